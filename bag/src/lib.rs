@@ -1,0 +1,2 @@
+//! rosbag2-compatible MCAP bags: writing, reading, metadata.yaml
+#![warn(missing_docs)]
