@@ -1,0 +1,33 @@
+"""Shared helpers for the interop tests.
+
+The tests drive our release binaries (built by tests/run.sh) and check them against independent
+peers: Eclipse Cyclone DDS for DDS, rosbags and mcap-ros2-support for bags.
+"""
+import os
+import pathlib
+import subprocess
+
+import pytest
+
+REPO = pathlib.Path(__file__).resolve().parents[2]
+
+
+def bin_dir() -> pathlib.Path:
+    return pathlib.Path(os.environ.get("DYNLAB_BIN_DIR", REPO / "target" / "release"))
+
+
+def binary(name: str) -> pathlib.Path:
+    """Path of one of our release binaries; fails the test with the build command if missing."""
+    path = bin_dir() / name
+    if not path.exists():
+        pytest.fail(f"{path} not built: run `cargo build --release --workspace --bins` (tests/run.sh does)")
+    return path
+
+
+def run(name: str, *args, timeout=60, check=True, **kw) -> subprocess.CompletedProcess:
+    """Runs one of our binaries, capturing output; on failure shows its stderr."""
+    proc = subprocess.run([str(binary(name)), *map(str, args)], capture_output=True, text=True,
+                          timeout=timeout, **kw)
+    if check and proc.returncode != 0:
+        raise AssertionError(f"{name} {' '.join(map(str, args))} exited {proc.returncode}:\n{proc.stderr}")
+    return proc
