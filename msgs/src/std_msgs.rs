@@ -1,12 +1,12 @@
-//! `std_msgs` messages.
+//! `std_msgs` messages: [`Header`].
 
 use serde::{Deserialize, Serialize};
 
-use crate::RosMessage;
 use crate::builtin_interfaces::Time;
 
 /// `std_msgs/msg/Header`: stamp and coordinate frame of a stamped message.
-#[derive(Debug, Clone, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct Header {
     /// Time of the data.
     pub stamp: Time,
@@ -14,12 +14,25 @@ pub struct Header {
     pub frame_id: String,
 }
 
-impl RosMessage for Header {
-    const TYPE_NAME: &'static str = "std_msgs/msg/Header";
-    const DEFINITION: &'static str = concat!(
-        "builtin_interfaces/Time stamp\nstring frame_id\n",
-        "================================================================================\n",
-        "MSG: builtin_interfaces/Time\n",
-        "int32 sec\nuint32 nanosec\n"
-    );
+impl Header {
+    /// A header with the given stamp and frame.
+    pub fn new(stamp: Time, frame_id: impl Into<String>) -> Self {
+        Header {
+            stamp,
+            frame_id: frame_id.into(),
+        }
+    }
 }
+
+/// `Header.msg` text.
+pub(crate) const HEADER_MSG: &str = "\
+# Metadata of stamped data: when it was measured and in which frame it is expressed.
+
+# Time of the data (sensor acquisition time when known).
+builtin_interfaces/Time stamp
+
+# Coordinate frame the data is expressed in.
+string frame_id
+";
+
+impl_ros_message!(Header, "std_msgs/msg/Header", HEADER_MSG);
