@@ -1,0 +1,125 @@
+//! The nominal car: a dynamic bicycle model with Pacejka "magic formula" lateral tire forces
+//! and a DC-motor drivetrain, in the form of Liniger, Domahidi & Morari (2015, "Optimization-based
+//! autonomous racing of 1:43 scale RC cars"), written here from the equations:
+//!
+//! ```text
+//! ẋ  = vx cos ψ − vy sin ψ          ẏ = vx sin ψ + vy cos ψ          ψ̇ = ω
+//! v̇x = (F_rx − F_fy sin δ)/m + vy ω
+//! v̇y = (F_ry + F_fy cos δ)/m − vx ω
+//! ω̇  = (F_fy l_f cos δ − F_ry l_r)/I_z
+//! F_fy = D_f sin(C_f atan(B_f α_f))     F_ry = D_r sin(C_r atan(B_r α_r))
+//! F_rx = (C_m1 − C_m2 vx) d − C_r0 tanh(vx/v_reg) − C_r2 vx|vx|
+//! ```
+//!
+//! **Low-speed regularisation.** Liniger's slip angles `α_f = δ − atan2(ω l_f + vy, vx)`,
+//! `α_r = atan2(ω l_r − vy, vx)` are singular at `vx = 0` and a standing car with the wheels
+//! turned would feel a lateral force. Here the slip angle of each axle is computed from the
+//! velocity of that wheel in its own frame, `α = −atan(v_lat / √(v_long² + v_reg²))`: identical
+//! to Liniger's for `v_long ≫ v_reg` (forward driving), zero for a standing car, smooth through
+//! `vx = 0` and opposing lateral sliding when reversing. Rolling resistance `C_r0` acts through
+//! `tanh(vx/v_reg)` so it never pushes a standing car backwards, and drag is `C_r2 vx|vx|`.
+//! `v_reg` defaults to 0.05 m/s (the ORCA car races at 1–3 m/s).
+
+use super::{Effect, ParamSpec, ps};
+use crate::real::Real;
+
+/// Name of the extra state added by [`Effect::MotorLag`]: the filtered throttle `d_f`.
+pub const MOTOR_LAG_STATE: &str = "d_f";
+
+/// Nominal car parameters, defaults from the ORCA 1:43 car (Liniger et al., MPCC project).
+pub static CAR_NOMINAL_PARAMS: [ParamSpec; 15] = [
+    ps("m", "m", "kg", 0.01, 10.0, 0.041, "mass (ORCA 1:43)"),
+    ps("Iz", "I_z", "kg·m²", 1e-6, 1.0, 27.8e-6, "yaw inertia (ORCA 1:43)"),
+    ps("lf", "l_f", "m", 0.005, 1.0, 0.029, "centre of mass to front axle"),
+    ps("lr", "l_r", "m", 0.005, 1.0, 0.033, "centre of mass to rear axle"),
+    ps("Bf", "B_f", "-", 0.1, 50.0, 2.579, "front Pacejka stiffness factor"),
+    ps("Cf", "C_f", "-", 0.1, 3.0, 1.2, "front Pacejka shape factor"),
+    ps("Df", "D_f", "N", 0.0, 100.0, 0.192, "front Pacejka peak force"),
+    ps("Br", "B_r", "-", 0.1, 50.0, 3.3852, "rear Pacejka stiffness factor"),
+    ps("Cr", "C_r", "-", 0.1, 3.0, 1.2691, "rear Pacejka shape factor"),
+    ps("Dr", "D_r", "N", 0.0, 100.0, 0.1737, "rear Pacejka peak force"),
+    ps("Cm1", "C_m1", "N", 0.0, 100.0, 0.287, "motor force per unit throttle"),
+    ps("Cm2", "C_m2", "kg/s", 0.0, 100.0, 0.0545, "motor back-EMF loss per unit throttle and speed"),
+    ps("Cr0", "C_r0", "N", 0.0, 10.0, 0.0518, "rolling resistance"),
+    ps("Cr2", "C_r2", "kg/m", 0.0, 10.0, 0.00035, "quadratic drag"),
+    ps("v_reg", "v_reg", "m/s", 1e-3, 1.0, 0.05, "low-speed regularisation of slip angles and rolling resistance"),
+];
+
+/// Where an enabled effect's parameters and extra states live.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Slot {
+    pub effect: Effect,
+    pub p_off: usize,
+    pub s_off: usize,
+}
+
+/// Smooth indicator of a disc: `σ((r − ‖p − c‖)/w)`.
+pub(crate) fn disc<R: Real>(x: R, y: R, cx: R, cy: R, r: R, w: R) -> R {
+    let dx = x - cx;
+    let dy = y - cy;
+    let dist = (dx * dx + dy * dy + 1e-12).sqrt();
+    ((r - dist) / w).sigmoid()
+}
+
+/// The car vector field with the effects in `slots` whose `active` flag is set.
+pub(crate) fn rhs<R: Real>(
+    p: &[R],
+    slots: &[Slot],
+    active: &[bool],
+    s: &[R],
+    u: &[R],
+    out: &mut [R],
+) {
+    let [m, iz, lf, lr, bf, cf, df, br, cr, dr, cm1, cm2, cr0, cr2, vreg] =
+        [0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14].map(|i| p[i]);
+    let (x, y, psi, vx, vy, om) = (s[0], s[1], s[2], s[3], s[4], s[5]);
+    let mut delta = u[0];
+    let mut d = u[1];
+    let mut grip = R::cst(1.0);
+    for (sl, &on) in slots.iter().zip(active) {
+        if !on {
+            continue;
+        }
+        let q = &p[sl.p_off..];
+        match sl.effect {
+            Effect::SteeringOffset => delta = delta + q[0],
+            Effect::MotorLag => d = s[sl.s_off],
+            Effect::GripPatch => {
+                let sig = disc(x, y, q[0], q[1], q[2], q[3]);
+                grip = grip * ((q[4] - 1.0) * sig + 1.0);
+            }
+            _ => {}
+        }
+    }
+    let (sd, cd) = (delta.sin(), delta.cos());
+    let vyf = vy + lf * om;
+    let v_long_f = cd * vx + sd * vyf;
+    let v_lat_f = cd * vyf - sd * vx;
+    let reg = vreg * vreg;
+    let alpha_f = -(v_lat_f / (v_long_f * v_long_f + reg).sqrt()).atan();
+    let alpha_r = -((vy - lr * om) / (vx * vx + reg).sqrt()).atan();
+    let ffy = grip * df * (cf * (bf * alpha_f).atan()).sin();
+    let fry = grip * dr * (cr * (br * alpha_r).atan()).sin();
+    let frx = (cm1 - cm2 * vx) * d - cr0 * (vx / vreg).tanh() - cr2 * vx.mul_abs();
+    let (sp, cp) = (psi.sin(), psi.cos());
+    out[0] = vx * cp - vy * sp;
+    out[1] = vx * sp + vy * cp;
+    out[2] = om;
+    out[3] = (frx - ffy * sd) / m + vy * om;
+    out[4] = (fry + ffy * cd) / m - vx * om;
+    out[5] = (ffy * lf * cd - fry * lr) / iz;
+    for o in out.iter_mut().skip(6) {
+        *o = R::cst(0.0);
+    }
+    for (sl, &on) in slots.iter().zip(active) {
+        if !on {
+            continue;
+        }
+        let q = &p[sl.p_off..];
+        match sl.effect {
+            Effect::AeroDrag => out[3] = out[3] - q[0] * vx.mul_abs(),
+            Effect::MotorLag => out[sl.s_off] = (u[1] - s[sl.s_off]) / q[0],
+            _ => {}
+        }
+    }
+}

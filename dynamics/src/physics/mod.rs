@@ -1,0 +1,251 @@
+//! Physics models of the two robots with named, pluggable effects.
+//!
+//! A [`PhysicsModel`] is a nominal model (the car's dynamic bicycle with Pacejka tires and
+//! drivetrain, or the quasi-static pusher–slider) plus a list of enabled [`Effect`]s, with one
+//! flat parameter vector `θ = [nominal…, effect 1…, effect 2…]`. It implements
+//! [`VectorField`](crate::ode::VectorField), so it integrates with the same solvers as a network
+//! and has exact Jacobians with respect to state, input and parameters.
+//!
+//! **The effect interface.** An effect is a named term with physical parameters
+//! ([`Effect::params`]: name, symbol, unit, bounds, default), a contribution to the dynamics and
+//! its derivatives. The *contribution* of enabled effect `e` is
+//! `Δf_e(s, u) = f(s, u) − f_{without e}(s, u)`: exactly additive for additive terms
+//! (`aero_drag`), and the induced change for effects that modify an intermediate quantity
+//! (`steering_offset` shifts δ, `grip_patch` scales the tire peaks). [`PhysicsModel::effect_term`]
+//! gives the contribution with its exact Jacobians wrt state, input and the effect's own
+//! parameters; [`Effect::linear_in_params`] says whether the contribution is linear in those
+//! parameters (then the diagnosis can fit it by constrained linear least squares).
+//!
+//! Derivatives are exact: the models are written once, generically over
+//! [`Real`](crate::real::Real), and differentiated by forward-mode dual numbers. There is no
+//! second, hand-differentiated copy of the equations to drift out of sync.
+
+mod car;
+mod fit;
+mod model;
+mod push;
+
+pub use car::{CAR_NOMINAL_PARAMS, MOTOR_LAG_STATE};
+pub use fit::{ResidualJacobian, Transition, residuals, residuals_and_jacobian};
+pub use model::{EffectTerm, ModelError, PhysicsModel};
+pub use push::PUSH_NOMINAL_PARAMS;
+
+/// Which robot a model or effect belongs to.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Robot {
+    /// The RC car: state `(x, y, ψ, vx, vy, ω)` (+ effect states), input `(δ, d)`, time in seconds.
+    Car,
+    /// The planar pusher: state `(x, y, θ)`, action `(p, φ, ℓ)`, time in pushes (one push = 1).
+    Pushing,
+}
+
+/// A physical parameter: what it is, its unit, bounds and documented default.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct ParamSpec {
+    /// Name used in files and on the command line (`c`, `tau`, `delta0`).
+    pub name: &'static str,
+    /// Symbol for printed equations (`c`, `τ`, `δ₀`).
+    pub symbol: &'static str,
+    /// Unit (`1/m`, `s`, `rad`, `-`).
+    pub unit: &'static str,
+    /// Lower bound.
+    pub lower: f64,
+    /// Upper bound.
+    pub upper: f64,
+    /// Default value.
+    pub default: f64,
+    /// One line: meaning and where the default comes from.
+    pub description: &'static str,
+}
+
+const fn ps(
+    name: &'static str,
+    symbol: &'static str,
+    unit: &'static str,
+    lower: f64,
+    upper: f64,
+    default: f64,
+    description: &'static str,
+) -> ParamSpec {
+    ParamSpec { name, symbol, unit, lower, upper, default, description }
+}
+
+/// The library of candidate physical effects (DESIGN.md, "Finding the missing physics").
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Effect {
+    /// Car: aerodynamic drag `v̇x −= c·vx|vx|` (mass-normalised).
+    AeroDrag,
+    /// Car: first-order lag of the motor: the drivetrain sees the filtered throttle `d_f`,
+    /// `ḋ_f = (d − d_f)/τ`, an extra state (see [`MOTOR_LAG_STATE`]).
+    MotorLag,
+    /// Car: steering offset, the wheels turn to `δ + δ₀`.
+    SteeringOffset,
+    /// Car: a circular patch of the floor where both tire peak forces are scaled by `k`.
+    GripPatch,
+    /// Pushing: the block's centre of mass (centre of friction) is offset from its geometric
+    /// centre by `(o_x, o_y)` in the block frame.
+    ComOffset,
+    /// Pushing: a tilted table; a sliding block drifts downhill by `(g_x, g_y)` metres per metre
+    /// slid (world frame).
+    TableTilt,
+    /// Pushing: a circular patch of the table where the block moves `1 + β` times as far per
+    /// push (lower friction: it coasts further after the pusher stops).
+    FrictionPatch,
+    /// Pushing: Coulomb friction `μ_p` between pusher and block (the nominal pusher is
+    /// frictionless): sticking inside the motion cone, sliding on its edge.
+    PusherFriction,
+}
+
+static AERO_DRAG: [ParamSpec; 1] = [ps(
+    "c",
+    "c",
+    "1/m",
+    0.0,
+    5.0,
+    0.0,
+    "drag coefficient over mass, ½ρC_dA/m (a 1:43 car: ≈ 0.01–0.1)",
+)];
+static MOTOR_LAG: [ParamSpec; 1] = [ps(
+    "tau",
+    "τ",
+    "s",
+    1e-3,
+    1.0,
+    0.05,
+    "time constant of the throttle-to-drive lag",
+)];
+static STEERING_OFFSET: [ParamSpec; 1] = [ps(
+    "delta0",
+    "δ₀",
+    "rad",
+    -0.2,
+    0.2,
+    0.0,
+    "constant offset added to the commanded front wheel angle",
+)];
+static GRIP_PATCH: [ParamSpec; 5] = [
+    ps("cx", "c_x", "m", -100.0, 100.0, 0.0, "patch centre x (world)"),
+    ps("cy", "c_y", "m", -100.0, 100.0, 0.0, "patch centre y (world)"),
+    ps("r", "r", "m", 0.01, 100.0, 0.5, "patch radius"),
+    ps("w", "w", "m", 0.005, 10.0, 0.05, "width of the smooth patch edge (logistic)"),
+    ps("k", "k", "-", 0.0, 3.0, 1.0, "tire peak force scale inside the patch (1: no change)"),
+];
+static COM_OFFSET: [ParamSpec; 2] = [
+    ps("ox", "o_x", "m", -0.05, 0.05, 0.0, "centre-of-mass offset along the block x axis"),
+    ps("oy", "o_y", "m", -0.05, 0.05, 0.0, "centre-of-mass offset along the block y axis"),
+];
+static TABLE_TILT: [ParamSpec; 2] = [
+    ps("gx", "g_x", "m/m", -1.0, 1.0, 0.0, "downhill drift along world x per metre slid (≈ slope/μ)"),
+    ps("gy", "g_y", "m/m", -1.0, 1.0, 0.0, "downhill drift along world y per metre slid (≈ slope/μ)"),
+];
+static FRICTION_PATCH: [ParamSpec; 5] = [
+    ps("cx", "c_x", "m", -10.0, 10.0, 0.6, "patch centre x (table frame)"),
+    ps("cy", "c_y", "m", -10.0, 10.0, 0.0, "patch centre y (table frame)"),
+    ps("r", "r", "m", 0.005, 10.0, 0.1, "patch radius"),
+    ps("w", "w", "m", 0.001, 1.0, 0.01, "width of the smooth patch edge (logistic)"),
+    ps("beta", "β", "-", -1.0, 5.0, 0.0, "extra motion per push inside the patch (0: none)"),
+];
+static PUSHER_FRICTION: [ParamSpec; 1] = [ps(
+    "mu",
+    "μ_p",
+    "-",
+    0.0,
+    2.0,
+    0.0,
+    "Coulomb friction coefficient between pusher and block",
+)];
+
+impl Effect {
+    /// Every effect in the library.
+    pub const ALL: [Effect; 8] = [
+        Effect::AeroDrag,
+        Effect::MotorLag,
+        Effect::SteeringOffset,
+        Effect::GripPatch,
+        Effect::ComOffset,
+        Effect::TableTilt,
+        Effect::FrictionPatch,
+        Effect::PusherFriction,
+    ];
+
+    /// The name used in files and on the command line (`aero_drag`, …).
+    pub fn name(self) -> &'static str {
+        match self {
+            Effect::AeroDrag => "aero_drag",
+            Effect::MotorLag => "motor_lag",
+            Effect::SteeringOffset => "steering_offset",
+            Effect::GripPatch => "grip_patch",
+            Effect::ComOffset => "com_offset",
+            Effect::TableTilt => "table_tilt",
+            Effect::FrictionPatch => "friction_patch",
+            Effect::PusherFriction => "pusher_friction",
+        }
+    }
+
+    /// Looks an effect up by name.
+    pub fn from_name(name: &str) -> Option<Effect> {
+        Effect::ALL.into_iter().find(|e| e.name() == name)
+    }
+
+    /// The robot the effect applies to.
+    pub fn robot(self) -> Robot {
+        match self {
+            Effect::AeroDrag | Effect::MotorLag | Effect::SteeringOffset | Effect::GripPatch => {
+                Robot::Car
+            }
+            _ => Robot::Pushing,
+        }
+    }
+
+    /// One-line physical description.
+    pub fn description(self) -> &'static str {
+        match self {
+            Effect::AeroDrag => "aerodynamic drag, quadratic in speed",
+            Effect::MotorLag => "first-order lag between throttle command and drive force",
+            Effect::SteeringOffset => "constant steering offset (miscalibrated servo trim)",
+            Effect::GripPatch => "floor patch with different tire grip",
+            Effect::ComOffset => "centre of mass away from the geometric centre",
+            Effect::TableTilt => "tilted table: downhill drift while sliding",
+            Effect::FrictionPatch => "table patch with different friction",
+            Effect::PusherFriction => "friction at the pusher contact (sticking/sliding)",
+        }
+    }
+
+    /// The effect's parameters, in the order they appear in the model's parameter vector.
+    pub fn params(self) -> &'static [ParamSpec] {
+        match self {
+            Effect::AeroDrag => &AERO_DRAG,
+            Effect::MotorLag => &MOTOR_LAG,
+            Effect::SteeringOffset => &STEERING_OFFSET,
+            Effect::GripPatch => &GRIP_PATCH,
+            Effect::ComOffset => &COM_OFFSET,
+            Effect::TableTilt => &TABLE_TILT,
+            Effect::FrictionPatch => &FRICTION_PATCH,
+            Effect::PusherFriction => &PUSHER_FRICTION,
+        }
+    }
+
+    /// Whether the contribution is linear in the effect's parameters (for all states and
+    /// inputs), so that it can be fitted by linear least squares. `aero_drag` and `table_tilt`
+    /// are; the others enter through nonlinear functions (`friction_patch` is linear in `β` once
+    /// the region is fixed, `grip_patch` is not even then: tire forces saturate).
+    pub fn linear_in_params(self) -> bool {
+        matches!(self, Effect::AeroDrag | Effect::TableTilt)
+    }
+
+    /// Names of the states the effect adds to the model state (appended in effect order).
+    pub fn extra_states(self) -> &'static [&'static str] {
+        match self {
+            Effect::MotorLag => &[MOTOR_LAG_STATE],
+            _ => &[],
+        }
+    }
+}
+
+impl std::fmt::Display for Effect {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}

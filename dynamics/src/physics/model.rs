@@ -1,0 +1,653 @@
+//! [`PhysicsModel`]: nominal model + enabled effects + flat parameter vector.
+
+use super::car::{self, CAR_NOMINAL_PARAMS, Slot};
+use super::push::{self, PUSH_NOMINAL_PARAMS};
+use super::{Effect, ParamSpec, Robot};
+use crate::ode::{InputTape, VectorField};
+use crate::real::{Dual, Real};
+use std::fmt::Write as _;
+use std::ops::Range;
+use thiserror::Error;
+
+/// Errors building or configuring a physics model.
+#[derive(Debug, Error, Clone, PartialEq)]
+pub enum ModelError {
+    /// An effect of the other robot.
+    #[error("effect {effect} belongs to the {effect_robot:?} model, not the {robot:?} model; choose from: {choices}")]
+    WrongRobot {
+        /// The effect.
+        effect: Effect,
+        /// Its robot.
+        effect_robot: Robot,
+        /// The model's robot.
+        robot: Robot,
+        /// Effects available for the model.
+        choices: String,
+    },
+    /// An effect listed twice.
+    #[error("effect {0} is listed twice; list each effect once")]
+    DuplicateEffect(Effect),
+    /// An unknown effect name.
+    #[error("unknown effect '{name}'; known effects: {known}")]
+    UnknownEffect {
+        /// The name given.
+        name: String,
+        /// All known names.
+        known: String,
+    },
+    /// A parameter vector of the wrong length.
+    #[error("expected {expected} parameters ({names}), got {got}")]
+    ParamCount {
+        /// Expected length.
+        expected: usize,
+        /// Given length.
+        got: usize,
+        /// Parameter names in order.
+        names: String,
+    },
+    /// A parameter outside its bounds or not finite.
+    #[error("parameter {name} = {value} is outside its bounds [{lower}, {upper}]")]
+    ParamOutOfBounds {
+        /// Qualified name (`aero_drag.c`).
+        name: String,
+        /// The value.
+        value: f64,
+        /// Lower bound.
+        lower: f64,
+        /// Upper bound.
+        upper: f64,
+    },
+    /// A slice of the wrong length.
+    #[error("{what} has length {got}, expected {expected}")]
+    Dimension {
+        /// Which argument.
+        what: &'static str,
+        /// Expected length.
+        expected: usize,
+        /// Given length.
+        got: usize,
+    },
+    /// The effect is not enabled in this model.
+    #[error("effect {0} is not enabled in this model; enable it first")]
+    NotEnabled(Effect),
+}
+
+/// The contribution of one effect at a point, with its exact Jacobians.
+#[derive(Clone, Debug, PartialEq)]
+pub struct EffectTerm {
+    /// The effect.
+    pub effect: Effect,
+    /// `Δf = f(s, u) − f_{without effect}(s, u)`, length `dim_s`.
+    pub contribution: Vec<f64>,
+    /// `∂Δf/∂s`, `dim_s × dim_s` row-major.
+    pub d_state: Vec<f64>,
+    /// `∂Δf/∂u`, `dim_s × dim_u` row-major.
+    pub d_input: Vec<f64>,
+    /// `∂Δf/∂θ_e` wrt the effect's own parameters, `dim_s × n_e` row-major.
+    pub d_params: Vec<f64>,
+}
+
+/// A nominal physics model plus enabled effects, with a flat parameter vector
+/// `θ = [nominal…, effect 1…, effect 2…]`. See the [module docs](super).
+#[derive(Clone, Debug, PartialEq)]
+pub struct PhysicsModel {
+    robot: Robot,
+    slots: Vec<Slot>,
+    params: Vec<f64>,
+    std_errors: Option<Vec<f64>>,
+    dim_s: usize,
+}
+
+impl PartialEq for Slot {
+    fn eq(&self, o: &Self) -> bool {
+        self.effect == o.effect && self.p_off == o.p_off && self.s_off == o.s_off
+    }
+}
+
+const DIRS: usize = 8;
+
+impl PhysicsModel {
+    /// A model of `robot` with the given effects enabled, all parameters at their defaults.
+    pub fn new(robot: Robot, effects: &[Effect]) -> Result<Self, ModelError> {
+        let nominal = Self::nominal_specs(robot);
+        let mut params: Vec<f64> = nominal.iter().map(|p| p.default).collect();
+        let mut dim_s = match robot {
+            Robot::Car => 6,
+            Robot::Pushing => 3,
+        };
+        let mut slots = Vec::new();
+        for &e in effects {
+            if e.robot() != robot {
+                return Err(ModelError::WrongRobot {
+                    effect: e,
+                    effect_robot: e.robot(),
+                    robot,
+                    choices: Self::available_effects(robot).join(", "),
+                });
+            }
+            if slots.iter().any(|s: &Slot| s.effect == e) {
+                return Err(ModelError::DuplicateEffect(e));
+            }
+            slots.push(Slot { effect: e, p_off: params.len(), s_off: dim_s });
+            params.extend(e.params().iter().map(|p| p.default));
+            dim_s += e.extra_states().len();
+        }
+        Ok(Self { robot, slots, params, std_errors: None, dim_s })
+    }
+
+    /// The car model (dynamic bicycle, Pacejka tires, drivetrain) with the given effects.
+    pub fn car(effects: &[Effect]) -> Result<Self, ModelError> {
+        Self::new(Robot::Car, effects)
+    }
+
+    /// The quasi-static pusher–slider with the given effects.
+    pub fn pushing(effects: &[Effect]) -> Result<Self, ModelError> {
+        Self::new(Robot::Pushing, effects)
+    }
+
+    /// Parses effect names (`"aero_drag"`, …).
+    pub fn parse_effects(names: &[&str]) -> Result<Vec<Effect>, ModelError> {
+        names
+            .iter()
+            .map(|n| {
+                Effect::from_name(n).ok_or_else(|| ModelError::UnknownEffect {
+                    name: n.to_string(),
+                    known: Effect::ALL.iter().map(|e| e.name()).collect::<Vec<_>>().join(", "),
+                })
+            })
+            .collect()
+    }
+
+    /// Names of the effects available for a robot.
+    pub fn available_effects(robot: Robot) -> Vec<&'static str> {
+        Effect::ALL.iter().filter(|e| e.robot() == robot).map(|e| e.name()).collect()
+    }
+
+    /// The nominal parameter specs of a robot.
+    pub fn nominal_specs(robot: Robot) -> &'static [ParamSpec] {
+        match robot {
+            Robot::Car => &CAR_NOMINAL_PARAMS,
+            Robot::Pushing => &PUSH_NOMINAL_PARAMS,
+        }
+    }
+
+    /// The robot.
+    pub fn robot(&self) -> Robot {
+        self.robot
+    }
+
+    /// Enabled effects in order.
+    pub fn effects(&self) -> Vec<Effect> {
+        self.slots.iter().map(|s| s.effect).collect()
+    }
+
+    /// State dimension (the robot's state plus effect states such as `d_f`).
+    pub fn dim_state(&self) -> usize {
+        self.dim_s
+    }
+
+    /// Input dimension.
+    pub fn dim_input(&self) -> usize {
+        match self.robot {
+            Robot::Car => 2,
+            Robot::Pushing => 3,
+        }
+    }
+
+    /// State names (`x, y, ψ, vx, vy, ω, d_f` / `x, y, θ`).
+    pub fn state_names(&self) -> Vec<&'static str> {
+        let mut v: Vec<&'static str> = match self.robot {
+            Robot::Car => vec!["x", "y", "ψ", "vx", "vy", "ω"],
+            Robot::Pushing => vec!["x", "y", "θ"],
+        };
+        for s in &self.slots {
+            v.extend_from_slice(s.effect.extra_states());
+        }
+        v
+    }
+
+    /// Input names.
+    pub fn input_names(&self) -> Vec<&'static str> {
+        match self.robot {
+            Robot::Car => vec!["δ", "d"],
+            Robot::Pushing => vec!["p", "φ", "ℓ"],
+        }
+    }
+
+    /// State dimensions that are angles (errors wrap).
+    pub fn angle_dims(&self) -> Vec<usize> {
+        vec![2]
+    }
+
+    /// The parameter vector.
+    pub fn params(&self) -> &[f64] {
+        &self.params
+    }
+
+    /// Every parameter with its owner (`None` for the nominal model), in vector order.
+    pub fn param_specs(&self) -> Vec<(Option<Effect>, ParamSpec)> {
+        let mut v: Vec<(Option<Effect>, ParamSpec)> =
+            Self::nominal_specs(self.robot).iter().map(|p| (None, *p)).collect();
+        for s in &self.slots {
+            v.extend(s.effect.params().iter().map(|p| (Some(s.effect), *p)));
+        }
+        v
+    }
+
+    /// Qualified parameter names (`m`, `aero_drag.c`) in vector order.
+    pub fn param_names(&self) -> Vec<String> {
+        self.param_specs()
+            .iter()
+            .map(|(e, p)| match e {
+                Some(e) => format!("{}.{}", e.name(), p.name),
+                None => p.name.to_string(),
+            })
+            .collect()
+    }
+
+    /// Index of a parameter by qualified name.
+    pub fn param_index(&self, name: &str) -> Option<usize> {
+        self.param_names().iter().position(|n| n == name)
+    }
+
+    /// The index range of an enabled effect's parameters.
+    pub fn effect_param_range(&self, e: Effect) -> Option<Range<usize>> {
+        self.slots
+            .iter()
+            .find(|s| s.effect == e)
+            .map(|s| s.p_off..s.p_off + e.params().len())
+    }
+
+    /// Sets all parameters, checking length, finiteness and bounds.
+    pub fn set_params(&mut self, p: &[f64]) -> Result<(), ModelError> {
+        if p.len() != self.params.len() {
+            return Err(ModelError::ParamCount {
+                expected: self.params.len(),
+                got: p.len(),
+                names: self.param_names().join(", "),
+            });
+        }
+        for ((v, (_, spec)), name) in p.iter().zip(self.param_specs()).zip(self.param_names()) {
+            if !(v.is_finite() && *v >= spec.lower && *v <= spec.upper) {
+                return Err(ModelError::ParamOutOfBounds {
+                    name,
+                    value: *v,
+                    lower: spec.lower,
+                    upper: spec.upper,
+                });
+            }
+        }
+        self.params.copy_from_slice(p);
+        Ok(())
+    }
+
+    /// Sets one parameter by qualified name (bounds checked).
+    pub fn set_param(&mut self, name: &str, value: f64) -> Result<(), ModelError> {
+        let i = self.param_index(name).ok_or_else(|| ModelError::UnknownEffect {
+            name: name.to_string(),
+            known: self.param_names().join(", "),
+        })?;
+        let mut p = self.params.clone();
+        p[i] = value;
+        self.set_params(&p)
+    }
+
+    /// Standard errors of the parameters (from a fit), printed as `±` by
+    /// [`PhysicsModel::equations`].
+    pub fn set_std_errors(&mut self, std: Option<Vec<f64>>) -> Result<(), ModelError> {
+        if let Some(s) = &std
+            && s.len() != self.params.len()
+        {
+            return Err(ModelError::Dimension {
+                what: "std_errors",
+                expected: self.params.len(),
+                got: s.len(),
+            });
+        }
+        self.std_errors = std;
+        Ok(())
+    }
+
+    /// The standard errors, if set.
+    pub fn std_errors(&self) -> Option<&[f64]> {
+        self.std_errors.as_deref()
+    }
+
+    /// The vector field at one point over any [`Real`], with parameters `p` and the effects
+    /// whose `active` flag is set.
+    pub fn eval_generic<R: Real>(&self, p: &[R], active: &[bool], s: &[R], u: &[R], out: &mut [R]) {
+        match self.robot {
+            Robot::Car => car::rhs(p, &self.slots, active, s, u, out),
+            Robot::Pushing => push::rhs(p, &self.slots, active, s, u, out),
+        }
+    }
+
+    fn all_active(&self) -> Vec<bool> {
+        vec![true; self.slots.len()]
+    }
+
+    /// `f(s, u)` for one sample with the model's parameters.
+    pub fn eval_one(&self, s: &[f64], u: &[f64], out: &mut [f64]) {
+        let act = self.all_active();
+        self.eval_generic(&self.params, &act, s, u, out);
+    }
+
+    /// Value and Jacobian of one sample: `f` and `J = ∂f/∂[s, u, θ]` (`dim_s × nz` row-major with
+    /// `nz = dim_s + dim_u + n_params`, or without the θ block when `with_params` is false), by
+    /// forward-mode dual numbers in passes of 8 directions.
+    pub fn jacobian_full(
+        &self,
+        s: &[f64],
+        u: &[f64],
+        active: &[bool],
+        with_params: bool,
+        f: &mut [f64],
+        j: &mut [f64],
+    ) {
+        let (ds, du) = (self.dim_s, self.dim_input());
+        let np = if with_params { self.params.len() } else { 0 };
+        let nz = ds + du + np;
+        let mut sd = vec![Dual::<DIRS>::cst(0.0); ds];
+        let mut ud = vec![Dual::<DIRS>::cst(0.0); du];
+        let mut pd = vec![Dual::<DIRS>::cst(0.0); self.params.len()];
+        let mut out = vec![Dual::<DIRS>::cst(0.0); ds];
+        let mut base = 0;
+        while base < nz.max(1) {
+            let seed = |z: usize| z.wrapping_sub(base);
+            for (i, x) in sd.iter_mut().enumerate() {
+                *x = Dual::var(s[i], seed(i));
+            }
+            for (i, x) in ud.iter_mut().enumerate() {
+                *x = Dual::var(u[i], seed(ds + i));
+            }
+            for (i, x) in pd.iter_mut().enumerate() {
+                *x = if with_params {
+                    Dual::var(self.params[i], seed(ds + du + i))
+                } else {
+                    Dual::cst(self.params[i])
+                };
+            }
+            self.eval_generic(&pd, active, &sd, &ud, &mut out);
+            for (r, o) in out.iter().enumerate() {
+                f[r] = o.v;
+                for k in 0..DIRS {
+                    if base + k < nz {
+                        j[r * nz + base + k] = o.d[k];
+                    }
+                }
+            }
+            base += DIRS;
+        }
+    }
+
+    /// The contribution of enabled effect `e` at `(s, u)` and its exact Jacobians wrt state,
+    /// input and the effect's own parameters.
+    pub fn effect_term(&self, e: Effect, s: &[f64], u: &[f64]) -> Result<EffectTerm, ModelError> {
+        let idx = self
+            .slots
+            .iter()
+            .position(|sl| sl.effect == e)
+            .ok_or(ModelError::NotEnabled(e))?;
+        self.check_dims(s, u)?;
+        let (ds, du, np) = (self.dim_s, self.dim_input(), self.params.len());
+        let nz = ds + du + np;
+        let on = self.all_active();
+        let mut off = on.clone();
+        off[idx] = false;
+        let (mut f1, mut f0) = (vec![0.0; ds], vec![0.0; ds]);
+        let (mut j1, mut j0) = (vec![0.0; ds * nz], vec![0.0; ds * nz]);
+        self.jacobian_full(s, u, &on, true, &mut f1, &mut j1);
+        self.jacobian_full(s, u, &off, true, &mut f0, &mut j0);
+        let range = self.slots[idx].p_off..self.slots[idx].p_off + e.params().len();
+        let ne = range.len();
+        let mut t = EffectTerm {
+            effect: e,
+            contribution: f1.iter().zip(&f0).map(|(a, b)| a - b).collect(),
+            d_state: vec![0.0; ds * ds],
+            d_input: vec![0.0; ds * du],
+            d_params: vec![0.0; ds * ne],
+        };
+        for r in 0..ds {
+            let d = |c: usize| j1[r * nz + c] - j0[r * nz + c];
+            for c in 0..ds {
+                t.d_state[r * ds + c] = d(c);
+            }
+            for c in 0..du {
+                t.d_input[r * du + c] = d(ds + c);
+            }
+            for (k, c) in range.clone().enumerate() {
+                t.d_params[r * ne + k] = d(ds + du + c);
+            }
+        }
+        Ok(t)
+    }
+
+    fn check_dims(&self, s: &[f64], u: &[f64]) -> Result<(), ModelError> {
+        if s.len() != self.dim_s {
+            return Err(ModelError::Dimension { what: "state", expected: self.dim_s, got: s.len() });
+        }
+        if u.len() != self.dim_input() {
+            return Err(ModelError::Dimension {
+                what: "input",
+                expected: self.dim_input(),
+                got: u.len(),
+            });
+        }
+        Ok(())
+    }
+
+    /// The filtered throttle of the `motor_lag` effect along a command sequence held over steps
+    /// of `dt`: the exact solution of `ḋ_f = (d − d_f)/τ` under zero-order hold,
+    /// `d_f[i+1] = d[i] + (d_f[i] − d[i])·e^(−dt/τ)`, from `d_f[0] = d_f0`. It depends only on the
+    /// commands and `τ`, which is what makes the lag identifiable from pose data: the initial
+    /// extra state of every training window is reconstructed from the command log.
+    pub fn motor_lag_filter(throttle: &[f64], dt: f64, tau: f64, d_f0: f64) -> Vec<f64> {
+        let a = (-dt / tau.max(1e-9)).exp();
+        let mut out = Vec::with_capacity(throttle.len());
+        let mut df = d_f0;
+        for &d in throttle {
+            out.push(df);
+            df = d + (df - d) * a;
+        }
+        out
+    }
+
+    fn fmt_param(&self, i: usize) -> String {
+        let (_, spec) = self.param_specs()[i];
+        let v = self.params[i];
+        match self.std_errors.as_ref().map(|s| s[i]) {
+            Some(se) => format!("{} = {} ± {} {}", spec.symbol, num(v), num(se), spec.unit),
+            None => format!("{} = {} {}", spec.symbol, num(v), spec.unit),
+        }
+    }
+
+    /// The model's equations with the effect terms inlined and every parameter listed with its
+    /// value (and `±` standard error after a fit), in the spirit of pysindy's `print()`.
+    pub fn equations(&self) -> String {
+        let mut o = String::new();
+        let has = |e: Effect| self.slots.iter().find(|s| s.effect == e);
+        let pv = |e: Effect, k: usize| has(e).map(|s| self.params[s.p_off + k]).unwrap_or(0.0);
+        let tag = |e: Effect| -> String {
+            match has(e) {
+                Some(s) => {
+                    let items: Vec<String> = (0..e.params().len())
+                        .map(|k| self.fmt_param(s.p_off + k))
+                        .collect();
+                    format!("   ({} {})", e.name(), items.join(", "))
+                }
+                None => String::new(),
+            }
+        };
+        match self.robot {
+            Robot::Car => {
+                let d = if has(Effect::MotorLag).is_some() { "d_f" } else { "d" };
+                let delta = match has(Effect::SteeringOffset) {
+                    Some(_) => format!("(δ {} {})", sign(pv(Effect::SteeringOffset, 0)), num(pv(Effect::SteeringOffset, 0).abs())),
+                    None => "δ".to_string(),
+                };
+                let _ = writeln!(o, "car: dynamic bicycle, Pacejka tires, drivetrain (time in s)");
+                let _ = writeln!(o, "  ẋ   = vx·cos ψ − vy·sin ψ");
+                let _ = writeln!(o, "  ẏ   = vx·sin ψ + vy·cos ψ");
+                let _ = writeln!(o, "  ψ̇   = ω");
+                let drag = match has(Effect::AeroDrag) {
+                    Some(_) => format!(" − {}·vx|vx|", num(pv(Effect::AeroDrag, 0))),
+                    None => String::new(),
+                };
+                let _ = writeln!(o, "  v̇x  = (F_rx − F_fy·sin {delta})/m + vy·ω{drag}{}", tag(Effect::AeroDrag));
+                let _ = writeln!(o, "  v̇y  = (F_ry + F_fy·cos {delta})/m − vx·ω");
+                let _ = writeln!(o, "  ω̇   = (F_fy·l_f·cos {delta} − F_ry·l_r)/I_z");
+                if has(Effect::MotorLag).is_some() {
+                    let _ = writeln!(o, "  ḋ_f = (d − d_f)/{}{}", num(pv(Effect::MotorLag, 0)), tag(Effect::MotorLag));
+                }
+                let g = if has(Effect::GripPatch).is_some() { "g·" } else { "" };
+                let _ = writeln!(o, "  F_fy = {g}D_f·sin(C_f·atan(B_f·α_f)),  α_f = −atan(v_lat,f / √(v_long,f² + v_reg²))");
+                let _ = writeln!(o, "  F_ry = {g}D_r·sin(C_r·atan(B_r·α_r)),  α_r = −atan((vy − l_r·ω) / √(vx² + v_reg²))");
+                let _ = writeln!(o, "  F_rx = (C_m1 − C_m2·vx)·{d} − C_r0·tanh(vx/v_reg) − C_r2·vx|vx|");
+                if has(Effect::SteeringOffset).is_some() {
+                    let _ = writeln!(o, "  δ → δ + δ₀{}", tag(Effect::SteeringOffset));
+                }
+                if has(Effect::GripPatch).is_some() {
+                    let _ = writeln!(o, "  g = 1 + (k − 1)·σ((r − ‖(x, y) − c‖)/w){}", tag(Effect::GripPatch));
+                }
+            }
+            Robot::Pushing => {
+                let _ = writeln!(o, "pushing: quasi-static pusher–slider, ellipsoidal limit surface (time in pushes)");
+                let _ = writeln!(o, "  (ẋ, ẏ) = R(θ)·(F_x, F_y){}{}", if has(Effect::FrictionPatch).is_some() { "·g" } else { "" },
+                    if has(Effect::TableTilt).is_some() { format!(" + ‖v‖·({}, {})", num(pv(Effect::TableTilt, 0)), num(pv(Effect::TableTilt, 1))) } else { String::new() });
+                let _ = writeln!(o, "  θ̇      = (p_x·F_y − p_y·F_x)/c²{}", if has(Effect::FrictionPatch).is_some() { "·g" } else { "" });
+                let _ = writeln!(o, "  v_p = ℓ·L·(cos φ, sin φ),  (p_x, p_y) = (−a/2, κ·p·a/2){}", if has(Effect::ComOffset).is_some() { " − (o_x, o_y)" } else { "" });
+                match has(Effect::PusherFriction) {
+                    Some(_) => {
+                        let _ = writeln!(o, "  F = M⁻¹·v_p if |F_y| ≤ μ_p·F_x (sticking), else F = f·(1, ±μ_p) (sliding){}", tag(Effect::PusherFriction));
+                    }
+                    None => {
+                        let _ = writeln!(o, "  F = (v_px / (1 + p_y²/c²), 0)   (frictionless pusher)");
+                    }
+                }
+                if has(Effect::ComOffset).is_some() {
+                    let _ = writeln!(o, "  centre velocity = v_com + ω × (−o){}", tag(Effect::ComOffset));
+                }
+                if has(Effect::TableTilt).is_some() {
+                    let _ = writeln!(o, "  table tilt drift{}", tag(Effect::TableTilt));
+                }
+                if has(Effect::FrictionPatch).is_some() {
+                    let _ = writeln!(o, "  g = 1 + β·σ((r − ‖(x, y) − c‖)/w){}", tag(Effect::FrictionPatch));
+                }
+            }
+        }
+        let _ = writeln!(o, "nominal parameters:");
+        for i in 0..Self::nominal_specs(self.robot).len() {
+            let (_, spec) = self.param_specs()[i];
+            let _ = writeln!(o, "  {:<28} {}", self.fmt_param(i), spec.description);
+        }
+        o
+    }
+}
+
+fn sign(v: f64) -> &'static str {
+    if v < 0.0 { "−" } else { "+" }
+}
+
+/// Compact number formatting: 4 significant digits, scientific outside [1e-3, 1e4).
+fn num(v: f64) -> String {
+    let a = v.abs();
+    if v == 0.0 {
+        "0".into()
+    } else if !(1e-3..1e4).contains(&a) {
+        format!("{v:.3e}")
+    } else {
+        let digits = (3 - a.log10().floor() as i32).max(0) as usize;
+        format!("{v:.digits$}")
+    }
+}
+
+impl std::fmt::Display for PhysicsModel {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.equations())
+    }
+}
+
+impl VectorField<f64> for PhysicsModel {
+    type Tape = InputTape<f64>;
+
+    fn dim_s(&self) -> usize {
+        self.dim_s
+    }
+    fn dim_u(&self) -> usize {
+        self.dim_input()
+    }
+    fn n_params(&self) -> usize {
+        self.params.len()
+    }
+    fn eval(&self, n: usize, s: &[f64], u: &[f64], out: &mut [f64]) {
+        let (ds, du) = (self.dim_s, self.dim_input());
+        let act = self.all_active();
+        for i in 0..n {
+            self.eval_generic(
+                &self.params,
+                &act,
+                &s[i * ds..(i + 1) * ds],
+                &u[i * du..(i + 1) * du],
+                &mut out[i * ds..(i + 1) * ds],
+            );
+        }
+    }
+    fn eval_taped(&self, n: usize, s: &[f64], u: &[f64], out: &mut [f64], tape: &mut Self::Tape) {
+        tape.record(n, s, u);
+        self.eval(n, s, u, out);
+    }
+    fn vjp(&self, tape: &Self::Tape, ybar: &[f64], sbar: &mut [f64], ubar: &mut [f64], pbar: &mut [f64]) {
+        let (ds, du) = (self.dim_s, self.dim_input());
+        let with_p = !pbar.is_empty();
+        let nz = ds + du + if with_p { self.params.len() } else { 0 };
+        let act = self.all_active();
+        let mut f = vec![0.0; ds];
+        let mut j = vec![0.0; ds * nz];
+        for i in 0..tape.n {
+            let s = &tape.s[i * ds..(i + 1) * ds];
+            let u = &tape.u[i * du..(i + 1) * du];
+            self.jacobian_full(s, u, &act, with_p, &mut f, &mut j);
+            let yb = &ybar[i * ds..(i + 1) * ds];
+            for c in 0..nz {
+                let g: f64 = (0..ds).map(|r| yb[r] * j[r * nz + c]).sum();
+                if c < ds {
+                    sbar[i * ds + c] = g;
+                } else if c < ds + du {
+                    ubar[i * du + c - ds] = g;
+                } else {
+                    pbar[c - ds - du] += g;
+                }
+            }
+        }
+    }
+    fn jvp(
+        &self,
+        n: usize,
+        s: &[f64],
+        u: &[f64],
+        sdot: &[f64],
+        udot: &[f64],
+        out: &mut [f64],
+        out_dot: &mut [f64],
+    ) {
+        let (ds, du) = (self.dim_s, self.dim_input());
+        let act = self.all_active();
+        let pd: Vec<Dual<1>> = self.params.iter().map(|&p| Dual::cst(p)).collect();
+        let mut sd = vec![Dual::<1>::cst(0.0); ds];
+        let mut ud = vec![Dual::<1>::cst(0.0); du];
+        let mut od = vec![Dual::<1>::cst(0.0); ds];
+        for i in 0..n {
+            for k in 0..ds {
+                sd[k] = Dual { v: s[i * ds + k], d: [sdot[i * ds + k]] };
+            }
+            for k in 0..du {
+                ud[k] = Dual { v: u[i * du + k], d: [udot[i * du + k]] };
+            }
+            self.eval_generic(&pd, &act, &sd, &ud, &mut od);
+            for k in 0..ds {
+                out[i * ds + k] = od[k].v;
+                out_dot[i * ds + k] = od[k].d[0];
+            }
+        }
+    }
+}
