@@ -456,8 +456,10 @@ impl PhysicsModel {
         let (_, spec) = self.param_specs()[i];
         let v = self.params[i];
         match self.std_errors.as_ref().map(|s| s[i]) {
-            Some(se) => format!("{} = {} ± {} {}", spec.symbol, num(v), num(se), spec.unit),
-            None => format!("{} = {} {}", spec.symbol, num(v), spec.unit),
+            Some(se) if se > 0.0 => {
+                format!("{} = {} ± {} {}", spec.symbol, num(v), num(se), spec.unit)
+            }
+            _ => format!("{} = {} {}", spec.symbol, num(v), spec.unit),
         }
     }
 
@@ -548,12 +550,12 @@ fn sign(v: f64) -> &'static str {
     if v < 0.0 { "−" } else { "+" }
 }
 
-/// Compact number formatting: 4 significant digits, scientific outside [1e-3, 1e4).
+/// Compact number formatting: 4 significant digits, scientific outside [1e-4, 1e4).
 fn num(v: f64) -> String {
     let a = v.abs();
     if v == 0.0 {
         "0".into()
-    } else if !(1e-3..1e4).contains(&a) {
+    } else if !(1e-4..1e4).contains(&a) {
         format!("{v:.3e}")
     } else {
         let digits = (3 - a.log10().floor() as i32).max(0) as usize;

@@ -1,0 +1,426 @@
+//! Physics models: exact Jacobians against finite differences, physical sanity, effects,
+//! residuals for fitting, printing and errors.
+
+mod common;
+use common::max_rel_diff;
+use dynlab_dynamics::ode::{Solver, VectorField, integrate, step_jacobians};
+use dynlab_dynamics::physics::*;
+
+fn car_all() -> PhysicsModel {
+    let mut m = PhysicsModel::car(&[
+        Effect::AeroDrag,
+        Effect::MotorLag,
+        Effect::SteeringOffset,
+        Effect::GripPatch,
+    ])
+    .unwrap();
+    m.set_param("aero_drag.c", 0.08).unwrap();
+    m.set_param("motor_lag.tau", 0.07).unwrap();
+    m.set_param("steering_offset.delta0", 0.03).unwrap();
+    m.set_param("grip_patch.cx", 1.0).unwrap();
+    m.set_param("grip_patch.cy", 0.4).unwrap();
+    m.set_param("grip_patch.r", 0.5).unwrap();
+    m.set_param("grip_patch.w", 0.1).unwrap();
+    m.set_param("grip_patch.k", 0.6).unwrap();
+    m
+}
+
+fn push_all(mu: f64) -> PhysicsModel {
+    let mut m = PhysicsModel::pushing(&[
+        Effect::ComOffset,
+        Effect::TableTilt,
+        Effect::FrictionPatch,
+        Effect::PusherFriction,
+    ])
+    .unwrap();
+    m.set_param("com_offset.ox", 0.01).unwrap();
+    m.set_param("com_offset.oy", -0.005).unwrap();
+    m.set_param("table_tilt.gx", 0.05).unwrap();
+    m.set_param("table_tilt.gy", -0.02).unwrap();
+    m.set_param("friction_patch.cx", 0.45).unwrap();
+    m.set_param("friction_patch.cy", 0.02).unwrap();
+    m.set_param("friction_patch.r", 0.05).unwrap();
+    m.set_param("friction_patch.w", 0.02).unwrap();
+    m.set_param("friction_patch.beta", 0.4).unwrap();
+    m.set_param("pusher_friction.mu", mu).unwrap();
+    m
+}
+
+// a cornering car: 1.2 m/s, some slip, inside the grip patch edge, filtered throttle ≠ command
+const CAR_S: [f64; 7] = [0.9, 0.1, 0.4, 1.2, 0.15, 2.0, 0.3];
+const CAR_U: [f64; 2] = [0.2, 0.5];
+// pushes: sliding (μ small), sticking (μ large)
+const PUSH_S: [f64; 3] = [0.42, 0.01, 0.6];
+const PUSH_U: [f64; 3] = [0.4, 0.5, 0.6];
+
+/// Central-difference Jacobian of `g` at `z`.
+fn fd_jac(g: impl Fn(&[f64]) -> Vec<f64>, z: &[f64], h: f64) -> Vec<Vec<f64>> {
+    (0..z.len())
+        .map(|k| {
+            // relative steps: parameters span 1e-5 (I_z) to 1e2
+            let hk = h * z[k].abs().max(1e-2);
+            let mut p = z.to_vec();
+            let mut m = z.to_vec();
+            p[k] += hk;
+            m[k] -= hk;
+            let (gp, gm) = (g(&p), g(&m));
+            gp.iter().zip(&gm).map(|(a, b)| (a - b) / (2.0 * hk)).collect()
+        })
+        .collect()
+}
+
+fn check_field_jacobians(model: &PhysicsModel, s: &[f64], u: &[f64]) {
+    let (ds, du, np) = (model.dim_s(), model.dim_u(), model.n_params());
+    let nz = ds + du + np;
+    let mut f = vec![0.0; ds];
+    let mut j = vec![0.0; ds * nz];
+    model.jacobian_full(s, u, &vec![true; model.effects().len()], true, &mut f, &mut j);
+    let z: Vec<f64> = s.iter().chain(u).chain(model.params()).copied().collect();
+    let fd = fd_jac(
+        |z| {
+            let mut m = model.clone();
+            // bounds are not the point here: set directly through a fresh vector
+            m.set_params(&z[ds + du..]).unwrap();
+            let mut out = vec![0.0; ds];
+            m.eval_one(&z[..ds], &z[ds..ds + du], &mut out);
+            out
+        },
+        &z,
+        1e-6,
+    );
+    let names = model.param_names();
+    for c in 0..nz {
+        for r in 0..ds {
+            let got = j[r * nz + c];
+            let want = fd[c][r];
+            let scale = want.abs().max(1.0);
+            let what = if c < ds {
+                format!("s{c}")
+            } else if c < ds + du {
+                format!("u{}", c - ds)
+            } else {
+                names[c - ds - du].clone()
+            };
+            assert!(
+                (got - want).abs() < 1e-5 * scale,
+                "{:?} ∂f{r}/∂{what}: exact {got} vs FD {want}",
+                model.robot()
+            );
+        }
+    }
+    // the VectorField forms agree with the full Jacobian
+    let ybar: Vec<f64> = (0..ds).map(|i| 0.3 + 0.1 * i as f64).collect();
+    let mut tape = Default::default();
+    let mut out = vec![0.0; ds];
+    model.eval_taped(1, s, u, &mut out, &mut tape);
+    let (mut sb, mut ub, mut pb) = (vec![0.0; ds], vec![0.0; du], vec![0.0; np]);
+    model.vjp(&tape, &ybar, &mut sb, &mut ub, &mut pb);
+    for c in 0..nz {
+        let want: f64 = (0..ds).map(|r| ybar[r] * j[r * nz + c]).sum();
+        let got = if c < ds { sb[c] } else if c < ds + du { ub[c - ds] } else { pb[c - ds - du] };
+        assert!((got - want).abs() < 1e-12 * want.abs().max(1.0));
+    }
+    let sdot: Vec<f64> = (0..ds).map(|i| 1.0 - 0.2 * i as f64).collect();
+    let udot: Vec<f64> = (0..du).map(|i| 0.5 + i as f64).collect();
+    let mut od = vec![0.0; ds];
+    model.jvp(1, s, u, &sdot, &udot, &mut out, &mut od);
+    for r in 0..ds {
+        let want: f64 = (0..ds).map(|c| j[r * nz + c] * sdot[c]).sum::<f64>()
+            + (0..du).map(|c| j[r * nz + ds + c] * udot[c]).sum::<f64>();
+        assert!((od[r] - want).abs() < 1e-12 * want.abs().max(1.0));
+        assert_eq!(out[r], f[r]);
+    }
+}
+
+#[test]
+fn car_jacobians_wrt_state_input_and_parameters_match_finite_differences() {
+    check_field_jacobians(&car_all(), &CAR_S, &CAR_U);
+    // reversing, slow, and the nominal model alone
+    check_field_jacobians(&car_all(), &[0.0, 0.0, -2.0, -0.4, 0.05, -0.3, -0.2], &[-0.1, -0.1]);
+    check_field_jacobians(&PhysicsModel::car(&[]).unwrap(), &CAR_S[..6], &CAR_U);
+}
+
+#[test]
+fn pushing_jacobians_match_finite_differences_sliding_and_sticking() {
+    check_field_jacobians(&push_all(0.2), &PUSH_S, &PUSH_U); // sliding on the cone edge
+    check_field_jacobians(&push_all(1.5), &PUSH_S, &PUSH_U); // sticking
+    check_field_jacobians(&PhysicsModel::pushing(&[]).unwrap(), &PUSH_S, &PUSH_U);
+}
+
+#[test]
+fn effect_terms_and_their_jacobians_match_finite_differences() {
+    for (model, s, u) in [
+        (car_all(), CAR_S.to_vec(), CAR_U.to_vec()),
+        (push_all(0.2), PUSH_S.to_vec(), PUSH_U.to_vec()),
+        (push_all(1.5), PUSH_S.to_vec(), PUSH_U.to_vec()),
+    ] {
+        let (ds, du) = (model.dim_state(), model.dim_input());
+        for e in model.effects() {
+            let t = model.effect_term(e, &s, &u).unwrap();
+            let range = model.effect_param_range(e).unwrap();
+            let ne = range.len();
+            let contrib = |s: &[f64], u: &[f64], q: &[f64]| {
+                let mut m = model.clone();
+                let mut p = m.params().to_vec();
+                p[range.clone()].copy_from_slice(q);
+                m.set_params(&p).unwrap();
+                m.effect_term(e, s, u).unwrap().contribution
+            };
+            let q0 = model.params()[range.clone()].to_vec();
+            let z: Vec<f64> = s.iter().chain(&u).chain(&q0).copied().collect();
+            let fd = fd_jac(|z| contrib(&z[..ds], &z[ds..ds + du], &z[ds + du..]), &z, 1e-7);
+            for r in 0..ds {
+                for c in 0..ds + du + ne {
+                    let got = if c < ds {
+                        t.d_state[r * ds + c]
+                    } else if c < ds + du {
+                        t.d_input[r * du + c - ds]
+                    } else {
+                        t.d_params[r * ne + c - ds - du]
+                    };
+                    let want = fd[c][r];
+                    assert!((got - want).abs() < 1e-5 * want.abs().max(1.0), "{e}: ∂Δf{r}/∂z{c}: {got} vs {want}");
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn aero_drag_is_exactly_minus_c_vx_abs_vx_and_linear_in_c() {
+    let mut m = PhysicsModel::car(&[Effect::AeroDrag]).unwrap();
+    m.set_param("aero_drag.c", 0.1).unwrap();
+    let s = [0.0, 0.0, 0.3, -1.5, 0.2, 0.4];
+    let t = m.effect_term(Effect::AeroDrag, &s, &[0.1, 0.3]).unwrap();
+    let want = [0.0, 0.0, 0.0, -0.1 * -1.5 * 1.5, 0.0, 0.0];
+    assert!(max_rel_diff(&t.contribution, &want) < 1e-14, "{:?}", t.contribution);
+    assert!(Effect::AeroDrag.linear_in_params());
+    m.set_param("aero_drag.c", 0.2).unwrap();
+    let t2 = m.effect_term(Effect::AeroDrag, &s, &[0.1, 0.3]).unwrap();
+    assert!((t2.contribution[3] - 2.0 * t.contribution[3]).abs() < 1e-14);
+    assert!((t.d_params[3] - (-(-1.5f64) * 1.5)).abs() < 1e-14);
+}
+
+#[test]
+fn table_tilt_is_linear_in_its_parameters() {
+    let mut m = PhysicsModel::pushing(&[Effect::TableTilt]).unwrap();
+    let t = |m: &PhysicsModel| m.effect_term(Effect::TableTilt, &PUSH_S, &PUSH_U).unwrap();
+    m.set_param("table_tilt.gx", 0.1).unwrap();
+    let a = t(&m);
+    m.set_param("table_tilt.gx", 0.3).unwrap();
+    m.set_param("table_tilt.gy", -0.2).unwrap();
+    let b = t(&m);
+    // Δf = J_θ θ exactly
+    for r in 0..3 {
+        let lin = a.d_params[r * 2] * 0.3 + a.d_params[r * 2 + 1] * -0.2;
+        assert!((b.contribution[r] - lin).abs() < 1e-15);
+    }
+}
+
+#[test]
+fn steering_offset_is_the_same_as_turning_the_wheels_further() {
+    let mut m = PhysicsModel::car(&[Effect::SteeringOffset]).unwrap();
+    m.set_param("steering_offset.delta0", 0.05).unwrap();
+    let nominal = PhysicsModel::car(&[]).unwrap();
+    let s = &CAR_S[..6];
+    let (mut a, mut b) = ([0.0; 6], [0.0; 6]);
+    m.eval_one(s, &[0.1, 0.4], &mut a);
+    nominal.eval_one(s, &[0.15, 0.4], &mut b);
+    assert!(max_rel_diff(&a, &b) < 1e-14);
+}
+
+#[test]
+fn car_drives_straight_accelerates_and_stands_still_sensibly() {
+    let car = PhysicsModel::car(&[]).unwrap();
+    let mut f = [0.0; 6];
+    // straight at 1 m/s with throttle: no lateral motion, forward acceleration = F_rx/m
+    car.eval_one(&[0.0, 0.0, 0.0, 1.0, 0.0, 0.0], &[0.0, 0.5], &mut f);
+    let frx = (0.287 - 0.0545) * 0.5 - 0.0518 * (1.0f64 / 0.05).tanh() - 0.00035;
+    assert!((f[3] - frx / 0.041).abs() < 1e-12);
+    assert_eq!((f[4], f[5]), (0.0, 0.0));
+    // a standing car with the wheels turned and no throttle does not move
+    car.eval_one(&[0.0, 0.0, 0.7, 0.0, 0.0, 0.0], &[0.3, 0.0], &mut f);
+    assert!(f.iter().all(|v| v.abs() < 1e-15), "{f:?}");
+    // steering left at speed turns left (positive yaw acceleration)
+    car.eval_one(&[0.0, 0.0, 0.0, 1.5, 0.0, 0.0], &[0.2, 0.0], &mut f);
+    assert!(f[5] > 0.0 && f[4] > 0.0);
+    // far above v_reg the slip angles are Liniger's: compare the front lateral force
+    let (vx, vy, om, delta) = (2.0, 0.1, 0.5, 0.1);
+    car.eval_one(&[0.0, 0.0, 0.0, vx, vy, om], &[delta, 0.0], &mut f);
+    let af = delta - ((om * 0.029 + vy) / vx).atan();
+    let ar = ((om * 0.033 - vy) / vx).atan();
+    let ffy = 0.192 * (1.2 * (2.579 * af).atan()).sin();
+    let fry = 0.1737 * (1.2691 * (3.3852 * ar).atan()).sin();
+    let omd = (ffy * 0.029 * delta.cos() - fry * 0.033) / 27.8e-6;
+    assert!((f[5] - omd).abs() < 2e-3 * omd.abs(), "{} vs Liniger {omd}", f[5]);
+}
+
+#[test]
+fn a_central_frictionless_push_translates_the_block_by_the_push_length() {
+    let m = PhysicsModel::pushing(&[]).unwrap();
+    let th = 0.3;
+    let mut out = [0.0; 3];
+    let rep = integrate(&m, &Solver::rk4(), 1, &[0.4, 0.0, th], &[0.0, 0.0, 0.7], 1.0, &mut out);
+    assert!(rep.is_success());
+    let d = 0.7 * 0.1;
+    assert!((out[0] - (0.4 + d * th.cos())).abs() < 1e-12);
+    assert!((out[1] - d * th.sin()).abs() < 1e-12);
+    assert!((out[2] - th).abs() < 1e-12);
+    // off-centre towards +y along the pushed face turns the block clockwise; no push no motion
+    let mut f = [0.0; 3];
+    m.eval_one(&[0.0, 0.0, 0.0], &[0.8, 0.0, 0.5], &mut f);
+    assert!(f[2] < 0.0);
+    m.eval_one(&[0.0, 0.0, 0.0], &[0.8, 0.3, 0.0], &mut f);
+    assert_eq!(f, [0.0; 3]);
+}
+
+#[test]
+fn a_sticking_pusher_moves_the_contact_point_with_the_pusher() {
+    // with high friction, the block's contact point velocity equals the pusher velocity
+    let mut m = PhysicsModel::pushing(&[Effect::PusherFriction]).unwrap();
+    m.set_param("pusher_friction.mu", 2.0).unwrap();
+    let (p, phi, ell) = (0.3, 0.25, 0.5);
+    let mut f = [0.0; 3];
+    m.eval_one(&[0.0, 0.0, 0.0], &[p, phi, ell], &mut f);
+    let (px, py) = (-0.05, 0.95 * p * 0.05);
+    let vc = [f[0] - f[2] * py, f[1] + f[2] * px];
+    let vp = [ell * 0.1 * phi.cos(), ell * 0.1 * phi.sin()];
+    assert!(max_rel_diff(&vc, &vp) < 1e-12, "{vc:?} vs {vp:?}");
+    // without friction the same push only transmits its normal component
+    let m0 = PhysicsModel::pushing(&[]).unwrap();
+    m0.eval_one(&[0.0, 0.0, 0.0], &[p, phi, ell], &mut f);
+    let vc0 = f[0] - f[2] * py;
+    assert!((vc0 - vp[0]).abs() < 1e-12);
+}
+
+#[test]
+fn motor_lag_filter_matches_the_integrated_extra_state() {
+    let mut m = PhysicsModel::car(&[Effect::MotorLag]).unwrap();
+    m.set_param("motor_lag.tau", 0.08).unwrap();
+    let dt = 0.02;
+    let throttle = [0.2, 0.9, 0.9, -0.1, 0.4];
+    let filt = PhysicsModel::motor_lag_filter(&throttle, dt, 0.08, 0.0);
+    let mut s = vec![0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0];
+    for (k, &d) in throttle.iter().enumerate() {
+        assert!((s[6] - filt[k]).abs() < 1e-9, "step {k}: {} vs {}", s[6], filt[k]);
+        let mut next = vec![0.0; 7];
+        integrate(&m, &Solver::dopri5(1e-11, 1e-13), 1, &s, &[0.0, d], dt, &mut next);
+        s = next;
+    }
+}
+
+#[test]
+fn step_jacobians_of_the_car_match_finite_differences() {
+    let m = car_all();
+    let solver = Solver::Rk4 { substeps: 2 };
+    let (mut out, mut js, mut ju) = (vec![0.0; 7], vec![0.0; 49], vec![0.0; 14]);
+    step_jacobians(&m, &solver, 1, &CAR_S, &CAR_U, 0.02, &mut out, &mut js, &mut ju);
+    let z: Vec<f64> = CAR_S.iter().chain(&CAR_U).copied().collect();
+    let fd = fd_jac(
+        |z| {
+            let mut o = vec![0.0; 7];
+            integrate(&m, &solver, 1, &z[..7], &z[7..], 0.02, &mut o);
+            o
+        },
+        &z,
+        1e-7,
+    );
+    for r in 0..7 {
+        for c in 0..9 {
+            let got = if c < 7 { js[r * 7 + c] } else { ju[r * 2 + c - 7] };
+            assert!((got - fd[c][r]).abs() < 1e-6 * fd[c][r].abs().max(1.0), "∂s{r}/∂z{c}: {got} vs {}", fd[c][r]);
+        }
+    }
+}
+
+#[test]
+fn residual_jacobian_matches_finite_differences_and_vanishes_at_the_truth() {
+    let mut truth = PhysicsModel::car(&[Effect::AeroDrag, Effect::SteeringOffset]).unwrap();
+    truth.set_param("aero_drag.c", 0.1).unwrap();
+    truth.set_param("steering_offset.delta0", 0.02).unwrap();
+    let solver = Solver::Rk4 { substeps: 2 };
+    let mut transitions = Vec::new();
+    for k in 0..4 {
+        let s0 = vec![0.1 * k as f64, -0.2, 3.0 + 0.3 * k as f64, 1.0 + 0.2 * k as f64, 0.05, 0.5 - 0.2 * k as f64];
+        let u = vec![0.1 - 0.05 * k as f64, 0.4];
+        let mut s1 = vec![0.0; 6];
+        integrate(&truth, &solver, 1, &s0, &u, 0.02, &mut s1);
+        transitions.push(Transition { s0, u, s1, dt: 0.02 });
+    }
+    let w = [1.0, 1.0, 0.5, 0.2, 0.2, 0.1];
+    let rj = residuals_and_jacobian(&truth, &solver, &transitions, &w).unwrap();
+    assert!(rj.residuals.iter().all(|r| r.abs() < 1e-15));
+    assert!(rj.failed.is_empty());
+    let mut model = PhysicsModel::car(&[Effect::AeroDrag, Effect::SteeringOffset]).unwrap();
+    model.set_param("aero_drag.c", 0.03).unwrap();
+    let rj = residuals_and_jacobian(&model, &solver, &transitions, &w).unwrap();
+    let np = rj.cols;
+    assert_eq!(np, model.params().len());
+    assert!(rj.residuals.iter().any(|r| r.abs() > 1e-6));
+    let fd = fd_jac(
+        |p| {
+            let mut m = model.clone();
+            m.set_params(p).unwrap();
+            residuals(&m, &solver, &transitions, &w).unwrap().0
+        },
+        model.params(),
+        1e-6,
+    );
+    for r in 0..rj.residuals.len() {
+        for c in 0..np {
+            let got = rj.jacobian[r * np + c];
+            assert!((got - fd[c][r]).abs() < 1e-5 * fd[c][r].abs().max(1e-3) + 1e-7, "row {r} col {c}: {got} vs {}", fd[c][r]);
+        }
+    }
+    // one Gauss–Newton step on c and δ₀ alone lands near the truth
+    let cols = [model.param_index("aero_drag.c").unwrap(), model.param_index("steering_offset.delta0").unwrap()];
+    let (mut a, mut b) = ([[0.0; 2]; 2], [0.0; 2]);
+    for r in 0..rj.residuals.len() {
+        for i in 0..2 {
+            b[i] -= rj.jacobian[r * np + cols[i]] * rj.residuals[r];
+            for j in 0..2 {
+                a[i][j] += rj.jacobian[r * np + cols[i]] * rj.jacobian[r * np + cols[j]];
+            }
+        }
+    }
+    let det = a[0][0] * a[1][1] - a[0][1] * a[1][0];
+    let dc = (b[0] * a[1][1] - a[0][1] * b[1]) / det;
+    let dd = (a[0][0] * b[1] - a[1][0] * b[0]) / det;
+    assert!((0.03 + dc - 0.1).abs() < 5e-3, "c → {}", 0.03 + dc);
+    assert!((0.0 + dd - 0.02).abs() < 1e-3, "δ₀ → {}", dd);
+}
+
+#[test]
+fn equations_print_fitted_effects_with_uncertainty() {
+    let mut m = PhysicsModel::car(&[Effect::AeroDrag, Effect::MotorLag]).unwrap();
+    m.set_param("aero_drag.c", 0.0123).unwrap();
+    let mut se = vec![0.0; m.params().len()];
+    se[m.param_index("aero_drag.c").unwrap()] = 0.0008;
+    m.set_std_errors(Some(se)).unwrap();
+    let text = m.to_string();
+    assert!(text.contains("− 0.01230·vx|vx|"), "{text}");
+    assert!(text.contains("(aero_drag c = 0.01230 ± 0.0008000 1/m)"), "{text}");
+    assert!(text.contains("ḋ_f = (d − d_f)/0.05000"), "{text}");
+    assert!(text.contains("m = 0.04100 kg"), "{text}");
+    let p = push_all(0.3).to_string();
+    assert!(p.contains("pusher_friction μ_p = 0.3000 -"), "{p}");
+}
+
+#[test]
+fn bad_model_configurations_get_clear_errors() {
+    let e = PhysicsModel::car(&[Effect::ComOffset]).unwrap_err();
+    assert!(e.to_string().contains("aero_drag, motor_lag, steering_offset, grip_patch"), "{e}");
+    let e = PhysicsModel::car(&[Effect::AeroDrag, Effect::AeroDrag]).unwrap_err();
+    assert_eq!(e, ModelError::DuplicateEffect(Effect::AeroDrag));
+    let e = PhysicsModel::parse_effects(&["aero_dreg"]).unwrap_err();
+    assert!(e.to_string().contains("unknown effect 'aero_dreg'"), "{e}");
+    let mut m = PhysicsModel::car(&[Effect::AeroDrag]).unwrap();
+    let e = m.set_param("aero_drag.c", f64::NAN).unwrap_err();
+    assert!(matches!(e, ModelError::ParamOutOfBounds { .. }), "{e}");
+    let e = m.set_params(&[1.0]).unwrap_err();
+    assert!(e.to_string().contains("expected 16 parameters"), "{e}");
+    let e = m.effect_term(Effect::MotorLag, &CAR_S[..6], &CAR_U).unwrap_err();
+    assert_eq!(e, ModelError::NotEnabled(Effect::MotorLag));
+    let e = m.effect_term(Effect::AeroDrag, &CAR_S, &CAR_U).unwrap_err();
+    assert!(matches!(e, ModelError::Dimension { what: "state", expected: 6, got: 7 }));
+}
