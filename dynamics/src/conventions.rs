@@ -78,7 +78,11 @@ impl PushState {
     }
     /// From an array `[x, y, θ]`.
     pub fn from_array(a: [f64; 3]) -> Self {
-        Self { x: a[0], y: a[1], theta: a[2] }
+        Self {
+            x: a[0],
+            y: a[1],
+            theta: a[2],
+        }
     }
 }
 impl PushAction {
@@ -88,7 +92,11 @@ impl PushAction {
     }
     /// From an array `[p, φ, ℓ]`.
     pub fn from_array(a: [f64; 3]) -> Self {
-        Self { p: a[0], phi: a[1], length: a[2] }
+        Self {
+            p: a[0],
+            phi: a[1],
+            length: a[2],
+        }
     }
 }
 impl CarState {
@@ -98,7 +106,14 @@ impl CarState {
     }
     /// From an array `[x, y, ψ, vx, vy, ω]`.
     pub fn from_array(a: [f64; 6]) -> Self {
-        Self { x: a[0], y: a[1], psi: a[2], vx: a[3], vy: a[4], omega: a[5] }
+        Self {
+            x: a[0],
+            y: a[1],
+            psi: a[2],
+            vx: a[3],
+            vy: a[4],
+            omega: a[5],
+        }
     }
 }
 impl CarInput {
@@ -108,7 +123,10 @@ impl CarInput {
     }
     /// From an array `[δ, d]`.
     pub fn from_array(a: [f64; 2]) -> Self {
-        Self { delta: a[0], d: a[1] }
+        Self {
+            delta: a[0],
+            d: a[1],
+        }
     }
 }
 
@@ -137,7 +155,11 @@ pub fn yaw_from_quaternion(x: f64, y: f64, z: f64, w: f64) -> f64 {
 pub fn pose_error(predicted: &[f64], measured: &[f64], angle_dims: &[usize], out: &mut [f64]) {
     for (i, o) in out.iter_mut().enumerate() {
         let e = predicted[i] - measured[i];
-        *o = if angle_dims.contains(&i) { wrap_angle(e) } else { e };
+        *o = if angle_dims.contains(&i) {
+            wrap_angle(e)
+        } else {
+            e
+        };
     }
 }
 

@@ -18,16 +18,22 @@ use thiserror::Error;
 #[derive(Debug, Error, Clone, PartialEq)]
 pub enum DataError {
     /// No poses at all.
-    #[error("no poses: the input has no pose messages; check the pose topic name (e.g. /car/pose or /push/block_pose)")]
+    #[error(
+        "no poses: the input has no pose messages; check the pose topic name (e.g. /car/pose or /push/block_pose)"
+    )]
     NoPoses,
     /// Poses but no commands.
-    #[error("no commands: the input has {poses} poses but no command messages; record the command topic (e.g. /car/cmd or /push/action) as well")]
+    #[error(
+        "no commands: the input has {poses} poses but no command messages; record the command topic (e.g. /car/cmd or /push/action) as well"
+    )]
     NoCommands {
         /// Number of poses seen.
         poses: usize,
     },
     /// A NaN or infinite value.
-    #[error("non-finite value in {field} at t = {t_ns} ns ({value}); remove or repair that message")]
+    #[error(
+        "non-finite value in {field} at t = {t_ns} ns ({value}); remove or repair that message"
+    )]
     NonFinite {
         /// Which field (`pose.x`, `command[1]`, …).
         field: String,
@@ -37,7 +43,9 @@ pub enum DataError {
         value: f64,
     },
     /// Commands of different lengths.
-    #[error("command at t = {t_ns} ns has {got} values, earlier commands have {expected}; all commands must have the same dimension")]
+    #[error(
+        "command at t = {t_ns} ns has {got} values, earlier commands have {expected}; all commands must have the same dimension"
+    )]
     CommandDimension {
         /// Stamp [ns].
         t_ns: i64,
@@ -47,7 +55,9 @@ pub enum DataError {
         got: usize,
     },
     /// Every pose came before the first command.
-    #[error("no pose has a command held at its stamp: the first command is at t = {first_command_ns} ns, the last pose at t = {last_pose_ns} ns; record commands from the start")]
+    #[error(
+        "no pose has a command held at its stamp: the first command is at t = {first_command_ns} ns, the last pose at t = {last_pose_ns} ns; record commands from the start"
+    )]
     NoPoseWithCommand {
         /// First command stamp [ns].
         first_command_ns: i64,
@@ -55,7 +65,9 @@ pub enum DataError {
         last_pose_ns: i64,
     },
     /// Not enough poses for the requested windows.
-    #[error("too little data: need at least {needed} poses per trajectory for a window of {k} steps; the longest trajectory has {longest} ({trajectories} trajectories); record longer runs or lower the number of steps")]
+    #[error(
+        "too little data: need at least {needed} poses per trajectory for a window of {k} steps; the longest trajectory has {longest} ({trajectories} trajectories); record longer runs or lower the number of steps"
+    )]
     TooLittleData {
         /// Poses needed per trajectory (`k + 1`, more with filters).
         needed: usize,
@@ -251,14 +263,22 @@ fn check_finite(poses: &[PoseSample], commands: &[CommandSample]) -> Result<usiz
     for p in poses {
         for (name, v) in [("pose.x", p.x), ("pose.y", p.y), ("pose.yaw", p.yaw)] {
             if !v.is_finite() {
-                return Err(DataError::NonFinite { field: name.into(), t_ns: p.t_ns, value: v });
+                return Err(DataError::NonFinite {
+                    field: name.into(),
+                    t_ns: p.t_ns,
+                    value: v,
+                });
             }
         }
     }
     let dim = commands.first().map(|c| c.u.len()).unwrap_or(0);
     for c in commands {
         if c.u.len() != dim {
-            return Err(DataError::CommandDimension { t_ns: c.t_ns, expected: dim, got: c.u.len() });
+            return Err(DataError::CommandDimension {
+                t_ns: c.t_ns,
+                expected: dim,
+                got: c.u.len(),
+            });
         }
         for (i, v) in c.u.iter().enumerate() {
             if !v.is_finite() {
@@ -339,7 +359,10 @@ pub fn build_trajectories(
     let mut pieces: Vec<Vec<PoseSample>> = vec![Vec::new()];
     for (i, p) in ps.iter().enumerate() {
         if i > 0 && p.t_ns - ps[i - 1].t_ns > max_gap {
-            rep.gaps.push(Gap { from_ns: ps[i - 1].t_ns, to_ns: p.t_ns });
+            rep.gaps.push(Gap {
+                from_ns: ps[i - 1].t_ns,
+                to_ns: p.t_ns,
+            });
             pieces.push(Vec::new());
         }
         if let Some(last) = pieces.last_mut() {
@@ -352,8 +375,11 @@ pub fn build_trajectories(
         let mut t: Vec<i64> = piece.iter().map(|p| p.t_ns).collect();
         let mut yaw: Vec<f64> = piece.iter().map(|p| p.yaw).collect();
         unwrap_angles(&mut yaw);
-        let mut pose: Vec<[f64; 3]> =
-            piece.iter().zip(&yaw).map(|(p, &w)| [p.x, p.y, w]).collect();
+        let mut pose: Vec<[f64; 3]> = piece
+            .iter()
+            .zip(&yaw)
+            .map(|(p, &w)| [p.x, p.y, w])
+            .collect();
         let mut d: Vec<i64> = t.windows(2).map(|w| w[1] - w[0]).collect();
         let med_i = median_i64(&mut d);
         let jitter = if med_i > 0 {
@@ -413,7 +439,14 @@ pub fn build_trajectories(
         }
         let mut d: Vec<i64> = keep_t.windows(2).map(|w| w[1] - w[0]).collect();
         let dt = median_i64(&mut d) as f64 * 1e-9;
-        out.push(Trajectory { t_ns: keep_t, pose: keep_pose, u, dim_u, dt, resampled });
+        out.push(Trajectory {
+            t_ns: keep_t,
+            pose: keep_pose,
+            u,
+            dim_u,
+            dt,
+            resampled,
+        });
     }
     if out.is_empty() && rep.poses_without_command > 0 && rep.short_trajectories_dropped == 0 {
         return Err(DataError::NoPoseWithCommand {
@@ -438,7 +471,11 @@ fn resample_linear(t: &[i64], pose: &[[f64; 3]], step: i64) -> (Vec<i64>, Vec<[f
             j += 1;
         }
         let (ta, tb) = (t[j], t[j + 1]);
-        let a = if tb > ta { (tk - ta) as f64 / (tb - ta) as f64 } else { 0.0 };
+        let a = if tb > ta {
+            (tk - ta) as f64 / (tb - ta) as f64
+        } else {
+            0.0
+        };
         let a = a.clamp(0.0, 1.0);
         let p = [0, 1, 2].map(|c| pose[j][c] + a * (pose[j + 1][c] - pose[j][c]));
         nt.push(tk);
@@ -460,14 +497,17 @@ pub struct SavGol {
 
 impl Default for SavGol {
     fn default() -> Self {
-        Self { window: 15, order: 3 }
+        Self {
+            window: 15,
+            order: 3,
+        }
     }
 }
 
 impl SavGol {
     /// Checks the settings.
     pub fn validate(&self) -> Result<(), DataError> {
-        if self.window % 2 == 0 || self.window < 3 {
+        if self.window.is_multiple_of(2) || self.window < 3 {
             return Err(DataError::InvalidSetting {
                 name: "savgol.window",
                 value: self.window.to_string(),
@@ -487,7 +527,9 @@ impl SavGol {
 
 /// Least squares `min ‖A c − b‖` by modified Gram–Schmidt QR; `a` is `m × k` row-major.
 fn lstsq(a: &[f64], m: usize, k: usize, b: &[f64]) -> Option<Vec<f64>> {
-    let mut q: Vec<Vec<f64>> = (0..k).map(|j| (0..m).map(|i| a[i * k + j]).collect()).collect();
+    let mut q: Vec<Vec<f64>> = (0..k)
+        .map(|j| (0..m).map(|i| a[i * k + j]).collect())
+        .collect();
     let mut r = vec![0.0; k * k];
     for j in 0..k {
         for p in 0..j {
@@ -504,7 +546,9 @@ fn lstsq(a: &[f64], m: usize, k: usize, b: &[f64]) -> Option<Vec<f64>> {
         r[j * k + j] = nrm;
         q[j].iter_mut().for_each(|x| *x /= nrm);
     }
-    let qtb: Vec<f64> = (0..k).map(|j| (0..m).map(|i| q[j][i] * b[i]).sum()).collect();
+    let qtb: Vec<f64> = (0..k)
+        .map(|j| (0..m).map(|i| q[j][i] * b[i]).sum())
+        .collect();
     let mut c = vec![0.0; k];
     for j in (0..k).rev() {
         let s: f64 = (j + 1..k).map(|p| r[j * k + p] * c[p]).sum();
@@ -551,13 +595,12 @@ pub fn savgol(t: &[f64], y: &[f64], sg: &SavGol) -> Result<(Vec<f64>, Vec<f64>),
                 p *= tau;
             }
         }
-        let c = lstsq(&a, sg.window, k, &y[lo..lo + sg.window]).ok_or(
-            DataError::InvalidSetting {
+        let c =
+            lstsq(&a, sg.window, k, &y[lo..lo + sg.window]).ok_or(DataError::InvalidSetting {
                 name: "stamps",
                 value: format!("{}", t[i]),
                 hint: "repeated stamps inside a Savitzky–Golay window; deduplicate the poses",
-            },
-        )?;
+            })?;
         val[i] = c[0];
         der[i] = c[1] / scale;
     }
@@ -577,7 +620,14 @@ pub fn car_states(traj: &Trajectory, sg: &SavGol) -> Result<Vec<[f64; 6]>, DataE
     Ok((0..t.len())
         .map(|i| {
             let (s, c) = psi[i].sin_cos();
-            [x[i], y[i], psi[i], c * xd[i] + s * yd[i], -s * xd[i] + c * yd[i], psid[i]]
+            [
+                x[i],
+                y[i],
+                psi[i],
+                c * xd[i] + s * yd[i],
+                -s * xd[i] + c * yd[i],
+                psid[i],
+            ]
         })
         .collect())
 }
@@ -653,7 +703,10 @@ pub fn windows(lengths: &[usize], k: usize) -> Result<Vec<Window>, DataError> {
     let mut w = Vec::new();
     for (ti, &len) in lengths.iter().enumerate() {
         if len > k {
-            w.extend((0..len - k).map(|start| Window { trajectory: ti, start }));
+            w.extend((0..len - k).map(|start| Window {
+                trajectory: ti,
+                start,
+            }));
         }
     }
     if w.is_empty() {
@@ -823,7 +876,7 @@ impl Normalizer {
     /// Statistics of `rows` (row-major, width `dim`). A dimension with standard deviation below
     /// `min_std` (absolute, e.g. 1e-8) gets std 1 and is listed in `constant_dims`.
     pub fn fit(rows: &[f64], dim: usize, min_std: f64) -> Result<Self, DataError> {
-        if dim == 0 || rows.len() < dim || rows.len() % dim != 0 {
+        if dim == 0 || rows.len() < dim || !rows.len().is_multiple_of(dim) {
             return Err(DataError::TooLittleData {
                 needed: 1,
                 k: 0,
@@ -849,14 +902,18 @@ impl Normalizer {
         let mut constant_dims = Vec::new();
         for (d, v) in var.iter().enumerate() {
             let s = (v / n).sqrt();
-            if !(s >= min_std) || !s.is_finite() {
+            if s.is_nan() || s < min_std || !s.is_finite() {
                 std.push(1.0);
                 constant_dims.push(d);
             } else {
                 std.push(s);
             }
         }
-        Ok(Self { mean, std, constant_dims })
+        Ok(Self {
+            mean,
+            std,
+            constant_dims,
+        })
     }
     /// Normalises rows in place.
     pub fn normalize(&self, rows: &mut [f64]) {

@@ -27,6 +27,8 @@
 //! # Ok::<(), dynlab_dynamics::physics::ModelError>(())
 //! ```
 #![warn(missing_docs)]
+// Index loops mirror the equations (rows, columns, stages) in the numerical kernels.
+#![allow(clippy::needless_range_loop)]
 
 pub mod conventions;
 pub mod data;

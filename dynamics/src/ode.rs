@@ -175,7 +175,11 @@ impl Solver {
     }
     /// Dopri5 with the given tolerances and the other options at their defaults.
     pub fn dopri5(rtol: f64, atol: f64) -> Self {
-        Solver::Dopri5(Dopri5Options { rtol, atol, ..Default::default() })
+        Solver::Dopri5(Dopri5Options {
+            rtol,
+            atol,
+            ..Default::default()
+        })
     }
     /// The solver's name as in model files (`euler`, `rk4`, `dopri5`).
     pub fn name(&self) -> &'static str {
@@ -242,7 +246,12 @@ struct Tableau {
     recorded: usize,
 }
 
-static EULER: Tableau = Tableau { a: &[&[]], b: &[1.0], e: &[], recorded: 1 };
+static EULER: Tableau = Tableau {
+    a: &[&[]],
+    b: &[1.0],
+    e: &[],
+    recorded: 1,
+};
 
 static RK4: Tableau = Tableau {
     a: &[&[], &[0.5], &[0.0, 0.5], &[0.0, 0.0, 1.0]],
@@ -257,11 +266,37 @@ static DOPRI5: Tableau = Tableau {
         &[1.0 / 5.0],
         &[3.0 / 40.0, 9.0 / 40.0],
         &[44.0 / 45.0, -56.0 / 15.0, 32.0 / 9.0],
-        &[19372.0 / 6561.0, -25360.0 / 2187.0, 64448.0 / 6561.0, -212.0 / 729.0],
-        &[9017.0 / 3168.0, -355.0 / 33.0, 46732.0 / 5247.0, 49.0 / 176.0, -5103.0 / 18656.0],
-        &[35.0 / 384.0, 0.0, 500.0 / 1113.0, 125.0 / 192.0, -2187.0 / 6784.0, 11.0 / 84.0],
+        &[
+            19372.0 / 6561.0,
+            -25360.0 / 2187.0,
+            64448.0 / 6561.0,
+            -212.0 / 729.0,
+        ],
+        &[
+            9017.0 / 3168.0,
+            -355.0 / 33.0,
+            46732.0 / 5247.0,
+            49.0 / 176.0,
+            -5103.0 / 18656.0,
+        ],
+        &[
+            35.0 / 384.0,
+            0.0,
+            500.0 / 1113.0,
+            125.0 / 192.0,
+            -2187.0 / 6784.0,
+            11.0 / 84.0,
+        ],
     ],
-    b: &[35.0 / 384.0, 0.0, 500.0 / 1113.0, 125.0 / 192.0, -2187.0 / 6784.0, 11.0 / 84.0, 0.0],
+    b: &[
+        35.0 / 384.0,
+        0.0,
+        500.0 / 1113.0,
+        125.0 / 192.0,
+        -2187.0 / 6784.0,
+        11.0 / 84.0,
+        0.0,
+    ],
     e: &[
         71.0 / 57600.0,
         0.0,
@@ -340,7 +375,11 @@ fn run_fixed<T: Scalar, S: System<T>>(
         y.copy_from_slice(&ynew);
         sys.accept(h);
         rep.accepted += 1;
-        rep.t_reached = if step + 1 == steps { t_end } else { h * (step + 1) as f64 };
+        rep.t_reached = if step + 1 == steps {
+            t_end
+        } else {
+            h * (step + 1) as f64
+        };
     }
     rep
 }
@@ -390,8 +429,16 @@ fn run_dopri5<T: Scalar, S: System<T>>(
         _ => {
             let sc: Vec<f64> = (0..ed).map(|i| scale(i, y, y)).collect();
             let d0 = rms_norm(&(0..ed).map(|i| y[i].to_f64() / sc[i]).collect::<Vec<_>>());
-            let d1 = rms_norm(&(0..ed).map(|i| ks[0][i].to_f64() / sc[i]).collect::<Vec<_>>());
-            let h0 = if d0 < 1e-5 || d1 < 1e-5 { 1e-6 } else { 0.01 * d0 / d1 };
+            let d1 = rms_norm(
+                &(0..ed)
+                    .map(|i| ks[0][i].to_f64() / sc[i])
+                    .collect::<Vec<_>>(),
+            );
+            let h0 = if d0 < 1e-5 || d1 < 1e-5 {
+                1e-6
+            } else {
+                0.01 * d0 / d1
+            };
             let h0 = h0.min(t_end);
             combine(y, h0, &[1.0], &ks[..1], &mut ytmp);
             sys.rhs(1, &ytmp, &mut ks[1]);
@@ -451,14 +498,22 @@ fn run_dopri5<T: Scalar, S: System<T>>(
             let r = h * e / scale(i, y, &ynew);
             err += r * r;
         }
-        let err = if ed > 0 { (err / ed as f64).sqrt() } else { 0.0 };
+        let err = if ed > 0 {
+            (err / ed as f64).sqrt()
+        } else {
+            0.0
+        };
         if !err.is_finite() || !all_finite(&ynew) || !all_finite(&ks[stages - 1]) {
             rep.rejected += 1;
             h *= o.min_factor;
             facmax = 1.0;
             continue;
         }
-        let fac = if err == 0.0 { facmax } else { o.safety * err.powf(-0.2) };
+        let fac = if err == 0.0 {
+            facmax
+        } else {
+            o.safety * err.powf(-0.2)
+        };
         if err <= 1.0 {
             t = if last { t_end } else { t + h };
             y.copy_from_slice(&ynew);
@@ -538,7 +593,13 @@ pub struct SolverTape<T, P> {
 
 impl<T, P> Default for SolverTape<T, P> {
     fn default() -> Self {
-        Self { n: 0, u: Vec::new(), solver: None, steps: Vec::new(), len: 0 }
+        Self {
+            n: 0,
+            u: Vec::new(),
+            solver: None,
+            steps: Vec::new(),
+            len: 0,
+        }
     }
 }
 
@@ -574,12 +635,17 @@ impl<T: Scalar, F: VectorField<T> + ?Sized> System<T> for Taped<'_, T, F> {
         let inp = &mut self.inputs[stage];
         inp.clear();
         inp.extend_from_slice(y);
-        self.field.eval_taped(self.n, y, self.u, k, &mut self.tapes[stage]);
+        self.field
+            .eval_taped(self.n, y, self.u, k, &mut self.tapes[stage]);
     }
     fn accept(&mut self, h: f64) {
         let tape = &mut *self.tape;
         if tape.len == tape.steps.len() {
-            tape.steps.push(TapedStep { h: 0.0, inputs: Vec::new(), tapes: Vec::new() });
+            tape.steps.push(TapedStep {
+                h: 0.0,
+                inputs: Vec::new(),
+                tapes: Vec::new(),
+            });
         }
         let st = &mut tape.steps[tape.len];
         st.h = h;
@@ -700,7 +766,15 @@ pub fn tape_jvp<T: Scalar, F: VectorField<T> + ?Sized>(
     for st in tape.steps[..tape.len].iter() {
         for i in 0..r {
             combine(out_dot, st.h, tab.a[i], &kd, &mut yd);
-            field.jvp(n, &st.inputs[i], &tape.u, &yd, udot, &mut scratch, &mut kd[i]);
+            field.jvp(
+                n,
+                &st.inputs[i],
+                &tape.u,
+                &yd,
+                udot,
+                &mut scratch,
+                &mut kd[i],
+            );
         }
         let base = out_dot.to_vec();
         combine(&base, st.h, &tab.b[..r], &kd, out_dot);
@@ -827,7 +901,8 @@ impl<T: Scalar, F: VectorField<T> + ?Sized> System<T> for Adjoint<'_, T, F> {
         let mu = self.n * self.field.dim_u();
         let (s, rest) = y.split_at(m);
         let a = &rest[..m];
-        self.field.eval_taped(self.n, s, self.u, &mut self.f, &mut self.tape);
+        self.field
+            .eval_taped(self.n, s, self.u, &mut self.f, &mut self.tape);
         let (ks, krest) = k.split_at_mut(m);
         for (kk, f) in ks.iter_mut().zip(self.f.iter()) {
             *kk = -*f;
@@ -835,7 +910,8 @@ impl<T: Scalar, F: VectorField<T> + ?Sized> System<T> for Adjoint<'_, T, F> {
         let (ka, krest) = krest.split_at_mut(m);
         let (ku, kp) = krest.split_at_mut(mu);
         kp.iter_mut().for_each(|x| *x = T::zero());
-        self.field.vjp(&self.tape, a, &mut self.sb, &mut self.ub, kp);
+        self.field
+            .vjp(&self.tape, a, &mut self.sb, &mut self.ub, kp);
         ka.copy_from_slice(&self.sb);
         ku.copy_from_slice(&self.ub);
     }

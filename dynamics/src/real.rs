@@ -235,14 +235,20 @@ impl<const N: usize> Add<f64> for Dual<N> {
     type Output = Self;
     #[inline]
     fn add(self, o: f64) -> Self {
-        Self { v: self.v + o, d: self.d }
+        Self {
+            v: self.v + o,
+            d: self.d,
+        }
     }
 }
 impl<const N: usize> Sub<f64> for Dual<N> {
     type Output = Self;
     #[inline]
     fn sub(self, o: f64) -> Self {
-        Self { v: self.v - o, d: self.d }
+        Self {
+            v: self.v - o,
+            d: self.d,
+        }
     }
 }
 impl<const N: usize> Mul<f64> for Dual<N> {
@@ -320,8 +326,9 @@ mod tests {
         let f = (x * y).sin() + (x / y).atan() * 3.0 - y.mul_abs();
         let (xv, yv) = (0.7f64, -1.3f64);
         let dfdx = yv * (xv * yv).cos() + 3.0 / (1.0 + (xv / yv).powi(2)) / yv;
-        let dfdy =
-            xv * (xv * yv).cos() - 3.0 * xv / (yv * yv) / (1.0 + (xv / yv).powi(2)) - 2.0 * yv.abs();
+        let dfdy = xv * (xv * yv).cos()
+            - 3.0 * xv / (yv * yv) / (1.0 + (xv / yv).powi(2))
+            - 2.0 * yv.abs();
         assert!((f.d[0] - dfdx).abs() < 1e-12);
         assert!((f.d[1] - dfdy).abs() < 1e-12);
     }

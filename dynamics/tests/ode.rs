@@ -1,4 +1,5 @@
 //! Solvers against exact solutions, derivatives against finite differences, failure statuses.
+#![allow(clippy::needless_range_loop)] // index loops mirror the math
 
 mod common;
 use common::{BlowUp, Linear, Pendulum, max_rel_diff};
@@ -40,7 +41,12 @@ fn scalar_linear_ode_with_input_matches_exact_solution() {
         let mut out = [0.0];
         let rep = integrate(&f, &solver, 1, &[s0], &[u], t, &mut out);
         assert!(rep.is_success());
-        assert!((out[0] - exact).abs() < tol, "{}: {} vs {exact}", solver.name(), out[0]);
+        assert!(
+            (out[0] - exact).abs() < tol,
+            "{}: {} vs {exact}",
+            solver.name(),
+            out[0]
+        );
     }
 }
 
@@ -73,8 +79,16 @@ fn dopri5_global_error_stays_within_tolerance_and_lands_on_dt() {
     // tighter tolerances take more steps
     let steps = |tol: f64| {
         let mut out = [0.0; 2];
-        integrate(&oscillator(2.0), &Solver::dopri5(tol, tol), 1, &[1.0, 0.5], &[0.3], 5.0, &mut out)
-            .accepted
+        integrate(
+            &oscillator(2.0),
+            &Solver::dopri5(tol, tol),
+            1,
+            &[1.0, 0.5],
+            &[0.3],
+            5.0,
+            &mut out,
+        )
+        .accepted
     };
     assert!(steps(1e-10) > steps(1e-5));
 }
@@ -83,7 +97,15 @@ fn dopri5_global_error_stays_within_tolerance_and_lands_on_dt() {
 fn solvers_work_in_f32() {
     let f = Linear::<f32>::new(2, 1, &[0.0, 1.0, -4.0, 0.0], &[0.0, 1.0]);
     let mut out = [0.0f32; 2];
-    let rep = integrate(&f, &Solver::Rk4 { substeps: 10 }, 1, &[1.0, 0.5], &[0.3], 1.0, &mut out);
+    let rep = integrate(
+        &f,
+        &Solver::Rk4 { substeps: 10 },
+        1,
+        &[1.0, 0.5],
+        &[0.3],
+        1.0,
+        &mut out,
+    );
     assert!(rep.is_success());
     let ex = oscillator_exact(2.0, 1.0, 0.5, 0.3, 1.0);
     assert!((out[0] as f64 - ex[0]).abs() < 1e-4 && (out[1] as f64 - ex[1]).abs() < 1e-4);
@@ -91,7 +113,9 @@ fn solvers_work_in_f32() {
 
 #[test]
 fn a_batch_integrates_like_its_samples_for_fixed_step_solvers() {
-    let f = Pendulum { theta: [9.0, 0.3, 1.5] };
+    let f = Pendulum {
+        theta: [9.0, 0.3, 1.5],
+    };
     let s = [0.4, -0.2, 1.2, 0.7];
     let u = [0.5, -1.0];
     for solver in [Solver::euler(), Solver::Rk4 { substeps: 3 }] {
@@ -99,14 +123,29 @@ fn a_batch_integrates_like_its_samples_for_fixed_step_solvers() {
         integrate(&f, &solver, 2, &s, &u, 0.1, &mut batch);
         for i in 0..2 {
             let mut one = [0.0; 2];
-            integrate(&f, &solver, 1, &s[2 * i..2 * i + 2], &u[i..i + 1], 0.1, &mut one);
+            integrate(
+                &f,
+                &solver,
+                1,
+                &s[2 * i..2 * i + 2],
+                &u[i..i + 1],
+                0.1,
+                &mut one,
+            );
             assert_eq!(&batch[2 * i..2 * i + 2], &one);
         }
     }
 }
 
 /// L = c · s(dt); gradient wrt (s0, u, θ) by central differences.
-fn fd_gradient(solver: &Solver, s0: [f64; 2], u: f64, theta: [f64; 3], c: [f64; 2], dt: f64) -> Vec<f64> {
+fn fd_gradient(
+    solver: &Solver,
+    s0: [f64; 2],
+    u: f64,
+    theta: [f64; 3],
+    c: [f64; 2],
+    dt: f64,
+) -> Vec<f64> {
     let loss = |s0: [f64; 2], u: f64, th: [f64; 3]| {
         let f = Pendulum { theta: th };
         let mut out = [0.0; 2];
@@ -138,7 +177,11 @@ fn fd_gradient(solver: &Solver, s0: [f64; 2], u: f64, theta: [f64; 3], c: [f64; 
 }
 
 fn solvers_for_gradients() -> Vec<Solver> {
-    vec![Solver::Euler { substeps: 3 }, Solver::Rk4 { substeps: 2 }, Solver::dopri5(1e-11, 1e-12)]
+    vec![
+        Solver::Euler { substeps: 3 },
+        Solver::Rk4 { substeps: 2 },
+        Solver::dopri5(1e-11, 1e-12),
+    ]
 }
 
 #[test]
@@ -161,7 +204,9 @@ fn reverse_mode_through_every_solver_matches_finite_differences() {
 
 #[test]
 fn taped_integration_gives_the_same_state_as_untaped() {
-    let f = Pendulum { theta: [9.0, 0.4, 2.0] };
+    let f = Pendulum {
+        theta: [9.0, 0.4, 2.0],
+    };
     for solver in solvers_for_gradients() {
         let mut a = [0.0; 2];
         let mut b = [0.0; 2];
@@ -176,7 +221,9 @@ fn taped_integration_gives_the_same_state_as_untaped() {
 
 #[test]
 fn forward_mode_agrees_with_reverse_mode_and_finite_differences() {
-    let f = Pendulum { theta: [9.0, 0.4, 2.0] };
+    let f = Pendulum {
+        theta: [9.0, 0.4, 2.0],
+    };
     let (s0, u, dt) = ([0.8, -0.3], [0.6], 0.7);
     let sdot = [0.3, -1.1];
     let udot = [0.7];
@@ -191,13 +238,21 @@ fn forward_mode_agrees_with_reverse_mode_and_finite_differences() {
         integrate_taped(&f, &solver, 1, &s0, &u, dt, &mut out2, &mut tape);
         let mut od2 = [0.0; 2];
         tape_jvp(&f, &tape, &sdot, &udot, &mut od2);
-        assert!(max_rel_diff(&od, &od2) < 1e-9, "{}: {od:?} vs {od2:?}", solver.name());
+        assert!(
+            max_rel_diff(&od, &od2) < 1e-9,
+            "{}: {od:?} vs {od2:?}",
+            solver.name()
+        );
         // ⟨ȳ, J v⟩ = ⟨Jᵀ ȳ, v⟩
         let (mut sb, mut ub) = ([0.0; 2], [0.0; 1]);
         integrate_vjp(&f, &tape, &ybar, &mut sb, &mut ub, &mut []);
         let lhs = ybar[0] * od2[0] + ybar[1] * od2[1];
         let rhs = sb[0] * sdot[0] + sb[1] * sdot[1] + ub[0] * udot[0];
-        assert!((lhs - rhs).abs() < 1e-12 * lhs.abs().max(1.0), "{}: {lhs} vs {rhs}", solver.name());
+        assert!(
+            (lhs - rhs).abs() < 1e-12 * lhs.abs().max(1.0),
+            "{}: {lhs} vs {rhs}",
+            solver.name()
+        );
         // against central differences along the direction
         let h = 1e-6;
         let shift = |sign: f64| {
@@ -209,13 +264,19 @@ fn forward_mode_agrees_with_reverse_mode_and_finite_differences() {
         };
         let (p, m) = (shift(1.0), shift(-1.0));
         let fd = [(p[0] - m[0]) / (2.0 * h), (p[1] - m[1]) / (2.0 * h)];
-        assert!(max_rel_diff(&od, &fd) < 1e-6, "{}: {od:?} vs {fd:?}", solver.name());
+        assert!(
+            max_rel_diff(&od, &fd) < 1e-6,
+            "{}: {od:?} vs {fd:?}",
+            solver.name()
+        );
     }
 }
 
 #[test]
 fn step_jacobians_match_finite_differences_for_a_batch() {
-    let f = Pendulum { theta: [9.0, 0.4, 2.0] };
+    let f = Pendulum {
+        theta: [9.0, 0.4, 2.0],
+    };
     let s = [0.8, -0.3, -1.2, 0.5];
     let u = [0.6, -0.4];
     let solver = Solver::Rk4 { substeps: 2 };
@@ -239,8 +300,15 @@ fn step_jacobians_match_finite_differences_for_a_batch() {
             let (p, m) = (eval(1.0), eval(-1.0));
             for i in 0..2 {
                 let fd = (p[i] - m[i]) / (2.0 * h);
-                let got = if j < 2 { js[b * 4 + i * 2 + j] } else { ju[b * 2 + i] };
-                assert!((got - fd).abs() < 1e-7, "sample {b} ∂s{i}/∂z{j}: {got} vs {fd}");
+                let got = if j < 2 {
+                    js[b * 4 + i * 2 + j]
+                } else {
+                    ju[b * 2 + i]
+                };
+                assert!(
+                    (got - fd).abs() < 1e-7,
+                    "sample {b} ∂s{i}/∂z{j}: {got} vs {fd}"
+                );
             }
         }
     }
@@ -248,7 +316,9 @@ fn step_jacobians_match_finite_differences_for_a_batch() {
 
 #[test]
 fn adjoint_method_matches_discrete_reverse_mode_to_solver_accuracy() {
-    let f = Pendulum { theta: [9.0, 0.4, 2.0] };
+    let f = Pendulum {
+        theta: [9.0, 0.4, 2.0],
+    };
     let (s0, u, dt, c) = ([0.8, -0.3], [0.6], 0.7, [1.0, -0.5]);
     let solver = Solver::dopri5(1e-10, 1e-12);
     let mut tape = SolverTape::default();
@@ -261,12 +331,29 @@ fn adjoint_method_matches_discrete_reverse_mode_to_solver_accuracy() {
     assert!(rep.is_success());
     let disc = [sb[0], sb[1], ub[0], pb[0], pb[1], pb[2]];
     let adj = [sa[0], sa[1], ua[0], pa[0], pa[1], pa[2]];
-    assert!(max_rel_diff(&adj, &disc) < 1e-7, "adjoint {adj:?} vs discrete {disc:?}");
+    assert!(
+        max_rel_diff(&adj, &disc) < 1e-7,
+        "adjoint {adj:?} vs discrete {disc:?}"
+    );
     // with RK4 substeps the adjoint converges to the same gradient too
     let (mut sr, mut ur, mut pr) = ([0.0; 2], [0.0; 1], [0.0; 3]);
-    adjoint_vjp(&f, &Solver::Rk4 { substeps: 50 }, 1, &s1, &u, dt, &c, &mut sr, &mut ur, &mut pr);
+    adjoint_vjp(
+        &f,
+        &Solver::Rk4 { substeps: 50 },
+        1,
+        &s1,
+        &u,
+        dt,
+        &c,
+        &mut sr,
+        &mut ur,
+        &mut pr,
+    );
     let rk = [sr[0], sr[1], ur[0], pr[0], pr[1], pr[2]];
-    assert!(max_rel_diff(&rk, &disc) < 1e-6, "adjoint RK4 {rk:?} vs {disc:?}");
+    assert!(
+        max_rel_diff(&rk, &disc) < 1e-6,
+        "adjoint RK4 {rk:?} vs {disc:?}"
+    );
 }
 
 #[test]
@@ -276,7 +363,16 @@ fn parameter_gradients_of_the_linear_field_match_the_exact_sensitivity() {
     let f = Linear::<f64>::new(1, 1, &[a], &[b]);
     let mut tape = SolverTape::default();
     let mut out = [0.0];
-    integrate_taped(&f, &Solver::dopri5(1e-12, 1e-14), 1, &[s0], &[u], t, &mut out, &mut tape);
+    integrate_taped(
+        &f,
+        &Solver::dopri5(1e-12, 1e-14),
+        1,
+        &[s0],
+        &[u],
+        t,
+        &mut out,
+        &mut tape,
+    );
     let (mut sb, mut ub, mut pb) = ([0.0], [0.0], [0.0; 2]);
     integrate_vjp(&f, &tape, &[1.0], &mut sb, &mut ub, &mut pb);
     let e = (a * t).exp();
@@ -291,16 +387,44 @@ fn parameter_gradients_of_the_linear_field_match_the_exact_sensitivity() {
 fn a_diverging_ode_reports_a_status_instead_of_nan() {
     // ṡ = s², s0 = 1 blows up at t = 1; integrate to t = 2
     let mut out = [0.0];
-    let rep = integrate(&BlowUp, &Solver::dopri5(1e-6, 1e-9), 1, &[1.0], &[], 2.0, &mut out);
+    let rep = integrate(
+        &BlowUp,
+        &Solver::dopri5(1e-6, 1e-9),
+        1,
+        &[1.0],
+        &[],
+        2.0,
+        &mut out,
+    );
     assert_ne!(rep.status, OdeStatus::Success);
     assert!(out[0].is_finite(), "state must be the last finite one");
-    assert!(rep.t_reached < 1.01 && rep.t_reached > 0.9, "t_reached {}", rep.t_reached);
+    assert!(
+        rep.t_reached < 1.01 && rep.t_reached > 0.9,
+        "t_reached {}",
+        rep.t_reached
+    );
 
-    let rep = integrate(&BlowUp, &Solver::Rk4 { substeps: 4 }, 1, &[1e100], &[], 2.0, &mut out);
+    let rep = integrate(
+        &BlowUp,
+        &Solver::Rk4 { substeps: 4 },
+        1,
+        &[1e100],
+        &[],
+        2.0,
+        &mut out,
+    );
     assert_eq!(rep.status, OdeStatus::NonFinite);
     assert!(out[0].is_finite());
 
-    let rep = integrate(&BlowUp, &Solver::Euler { substeps: 1000 }, 1, &[1.0], &[], 2.0, &mut out);
+    let rep = integrate(
+        &BlowUp,
+        &Solver::Euler { substeps: 1000 },
+        1,
+        &[1.0],
+        &[],
+        2.0,
+        &mut out,
+    );
     assert_eq!(rep.status, OdeStatus::NonFinite);
     assert!(out[0].is_finite());
 }
@@ -308,9 +432,22 @@ fn a_diverging_ode_reports_a_status_instead_of_nan() {
 #[test]
 fn dopri5_reports_exceeding_its_step_limit() {
     let f = oscillator(50.0);
-    let o = Dopri5Options { rtol: 1e-10, atol: 1e-12, max_steps: 5, ..Default::default() };
+    let o = Dopri5Options {
+        rtol: 1e-10,
+        atol: 1e-12,
+        max_steps: 5,
+        ..Default::default()
+    };
     let mut out = [0.0; 2];
-    let rep = integrate(&f, &Solver::Dopri5(o), 1, &[1.0, 0.0], &[0.0], 10.0, &mut out);
+    let rep = integrate(
+        &f,
+        &Solver::Dopri5(o),
+        1,
+        &[1.0, 0.0],
+        &[0.0],
+        10.0,
+        &mut out,
+    );
     assert_eq!(rep.status, OdeStatus::MaxStepsExceeded);
     assert!(rep.t_reached < 10.0);
     assert!(out.iter().all(|x| x.is_finite()));
@@ -318,11 +455,21 @@ fn dopri5_reports_exceeding_its_step_limit() {
 
 #[test]
 fn solver_settings_round_trip_through_json() {
-    for s in [Solver::euler(), Solver::Rk4 { substeps: 4 }, Solver::dopri5(1e-5, 1e-7)] {
+    for s in [
+        Solver::euler(),
+        Solver::Rk4 { substeps: 4 },
+        Solver::dopri5(1e-5, 1e-7),
+    ] {
         let j = serde_json::to_string(&s).unwrap();
         let back: Solver = serde_json::from_str(&j).unwrap();
         assert_eq!(back, s);
     }
     let s: Solver = serde_json::from_str(r#"{"method":"dopri5","rtol":1e-4}"#).unwrap();
-    assert_eq!(s, Solver::Dopri5(Dopri5Options { rtol: 1e-4, ..Default::default() }));
+    assert_eq!(
+        s,
+        Solver::Dopri5(Dopri5Options {
+            rtol: 1e-4,
+            ..Default::default()
+        })
+    );
 }

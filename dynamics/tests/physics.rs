@@ -1,5 +1,6 @@
 //! Physics models: exact Jacobians against finite differences, physical sanity, effects,
 //! residuals for fitting, printing and errors.
+#![allow(clippy::needless_range_loop)] // index loops mirror the math
 
 mod common;
 use common::max_rel_diff;
@@ -64,7 +65,10 @@ fn fd_jac(g: impl Fn(&[f64]) -> Vec<f64>, z: &[f64], h: f64) -> Vec<Vec<f64>> {
             p[k] += hk;
             m[k] -= hk;
             let (gp, gm) = (g(&p), g(&m));
-            gp.iter().zip(&gm).map(|(a, b)| (a - b) / (2.0 * hk)).collect()
+            gp.iter()
+                .zip(&gm)
+                .map(|(a, b)| (a - b) / (2.0 * hk))
+                .collect()
         })
         .collect()
 }
@@ -74,7 +78,14 @@ fn check_field_jacobians(model: &PhysicsModel, s: &[f64], u: &[f64]) {
     let nz = ds + du + np;
     let mut f = vec![0.0; ds];
     let mut j = vec![0.0; ds * nz];
-    model.jacobian_full(s, u, &vec![true; model.effects().len()], true, &mut f, &mut j);
+    model.jacobian_full(
+        s,
+        u,
+        &vec![true; model.effects().len()],
+        true,
+        &mut f,
+        &mut j,
+    );
     let z: Vec<f64> = s.iter().chain(u).chain(model.params()).copied().collect();
     let fd = fd_jac(
         |z| {
@@ -117,7 +128,13 @@ fn check_field_jacobians(model: &PhysicsModel, s: &[f64], u: &[f64]) {
     model.vjp(&tape, &ybar, &mut sb, &mut ub, &mut pb);
     for c in 0..nz {
         let want: f64 = (0..ds).map(|r| ybar[r] * j[r * nz + c]).sum();
-        let got = if c < ds { sb[c] } else if c < ds + du { ub[c - ds] } else { pb[c - ds - du] };
+        let got = if c < ds {
+            sb[c]
+        } else if c < ds + du {
+            ub[c - ds]
+        } else {
+            pb[c - ds - du]
+        };
         assert!((got - want).abs() < 1e-12 * want.abs().max(1.0));
     }
     let sdot: Vec<f64> = (0..ds).map(|i| 1.0 - 0.2 * i as f64).collect();
@@ -136,7 +153,11 @@ fn check_field_jacobians(model: &PhysicsModel, s: &[f64], u: &[f64]) {
 fn car_jacobians_wrt_state_input_and_parameters_match_finite_differences() {
     check_field_jacobians(&car_all(), &CAR_S, &CAR_U);
     // reversing, slow, and the nominal model alone
-    check_field_jacobians(&car_all(), &[0.0, 0.0, -2.0, -0.4, 0.05, -0.3, -0.2], &[-0.1, -0.1]);
+    check_field_jacobians(
+        &car_all(),
+        &[0.0, 0.0, -2.0, -0.4, 0.05, -0.3, -0.2],
+        &[-0.1, -0.1],
+    );
     check_field_jacobians(&PhysicsModel::car(&[]).unwrap(), &CAR_S[..6], &CAR_U);
 }
 
@@ -168,7 +189,11 @@ fn effect_terms_and_their_jacobians_match_finite_differences() {
             };
             let q0 = model.params()[range.clone()].to_vec();
             let z: Vec<f64> = s.iter().chain(&u).chain(&q0).copied().collect();
-            let fd = fd_jac(|z| contrib(&z[..ds], &z[ds..ds + du], &z[ds + du..]), &z, 1e-7);
+            let fd = fd_jac(
+                |z| contrib(&z[..ds], &z[ds..ds + du], &z[ds + du..]),
+                &z,
+                1e-7,
+            );
             for r in 0..ds {
                 for c in 0..ds + du + ne {
                     let got = if c < ds {
@@ -179,7 +204,10 @@ fn effect_terms_and_their_jacobians_match_finite_differences() {
                         t.d_params[r * ne + c - ds - du]
                     };
                     let want = fd[c][r];
-                    assert!((got - want).abs() < 1e-5 * want.abs().max(1.0), "{e}: ∂Δf{r}/∂z{c}: {got} vs {want}");
+                    assert!(
+                        (got - want).abs() < 1e-5 * want.abs().max(1.0),
+                        "{e}: ∂Δf{r}/∂z{c}: {got} vs {want}"
+                    );
                 }
             }
         }
@@ -193,7 +221,11 @@ fn aero_drag_is_exactly_minus_c_vx_abs_vx_and_linear_in_c() {
     let s = [0.0, 0.0, 0.3, -1.5, 0.2, 0.4];
     let t = m.effect_term(Effect::AeroDrag, &s, &[0.1, 0.3]).unwrap();
     let want = [0.0, 0.0, 0.0, -0.1 * -1.5 * 1.5, 0.0, 0.0];
-    assert!(max_rel_diff(&t.contribution, &want) < 1e-14, "{:?}", t.contribution);
+    assert!(
+        max_rel_diff(&t.contribution, &want) < 1e-14,
+        "{:?}",
+        t.contribution
+    );
     assert!(Effect::AeroDrag.linear_in_params());
     m.set_param("aero_drag.c", 0.2).unwrap();
     let t2 = m.effect_term(Effect::AeroDrag, &s, &[0.1, 0.3]).unwrap();
@@ -252,7 +284,11 @@ fn car_drives_straight_accelerates_and_stands_still_sensibly() {
     let ffy = 0.192 * (1.2 * (2.579 * af).atan()).sin();
     let fry = 0.1737 * (1.2691 * (3.3852 * ar).atan()).sin();
     let omd = (ffy * 0.029 * delta.cos() - fry * 0.033) / 27.8e-6;
-    assert!((f[5] - omd).abs() < 2e-3 * omd.abs(), "{} vs Liniger {omd}", f[5]);
+    assert!(
+        (f[5] - omd).abs() < 2e-3 * omd.abs(),
+        "{} vs Liniger {omd}",
+        f[5]
+    );
 }
 
 #[test]
@@ -260,7 +296,15 @@ fn a_central_frictionless_push_translates_the_block_by_the_push_length() {
     let m = PhysicsModel::pushing(&[]).unwrap();
     let th = 0.3;
     let mut out = [0.0; 3];
-    let rep = integrate(&m, &Solver::rk4(), 1, &[0.4, 0.0, th], &[0.0, 0.0, 0.7], 1.0, &mut out);
+    let rep = integrate(
+        &m,
+        &Solver::rk4(),
+        1,
+        &[0.4, 0.0, th],
+        &[0.0, 0.0, 0.7],
+        1.0,
+        &mut out,
+    );
     assert!(rep.is_success());
     let d = 0.7 * 0.1;
     assert!((out[0] - (0.4 + d * th.cos())).abs() < 1e-12);
@@ -302,9 +346,22 @@ fn motor_lag_filter_matches_the_integrated_extra_state() {
     let filt = PhysicsModel::motor_lag_filter(&throttle, dt, 0.08, 0.0);
     let mut s = vec![0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0];
     for (k, &d) in throttle.iter().enumerate() {
-        assert!((s[6] - filt[k]).abs() < 1e-9, "step {k}: {} vs {}", s[6], filt[k]);
+        assert!(
+            (s[6] - filt[k]).abs() < 1e-9,
+            "step {k}: {} vs {}",
+            s[6],
+            filt[k]
+        );
         let mut next = vec![0.0; 7];
-        integrate(&m, &Solver::dopri5(1e-11, 1e-13), 1, &s, &[0.0, d], dt, &mut next);
+        integrate(
+            &m,
+            &Solver::dopri5(1e-11, 1e-13),
+            1,
+            &s,
+            &[0.0, d],
+            dt,
+            &mut next,
+        );
         s = next;
     }
 }
@@ -314,7 +371,9 @@ fn step_jacobians_of_the_car_match_finite_differences() {
     let m = car_all();
     let solver = Solver::Rk4 { substeps: 2 };
     let (mut out, mut js, mut ju) = (vec![0.0; 7], vec![0.0; 49], vec![0.0; 14]);
-    step_jacobians(&m, &solver, 1, &CAR_S, &CAR_U, 0.02, &mut out, &mut js, &mut ju);
+    step_jacobians(
+        &m, &solver, 1, &CAR_S, &CAR_U, 0.02, &mut out, &mut js, &mut ju,
+    );
     let z: Vec<f64> = CAR_S.iter().chain(&CAR_U).copied().collect();
     let fd = fd_jac(
         |z| {
@@ -327,8 +386,16 @@ fn step_jacobians_of_the_car_match_finite_differences() {
     );
     for r in 0..7 {
         for c in 0..9 {
-            let got = if c < 7 { js[r * 7 + c] } else { ju[r * 2 + c - 7] };
-            assert!((got - fd[c][r]).abs() < 1e-6 * fd[c][r].abs().max(1.0), "∂s{r}/∂z{c}: {got} vs {}", fd[c][r]);
+            let got = if c < 7 {
+                js[r * 7 + c]
+            } else {
+                ju[r * 2 + c - 7]
+            };
+            assert!(
+                (got - fd[c][r]).abs() < 1e-6 * fd[c][r].abs().max(1.0),
+                "∂s{r}/∂z{c}: {got} vs {}",
+                fd[c][r]
+            );
         }
     }
 }
@@ -341,11 +408,23 @@ fn residual_jacobian_matches_finite_differences_and_vanishes_at_the_truth() {
     let solver = Solver::Rk4 { substeps: 2 };
     let mut transitions = Vec::new();
     for k in 0..4 {
-        let s0 = vec![0.1 * k as f64, -0.2, 3.0 + 0.3 * k as f64, 1.0 + 0.2 * k as f64, 0.05, 0.5 - 0.2 * k as f64];
+        let s0 = vec![
+            0.1 * k as f64,
+            -0.2,
+            3.0 + 0.3 * k as f64,
+            1.0 + 0.2 * k as f64,
+            0.05,
+            0.5 - 0.2 * k as f64,
+        ];
         let u = vec![0.1 - 0.05 * k as f64, 0.4];
         let mut s1 = vec![0.0; 6];
         integrate(&truth, &solver, 1, &s0, &u, 0.02, &mut s1);
-        transitions.push(Transition { s0, u, s1, dt: 0.02 });
+        transitions.push(Transition {
+            s0,
+            u,
+            s1,
+            dt: 0.02,
+        });
     }
     let w = [1.0, 1.0, 0.5, 0.2, 0.2, 0.1];
     let rj = residuals_and_jacobian(&truth, &solver, &transitions, &w).unwrap();
@@ -369,11 +448,18 @@ fn residual_jacobian_matches_finite_differences_and_vanishes_at_the_truth() {
     for r in 0..rj.residuals.len() {
         for c in 0..np {
             let got = rj.jacobian[r * np + c];
-            assert!((got - fd[c][r]).abs() < 1e-5 * fd[c][r].abs().max(1e-3) + 1e-7, "row {r} col {c}: {got} vs {}", fd[c][r]);
+            assert!(
+                (got - fd[c][r]).abs() < 1e-5 * fd[c][r].abs().max(1e-3) + 1e-7,
+                "row {r} col {c}: {got} vs {}",
+                fd[c][r]
+            );
         }
     }
     // one Gauss–Newton step on c and δ₀ alone lands near the truth
-    let cols = [model.param_index("aero_drag.c").unwrap(), model.param_index("steering_offset.delta0").unwrap()];
+    let cols = [
+        model.param_index("aero_drag.c").unwrap(),
+        model.param_index("steering_offset.delta0").unwrap(),
+    ];
     let (mut a, mut b) = ([[0.0; 2]; 2], [0.0; 2]);
     for r in 0..rj.residuals.len() {
         for i in 0..2 {
@@ -399,7 +485,10 @@ fn equations_print_fitted_effects_with_uncertainty() {
     m.set_std_errors(Some(se)).unwrap();
     let text = m.to_string();
     assert!(text.contains("− 0.01230·vx|vx|"), "{text}");
-    assert!(text.contains("(aero_drag c = 0.01230 ± 0.0008000 1/m)"), "{text}");
+    assert!(
+        text.contains("(aero_drag c = 0.01230 ± 0.0008000 1/m)"),
+        "{text}"
+    );
     assert!(text.contains("ḋ_f = (d − d_f)/0.05000"), "{text}");
     assert!(text.contains("m = 0.04100 kg"), "{text}");
     let p = push_all(0.3).to_string();
@@ -409,7 +498,11 @@ fn equations_print_fitted_effects_with_uncertainty() {
 #[test]
 fn bad_model_configurations_get_clear_errors() {
     let e = PhysicsModel::car(&[Effect::ComOffset]).unwrap_err();
-    assert!(e.to_string().contains("aero_drag, motor_lag, steering_offset, grip_patch"), "{e}");
+    assert!(
+        e.to_string()
+            .contains("aero_drag, motor_lag, steering_offset, grip_patch"),
+        "{e}"
+    );
     let e = PhysicsModel::car(&[Effect::AeroDrag, Effect::AeroDrag]).unwrap_err();
     assert_eq!(e, ModelError::DuplicateEffect(Effect::AeroDrag));
     let e = PhysicsModel::parse_effects(&["aero_dreg"]).unwrap_err();
@@ -419,8 +512,17 @@ fn bad_model_configurations_get_clear_errors() {
     assert!(matches!(e, ModelError::ParamOutOfBounds { .. }), "{e}");
     let e = m.set_params(&[1.0]).unwrap_err();
     assert!(e.to_string().contains("expected 16 parameters"), "{e}");
-    let e = m.effect_term(Effect::MotorLag, &CAR_S[..6], &CAR_U).unwrap_err();
+    let e = m
+        .effect_term(Effect::MotorLag, &CAR_S[..6], &CAR_U)
+        .unwrap_err();
     assert_eq!(e, ModelError::NotEnabled(Effect::MotorLag));
     let e = m.effect_term(Effect::AeroDrag, &CAR_S, &CAR_U).unwrap_err();
-    assert!(matches!(e, ModelError::Dimension { what: "state", expected: 6, got: 7 }));
+    assert!(matches!(
+        e,
+        ModelError::Dimension {
+            what: "state",
+            expected: 6,
+            got: 7
+        }
+    ));
 }

@@ -3,7 +3,9 @@
 
 use super::model::{ModelError, PhysicsModel};
 use crate::conventions::wrap_angle;
-use crate::ode::{OdeReport, OdeStatus, Solver, SolverTape, integrate, integrate_taped, integrate_vjp};
+use crate::ode::{
+    OdeReport, OdeStatus, Solver, SolverTape, integrate, integrate_taped, integrate_vjp,
+};
 
 /// One measured transition: from `s0` under input `u` held for `dt` to the measured `s1`.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -35,7 +37,11 @@ pub struct ResidualJacobian {
 fn check(model: &PhysicsModel, tr: &Transition, m: usize) -> Result<(), ModelError> {
     let ds = model.dim_state();
     if tr.s0.len() != ds {
-        return Err(ModelError::Dimension { what: "transition.s0", expected: ds, got: tr.s0.len() });
+        return Err(ModelError::Dimension {
+            what: "transition.s0",
+            expected: ds,
+            got: tr.s0.len(),
+        });
     }
     if tr.u.len() != model.dim_input() {
         return Err(ModelError::Dimension {
@@ -45,7 +51,11 @@ fn check(model: &PhysicsModel, tr: &Transition, m: usize) -> Result<(), ModelErr
         });
     }
     if tr.s1.len() < m {
-        return Err(ModelError::Dimension { what: "transition.s1", expected: m, got: tr.s1.len() });
+        return Err(ModelError::Dimension {
+            what: "transition.s1",
+            expected: m,
+            got: tr.s1.len(),
+        });
     }
     Ok(())
 }
@@ -54,7 +64,13 @@ fn residual_rows(model: &PhysicsModel, pred: &[f64], s1: &[f64], w: &[f64], out:
     let angles = model.angle_dims();
     for (d, wd) in w.iter().enumerate() {
         let e = pred[d] - s1[d];
-        out.push(wd * if angles.contains(&d) { wrap_angle(e) } else { e });
+        out.push(
+            wd * if angles.contains(&d) {
+                wrap_angle(e)
+            } else {
+                e
+            },
+        );
     }
 }
 

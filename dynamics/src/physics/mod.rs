@@ -68,7 +68,15 @@ const fn ps(
     default: f64,
     description: &'static str,
 ) -> ParamSpec {
-    ParamSpec { name, symbol, unit, lower, upper, default, description }
+    ParamSpec {
+        name,
+        symbol,
+        unit,
+        lower,
+        upper,
+        default,
+        description,
+    }
 }
 
 /// The library of candidate physical effects (DESIGN.md, "Finding the missing physics").
@@ -126,26 +134,122 @@ static STEERING_OFFSET: [ParamSpec; 1] = [ps(
     "constant offset added to the commanded front wheel angle",
 )];
 static GRIP_PATCH: [ParamSpec; 5] = [
-    ps("cx", "c_x", "m", -100.0, 100.0, 0.0, "patch centre x (world)"),
-    ps("cy", "c_y", "m", -100.0, 100.0, 0.0, "patch centre y (world)"),
+    ps(
+        "cx",
+        "c_x",
+        "m",
+        -100.0,
+        100.0,
+        0.0,
+        "patch centre x (world)",
+    ),
+    ps(
+        "cy",
+        "c_y",
+        "m",
+        -100.0,
+        100.0,
+        0.0,
+        "patch centre y (world)",
+    ),
     ps("r", "r", "m", 0.01, 100.0, 0.5, "patch radius"),
-    ps("w", "w", "m", 0.005, 10.0, 0.05, "width of the smooth patch edge (logistic)"),
-    ps("k", "k", "-", 0.0, 3.0, 1.0, "tire peak force scale inside the patch (1: no change)"),
+    ps(
+        "w",
+        "w",
+        "m",
+        0.005,
+        10.0,
+        0.05,
+        "width of the smooth patch edge (logistic)",
+    ),
+    ps(
+        "k",
+        "k",
+        "-",
+        0.0,
+        3.0,
+        1.0,
+        "tire peak force scale inside the patch (1: no change)",
+    ),
 ];
 static COM_OFFSET: [ParamSpec; 2] = [
-    ps("ox", "o_x", "m", -0.05, 0.05, 0.0, "centre-of-mass offset along the block x axis"),
-    ps("oy", "o_y", "m", -0.05, 0.05, 0.0, "centre-of-mass offset along the block y axis"),
+    ps(
+        "ox",
+        "o_x",
+        "m",
+        -0.05,
+        0.05,
+        0.0,
+        "centre-of-mass offset along the block x axis",
+    ),
+    ps(
+        "oy",
+        "o_y",
+        "m",
+        -0.05,
+        0.05,
+        0.0,
+        "centre-of-mass offset along the block y axis",
+    ),
 ];
 static TABLE_TILT: [ParamSpec; 2] = [
-    ps("gx", "g_x", "m/m", -1.0, 1.0, 0.0, "downhill drift along world x per metre slid (≈ slope/μ)"),
-    ps("gy", "g_y", "m/m", -1.0, 1.0, 0.0, "downhill drift along world y per metre slid (≈ slope/μ)"),
+    ps(
+        "gx",
+        "g_x",
+        "m/m",
+        -1.0,
+        1.0,
+        0.0,
+        "downhill drift along world x per metre slid (≈ slope/μ)",
+    ),
+    ps(
+        "gy",
+        "g_y",
+        "m/m",
+        -1.0,
+        1.0,
+        0.0,
+        "downhill drift along world y per metre slid (≈ slope/μ)",
+    ),
 ];
 static FRICTION_PATCH: [ParamSpec; 5] = [
-    ps("cx", "c_x", "m", -10.0, 10.0, 0.6, "patch centre x (table frame)"),
-    ps("cy", "c_y", "m", -10.0, 10.0, 0.0, "patch centre y (table frame)"),
+    ps(
+        "cx",
+        "c_x",
+        "m",
+        -10.0,
+        10.0,
+        0.6,
+        "patch centre x (table frame)",
+    ),
+    ps(
+        "cy",
+        "c_y",
+        "m",
+        -10.0,
+        10.0,
+        0.0,
+        "patch centre y (table frame)",
+    ),
     ps("r", "r", "m", 0.005, 10.0, 0.1, "patch radius"),
-    ps("w", "w", "m", 0.001, 1.0, 0.01, "width of the smooth patch edge (logistic)"),
-    ps("beta", "β", "-", -1.0, 5.0, 0.0, "extra motion per push inside the patch (0: none)"),
+    ps(
+        "w",
+        "w",
+        "m",
+        0.001,
+        1.0,
+        0.01,
+        "width of the smooth patch edge (logistic)",
+    ),
+    ps(
+        "beta",
+        "β",
+        "-",
+        -1.0,
+        5.0,
+        0.0,
+        "extra motion per push inside the patch (0: none)",
+    ),
 ];
 static PUSHER_FRICTION: [ParamSpec; 1] = [ps(
     "mu",

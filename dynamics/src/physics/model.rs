@@ -13,7 +13,9 @@ use thiserror::Error;
 #[derive(Debug, Error, Clone, PartialEq)]
 pub enum ModelError {
     /// An effect of the other robot.
-    #[error("effect {effect} belongs to the {effect_robot:?} model, not the {robot:?} model; choose from: {choices}")]
+    #[error(
+        "effect {effect} belongs to the {effect_robot:?} model, not the {robot:?} model; choose from: {choices}"
+    )]
     WrongRobot {
         /// The effect.
         effect: Effect,
@@ -128,11 +130,21 @@ impl PhysicsModel {
             if slots.iter().any(|s: &Slot| s.effect == e) {
                 return Err(ModelError::DuplicateEffect(e));
             }
-            slots.push(Slot { effect: e, p_off: params.len(), s_off: dim_s });
+            slots.push(Slot {
+                effect: e,
+                p_off: params.len(),
+                s_off: dim_s,
+            });
             params.extend(e.params().iter().map(|p| p.default));
             dim_s += e.extra_states().len();
         }
-        Ok(Self { robot, slots, params, std_errors: None, dim_s })
+        Ok(Self {
+            robot,
+            slots,
+            params,
+            std_errors: None,
+            dim_s,
+        })
     }
 
     /// The car model (dynamic bicycle, Pacejka tires, drivetrain) with the given effects.
@@ -152,7 +164,11 @@ impl PhysicsModel {
             .map(|n| {
                 Effect::from_name(n).ok_or_else(|| ModelError::UnknownEffect {
                     name: n.to_string(),
-                    known: Effect::ALL.iter().map(|e| e.name()).collect::<Vec<_>>().join(", "),
+                    known: Effect::ALL
+                        .iter()
+                        .map(|e| e.name())
+                        .collect::<Vec<_>>()
+                        .join(", "),
                 })
             })
             .collect()
@@ -160,7 +176,11 @@ impl PhysicsModel {
 
     /// Names of the effects available for a robot.
     pub fn available_effects(robot: Robot) -> Vec<&'static str> {
-        Effect::ALL.iter().filter(|e| e.robot() == robot).map(|e| e.name()).collect()
+        Effect::ALL
+            .iter()
+            .filter(|e| e.robot() == robot)
+            .map(|e| e.name())
+            .collect()
     }
 
     /// The nominal parameter specs of a robot.
@@ -226,8 +246,10 @@ impl PhysicsModel {
 
     /// Every parameter with its owner (`None` for the nominal model), in vector order.
     pub fn param_specs(&self) -> Vec<(Option<Effect>, ParamSpec)> {
-        let mut v: Vec<(Option<Effect>, ParamSpec)> =
-            Self::nominal_specs(self.robot).iter().map(|p| (None, *p)).collect();
+        let mut v: Vec<(Option<Effect>, ParamSpec)> = Self::nominal_specs(self.robot)
+            .iter()
+            .map(|p| (None, *p))
+            .collect();
         for s in &self.slots {
             v.extend(s.effect.params().iter().map(|p| (Some(s.effect), *p)));
         }
@@ -283,10 +305,12 @@ impl PhysicsModel {
 
     /// Sets one parameter by qualified name (bounds checked).
     pub fn set_param(&mut self, name: &str, value: f64) -> Result<(), ModelError> {
-        let i = self.param_index(name).ok_or_else(|| ModelError::UnknownEffect {
-            name: name.to_string(),
-            known: self.param_names().join(", "),
-        })?;
+        let i = self
+            .param_index(name)
+            .ok_or_else(|| ModelError::UnknownEffect {
+                name: name.to_string(),
+                known: self.param_names().join(", "),
+            })?;
         let mut p = self.params.clone();
         p[i] = value;
         self.set_params(&p)
@@ -424,7 +448,11 @@ impl PhysicsModel {
 
     fn check_dims(&self, s: &[f64], u: &[f64]) -> Result<(), ModelError> {
         if s.len() != self.dim_s {
-            return Err(ModelError::Dimension { what: "state", expected: self.dim_s, got: s.len() });
+            return Err(ModelError::Dimension {
+                what: "state",
+                expected: self.dim_s,
+                got: s.len(),
+            });
         }
         if u.len() != self.dim_input() {
             return Err(ModelError::Dimension {
@@ -482,12 +510,23 @@ impl PhysicsModel {
         };
         match self.robot {
             Robot::Car => {
-                let d = if has(Effect::MotorLag).is_some() { "d_f" } else { "d" };
+                let d = if has(Effect::MotorLag).is_some() {
+                    "d_f"
+                } else {
+                    "d"
+                };
                 let delta = match has(Effect::SteeringOffset) {
-                    Some(_) => format!("(δ {} {})", sign(pv(Effect::SteeringOffset, 0)), num(pv(Effect::SteeringOffset, 0).abs())),
+                    Some(_) => format!(
+                        "(δ {} {})",
+                        sign(pv(Effect::SteeringOffset, 0)),
+                        num(pv(Effect::SteeringOffset, 0).abs())
+                    ),
                     None => "δ".to_string(),
                 };
-                let _ = writeln!(o, "car: dynamic bicycle, Pacejka tires, drivetrain (time in s)");
+                let _ = writeln!(
+                    o,
+                    "car: dynamic bicycle, Pacejka tires, drivetrain (time in s)"
+                );
                 let _ = writeln!(o, "  ẋ   = vx·cos ψ − vy·sin ψ");
                 let _ = writeln!(o, "  ẏ   = vx·sin ψ + vy·cos ψ");
                 let _ = writeln!(o, "  ψ̇   = ω");
@@ -495,45 +534,119 @@ impl PhysicsModel {
                     Some(_) => format!(" − {}·vx|vx|", num(pv(Effect::AeroDrag, 0))),
                     None => String::new(),
                 };
-                let _ = writeln!(o, "  v̇x  = (F_rx − F_fy·sin {delta})/m + vy·ω{drag}{}", tag(Effect::AeroDrag));
+                let _ = writeln!(
+                    o,
+                    "  v̇x  = (F_rx − F_fy·sin {delta})/m + vy·ω{drag}{}",
+                    tag(Effect::AeroDrag)
+                );
                 let _ = writeln!(o, "  v̇y  = (F_ry + F_fy·cos {delta})/m − vx·ω");
                 let _ = writeln!(o, "  ω̇   = (F_fy·l_f·cos {delta} − F_ry·l_r)/I_z");
                 if has(Effect::MotorLag).is_some() {
-                    let _ = writeln!(o, "  ḋ_f = (d − d_f)/{}{}", num(pv(Effect::MotorLag, 0)), tag(Effect::MotorLag));
+                    let _ = writeln!(
+                        o,
+                        "  ḋ_f = (d − d_f)/{}{}",
+                        num(pv(Effect::MotorLag, 0)),
+                        tag(Effect::MotorLag)
+                    );
                 }
-                let g = if has(Effect::GripPatch).is_some() { "g·" } else { "" };
-                let _ = writeln!(o, "  F_fy = {g}D_f·sin(C_f·atan(B_f·α_f)),  α_f = −atan(v_lat,f / √(v_long,f² + v_reg²))");
-                let _ = writeln!(o, "  F_ry = {g}D_r·sin(C_r·atan(B_r·α_r)),  α_r = −atan((vy − l_r·ω) / √(vx² + v_reg²))");
-                let _ = writeln!(o, "  F_rx = (C_m1 − C_m2·vx)·{d} − C_r0·tanh(vx/v_reg) − C_r2·vx|vx|");
+                let g = if has(Effect::GripPatch).is_some() {
+                    "g·"
+                } else {
+                    ""
+                };
+                let _ = writeln!(
+                    o,
+                    "  F_fy = {g}D_f·sin(C_f·atan(B_f·α_f)),  α_f = −atan(v_lat,f / √(v_long,f² + v_reg²))"
+                );
+                let _ = writeln!(
+                    o,
+                    "  F_ry = {g}D_r·sin(C_r·atan(B_r·α_r)),  α_r = −atan((vy − l_r·ω) / √(vx² + v_reg²))"
+                );
+                let _ = writeln!(
+                    o,
+                    "  F_rx = (C_m1 − C_m2·vx)·{d} − C_r0·tanh(vx/v_reg) − C_r2·vx|vx|"
+                );
                 if has(Effect::SteeringOffset).is_some() {
                     let _ = writeln!(o, "  δ → δ + δ₀{}", tag(Effect::SteeringOffset));
                 }
                 if has(Effect::GripPatch).is_some() {
-                    let _ = writeln!(o, "  g = 1 + (k − 1)·σ((r − ‖(x, y) − c‖)/w){}", tag(Effect::GripPatch));
+                    let _ = writeln!(
+                        o,
+                        "  g = 1 + (k − 1)·σ((r − ‖(x, y) − c‖)/w){}",
+                        tag(Effect::GripPatch)
+                    );
                 }
             }
             Robot::Pushing => {
-                let _ = writeln!(o, "pushing: quasi-static pusher–slider, ellipsoidal limit surface (time in pushes)");
-                let _ = writeln!(o, "  (ẋ, ẏ) = R(θ)·(F_x, F_y){}{}", if has(Effect::FrictionPatch).is_some() { "·g" } else { "" },
-                    if has(Effect::TableTilt).is_some() { format!(" + ‖v‖·({}, {})", num(pv(Effect::TableTilt, 0)), num(pv(Effect::TableTilt, 1))) } else { String::new() });
-                let _ = writeln!(o, "  θ̇      = (p_x·F_y − p_y·F_x)/c²{}", if has(Effect::FrictionPatch).is_some() { "·g" } else { "" });
-                let _ = writeln!(o, "  v_p = ℓ·L·(cos φ, sin φ),  (p_x, p_y) = (−a/2, κ·p·a/2){}", if has(Effect::ComOffset).is_some() { " − (o_x, o_y)" } else { "" });
+                let _ = writeln!(
+                    o,
+                    "pushing: quasi-static pusher–slider, ellipsoidal limit surface (time in pushes)"
+                );
+                let _ = writeln!(
+                    o,
+                    "  (ẋ, ẏ) = R(θ)·(F_x, F_y){}{}",
+                    if has(Effect::FrictionPatch).is_some() {
+                        "·g"
+                    } else {
+                        ""
+                    },
+                    if has(Effect::TableTilt).is_some() {
+                        format!(
+                            " + ‖v‖·({}, {})",
+                            num(pv(Effect::TableTilt, 0)),
+                            num(pv(Effect::TableTilt, 1))
+                        )
+                    } else {
+                        String::new()
+                    }
+                );
+                let _ = writeln!(
+                    o,
+                    "  θ̇      = (p_x·F_y − p_y·F_x)/c²{}",
+                    if has(Effect::FrictionPatch).is_some() {
+                        "·g"
+                    } else {
+                        ""
+                    }
+                );
+                let _ = writeln!(
+                    o,
+                    "  v_p = ℓ·L·(cos φ, sin φ),  (p_x, p_y) = (−a/2, κ·p·a/2){}",
+                    if has(Effect::ComOffset).is_some() {
+                        " − (o_x, o_y)"
+                    } else {
+                        ""
+                    }
+                );
                 match has(Effect::PusherFriction) {
                     Some(_) => {
-                        let _ = writeln!(o, "  F = M⁻¹·v_p if |F_y| ≤ μ_p·F_x (sticking), else F = f·(1, ±μ_p) (sliding){}", tag(Effect::PusherFriction));
+                        let _ = writeln!(
+                            o,
+                            "  F = M⁻¹·v_p if |F_y| ≤ μ_p·F_x (sticking), else F = f·(1, ±μ_p) (sliding){}",
+                            tag(Effect::PusherFriction)
+                        );
                     }
                     None => {
-                        let _ = writeln!(o, "  F = (v_px / (1 + p_y²/c²), 0)   (frictionless pusher)");
+                        let _ =
+                            writeln!(o, "  F = (v_px / (1 + p_y²/c²), 0)   (frictionless pusher)");
                     }
                 }
                 if has(Effect::ComOffset).is_some() {
-                    let _ = writeln!(o, "  centre velocity = v_com + ω × (−o){}", tag(Effect::ComOffset));
+                    let _ = writeln!(
+                        o,
+                        "  centre velocity = v_com + ω × (−o){}",
+                        tag(Effect::ComOffset)
+                    );
                 }
                 if has(Effect::TableTilt).is_some() {
                     let _ = writeln!(o, "  table tilt drift{}", tag(Effect::TableTilt));
                 }
                 if has(Effect::FrictionPatch).is_some() {
-                    let _ = writeln!(o, "  g = 1 + β·σ((r − ‖(x, y) − c‖)/w){}", tag(Effect::FrictionPatch));
+                    let _ = writeln!(
+                        o,
+                        "  g = 1 + β·σ((r − ‖(x, y) − c‖)/w){}",
+                        tag(Effect::FrictionPatch)
+                    );
                 }
             }
         }
@@ -598,7 +711,14 @@ impl VectorField<f64> for PhysicsModel {
         tape.record(n, s, u);
         self.eval(n, s, u, out);
     }
-    fn vjp(&self, tape: &Self::Tape, ybar: &[f64], sbar: &mut [f64], ubar: &mut [f64], pbar: &mut [f64]) {
+    fn vjp(
+        &self,
+        tape: &Self::Tape,
+        ybar: &[f64],
+        sbar: &mut [f64],
+        ubar: &mut [f64],
+        pbar: &mut [f64],
+    ) {
         let (ds, du) = (self.dim_s, self.dim_input());
         let with_p = !pbar.is_empty();
         let nz = ds + du + if with_p { self.params.len() } else { 0 };
@@ -640,10 +760,16 @@ impl VectorField<f64> for PhysicsModel {
         let mut od = vec![Dual::<1>::cst(0.0); ds];
         for i in 0..n {
             for k in 0..ds {
-                sd[k] = Dual { v: s[i * ds + k], d: [sdot[i * ds + k]] };
+                sd[k] = Dual {
+                    v: s[i * ds + k],
+                    d: [sdot[i * ds + k]],
+                };
             }
             for k in 0..du {
-                ud[k] = Dual { v: u[i * du + k], d: [udot[i * du + k]] };
+                ud[k] = Dual {
+                    v: u[i * du + k],
+                    d: [udot[i * du + k]],
+                };
             }
             self.eval_generic(&pd, &act, &sd, &ud, &mut od);
             for k in 0..ds {

@@ -30,10 +30,42 @@ use crate::real::Real;
 
 /// Nominal pushing parameters (Tu & Lin's PyBullet block).
 pub static PUSH_NOMINAL_PARAMS: [ParamSpec; 4] = [
-    ps("a", "a", "m", 0.01, 1.0, 0.1, "block side (Tu & Lin: 0.1 m cube)"),
-    ps("c", "c", "m", 0.001, 1.0, 0.0383, "limit-surface ratio m_max/f_max (uniform pressure square: 0.383 a)"),
-    ps("L", "L", "m", 0.001, 1.0, PUSH_MAX_LENGTH_M, "push length at ℓ = 1"),
-    ps("kappa", "κ", "-", 0.0, 1.0, 0.95, "usable fraction of the half face (Tu & Lin leave a 5 % margin)"),
+    ps(
+        "a",
+        "a",
+        "m",
+        0.01,
+        1.0,
+        0.1,
+        "block side (Tu & Lin: 0.1 m cube)",
+    ),
+    ps(
+        "c",
+        "c",
+        "m",
+        0.001,
+        1.0,
+        0.0383,
+        "limit-surface ratio m_max/f_max (uniform pressure square: 0.383 a)",
+    ),
+    ps(
+        "L",
+        "L",
+        "m",
+        0.001,
+        1.0,
+        PUSH_MAX_LENGTH_M,
+        "push length at ℓ = 1",
+    ),
+    ps(
+        "kappa",
+        "κ",
+        "-",
+        0.0,
+        1.0,
+        0.95,
+        "usable fraction of the half face (Tu & Lin leave a 5 % margin)",
+    ),
 ];
 
 /// The pushing vector field with the effects in `slots` whose `active` flag is set.

@@ -45,7 +45,11 @@ impl<T: Scalar> VectorField<T> for Linear<T> {
     fn eval(&self, n: usize, s: &[T], u: &[T], out: &mut [T]) {
         let (ds, du) = (self.ds, self.du);
         for i in 0..n {
-            self.apply(&s[i * ds..(i + 1) * ds], &u[i * du..(i + 1) * du], &mut out[i * ds..(i + 1) * ds]);
+            self.apply(
+                &s[i * ds..(i + 1) * ds],
+                &u[i * du..(i + 1) * du],
+                &mut out[i * ds..(i + 1) * ds],
+            );
         }
     }
     fn eval_taped(&self, n: usize, s: &[T], u: &[T], out: &mut [T], tape: &mut Self::Tape) {
@@ -82,7 +86,16 @@ impl<T: Scalar> VectorField<T> for Linear<T> {
             }
         }
     }
-    fn jvp(&self, n: usize, s: &[T], u: &[T], sdot: &[T], udot: &[T], out: &mut [T], out_dot: &mut [T]) {
+    fn jvp(
+        &self,
+        n: usize,
+        s: &[T],
+        u: &[T],
+        sdot: &[T],
+        udot: &[T],
+        out: &mut [T],
+        out_dot: &mut [T],
+    ) {
         self.eval(n, s, u, out);
         self.eval(n, sdot, udot, out_dot);
     }
@@ -129,14 +142,25 @@ impl VectorField<f64> for Pendulum {
     }
     fn eval(&self, n: usize, s: &[f64], u: &[f64], out: &mut [f64]) {
         for i in 0..n {
-            self.f(&s[2 * i..2 * i + 2], &u[i..i + 1], &mut out[2 * i..2 * i + 2]);
+            self.f(
+                &s[2 * i..2 * i + 2],
+                &u[i..i + 1],
+                &mut out[2 * i..2 * i + 2],
+            );
         }
     }
     fn eval_taped(&self, n: usize, s: &[f64], u: &[f64], out: &mut [f64], tape: &mut Self::Tape) {
         tape.record(n, s, u);
         self.eval(n, s, u, out);
     }
-    fn vjp(&self, tape: &Self::Tape, ybar: &[f64], sbar: &mut [f64], ubar: &mut [f64], pbar: &mut [f64]) {
+    fn vjp(
+        &self,
+        tape: &Self::Tape,
+        ybar: &[f64],
+        sbar: &mut [f64],
+        ubar: &mut [f64],
+        pbar: &mut [f64],
+    ) {
         for i in 0..tape.n {
             let j = self.jac(&tape.s[2 * i..2 * i + 2], &tape.u[i..i + 1]);
             let yb = &ybar[2 * i..2 * i + 2];
@@ -151,7 +175,16 @@ impl VectorField<f64> for Pendulum {
             }
         }
     }
-    fn jvp(&self, n: usize, s: &[f64], u: &[f64], sdot: &[f64], udot: &[f64], out: &mut [f64], out_dot: &mut [f64]) {
+    fn jvp(
+        &self,
+        n: usize,
+        s: &[f64],
+        u: &[f64],
+        sdot: &[f64],
+        udot: &[f64],
+        out: &mut [f64],
+        out_dot: &mut [f64],
+    ) {
         self.eval(n, s, u, out);
         for i in 0..n {
             let j = self.jac(&s[2 * i..2 * i + 2], &u[i..i + 1]);
@@ -186,12 +219,28 @@ impl VectorField<f64> for BlowUp {
         tape.record(n, s, u);
         self.eval(n, s, u, out);
     }
-    fn vjp(&self, tape: &Self::Tape, ybar: &[f64], sbar: &mut [f64], _ubar: &mut [f64], _pbar: &mut [f64]) {
+    fn vjp(
+        &self,
+        tape: &Self::Tape,
+        ybar: &[f64],
+        sbar: &mut [f64],
+        _ubar: &mut [f64],
+        _pbar: &mut [f64],
+    ) {
         for i in 0..tape.n {
             sbar[i] = 2.0 * tape.s[i] * ybar[i];
         }
     }
-    fn jvp(&self, n: usize, s: &[f64], u: &[f64], sdot: &[f64], _udot: &[f64], out: &mut [f64], out_dot: &mut [f64]) {
+    fn jvp(
+        &self,
+        n: usize,
+        s: &[f64],
+        u: &[f64],
+        sdot: &[f64],
+        _udot: &[f64],
+        out: &mut [f64],
+        out_dot: &mut [f64],
+    ) {
         self.eval(n, s, u, out);
         for i in 0..n {
             out_dot[i] = 2.0 * s[i] * sdot[i];
@@ -201,5 +250,8 @@ impl VectorField<f64> for BlowUp {
 
 /// Largest absolute difference, relative to `max(1, |b|)`.
 pub fn max_rel_diff(a: &[f64], b: &[f64]) -> f64 {
-    a.iter().zip(b).map(|(x, y)| (x - y).abs() / y.abs().max(1.0)).fold(0.0, f64::max)
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).abs() / y.abs().max(1.0))
+        .fold(0.0, f64::max)
 }

@@ -1,0 +1,375 @@
+//! The data pipeline: trajectories, command hold, Savitzky–Golay, windows, splits, normalisation.
+#![allow(clippy::needless_range_loop)] // index loops mirror the math
+
+use dynlab_dynamics::conventions::wrap_angle;
+use dynlab_dynamics::data::*;
+
+const MS: i64 = 1_000_000;
+
+fn pose(t_ms: i64, x: f64, y: f64, yaw: f64) -> PoseSample {
+    PoseSample {
+        t_ns: t_ms * MS,
+        x,
+        y,
+        yaw,
+    }
+}
+fn cmd(t_ms: i64, u: &[f64]) -> CommandSample {
+    CommandSample {
+        t_ns: t_ms * MS,
+        u: u.to_vec(),
+    }
+}
+
+#[test]
+fn gaps_split_trajectories_and_are_reported() {
+    let mut poses: Vec<_> = (0..20).map(|i| pose(i * 10, i as f64, 0.0, 0.0)).collect();
+    poses.extend((0..15).map(|i| pose(1000 + i * 10, 0.0, i as f64, 0.0)));
+    let cmds = vec![cmd(0, &[0.1, 0.2])];
+    let (trajs, rep) = build_trajectories(&poses, &cmds, &PipelineConfig::default()).unwrap();
+    assert_eq!(trajs.len(), 2);
+    assert_eq!((trajs[0].len(), trajs[1].len()), (20, 15));
+    assert_eq!(
+        rep.gaps,
+        vec![Gap {
+            from_ns: 190 * MS,
+            to_ns: 1000 * MS
+        }]
+    );
+    assert_eq!(rep.max_gap_ns, 50 * MS); // 5 × median interval
+    assert!((trajs[0].dt - 0.01).abs() < 1e-12);
+    // an explicit larger threshold keeps it whole
+    let cfg = PipelineConfig {
+        max_gap_ns: Some(2000 * MS),
+        resample: Resample::Off,
+        ..Default::default()
+    };
+    let (trajs, rep) = build_trajectories(&poses, &cmds, &cfg).unwrap();
+    assert_eq!(trajs.len(), 1);
+    assert!(rep.gaps.is_empty());
+}
+
+#[test]
+fn yaw_is_unwrapped_across_the_branch_cut() {
+    let yaws = [3.0, 3.1, -3.1, -3.0, 3.1];
+    let poses: Vec<_> = yaws
+        .iter()
+        .enumerate()
+        .map(|(i, &w)| pose(i as i64 * 10, 0.0, 0.0, w))
+        .collect();
+    let (trajs, _) =
+        build_trajectories(&poses, &[cmd(0, &[0.0])], &PipelineConfig::default()).unwrap();
+    let y: Vec<f64> = trajs[0].pose.iter().map(|p| p[2]).collect();
+    for w in y.windows(2) {
+        assert!((w[1] - w[0]).abs() < 0.3, "{y:?}");
+    }
+    for (a, b) in y.iter().zip(yaws) {
+        assert!(wrap_angle(a - b).abs() < 1e-12);
+    }
+    assert!((y[2] - (2.0 * std::f64::consts::PI - 3.1)).abs() < 1e-12);
+}
+
+#[test]
+fn zero_order_hold_never_uses_a_command_from_the_future() {
+    // poses at 100 Hz from t = 0, commands at 30 Hz starting at t = 25 ms
+    let poses: Vec<_> = (0..50).map(|i| pose(i * 10, 0.0, 0.0, 0.0)).collect();
+    let cmds: Vec<_> = (0..17)
+        .map(|k| cmd(25 + k * 33, &[k as f64, -(k as f64)]))
+        .collect();
+    let (trajs, rep) = build_trajectories(&poses, &cmds, &PipelineConfig::default()).unwrap();
+    // poses at 0, 10, 20 ms have no command yet: dropped and counted
+    assert_eq!(rep.poses_without_command, 3);
+    let t = &trajs[0];
+    assert_eq!(t.t_ns[0], 30 * MS);
+    for (i, &tn) in t.t_ns.iter().enumerate() {
+        let k = t.u[2 * i] as i64;
+        let issued = (25 + k * 33) * MS;
+        assert!(
+            issued <= tn,
+            "pose at {tn} got a command issued at {issued}"
+        );
+        // and it is the latest such command
+        assert!(issued + 33 * MS > tn);
+        assert_eq!(t.u[2 * i + 1], -(k as f64));
+    }
+}
+
+#[test]
+fn push_actions_issued_after_their_pose_are_held_over_the_following_interval() {
+    // the Tu & Lin layout: pose every 2 s, the push published 1 ms after the pose it starts from
+    let poses: Vec<_> = (0..4)
+        .map(|i| pose(i * 2000, 0.4 + 0.01 * i as f64, 0.0, 0.0))
+        .collect();
+    let cmds: Vec<_> = (0..3)
+        .map(|i| cmd(i * 2000 + 1, &[i as f64, 0.0, 0.5]))
+        .collect();
+    let cfg = PipelineConfig {
+        hold: CommandHold::BeforeNextPose,
+        ..Default::default()
+    };
+    let (trajs, rep) = build_trajectories(&poses, &cmds, &cfg).unwrap();
+    assert_eq!(rep.poses_without_command, 0);
+    let u0: Vec<f64> = trajs[0].u.chunks(3).map(|c| c[0]).collect();
+    assert_eq!(u0, vec![0.0, 1.0, 2.0, 2.0]);
+    // the strict hold at the pose stamp would miss the first push
+    let (trajs, rep) = build_trajectories(&poses, &cmds, &PipelineConfig::default()).unwrap();
+    assert_eq!(rep.poses_without_command, 1);
+    assert_eq!(trajs[0].u[0], 0.0);
+}
+
+#[test]
+fn jittery_stamps_are_resampled_to_the_median_step() {
+    let jitter = [0, 3, -4, 2, 0, -3, 4, 1, -2, 0, 3, -1];
+    let poses: Vec<_> = jitter
+        .iter()
+        .enumerate()
+        .map(|(i, j)| {
+            let t = i as i64 * 10 + j;
+            pose(t, 2.0 * t as f64 * 1e-3, 0.0, 0.0)
+        })
+        .collect();
+    let (trajs, rep) =
+        build_trajectories(&poses, &[cmd(0, &[1.0])], &PipelineConfig::default()).unwrap();
+    assert_eq!(rep.resampled_trajectories, 1);
+    assert!(rep.max_jitter > 0.5);
+    let t = &trajs[0];
+    assert!(t.resampled);
+    for w in t.t_ns.windows(2) {
+        assert_eq!(w[1] - w[0], t.t_ns[1] - t.t_ns[0]);
+    }
+    // x = 2 m/s × t is linear, so interpolation is exact
+    for (tn, p) in t.t_ns.iter().zip(&t.pose) {
+        assert!((p[0] - 2.0 * *tn as f64 * 1e-9).abs() < 1e-12);
+    }
+}
+
+#[test]
+fn bad_input_gets_clear_errors() {
+    let poses: Vec<_> = (0..5).map(|i| pose(i * 10, 0.0, 0.0, 0.0)).collect();
+    let e = build_trajectories(&poses, &[], &PipelineConfig::default()).unwrap_err();
+    assert_eq!(e, DataError::NoCommands { poses: 5 });
+    assert!(e.to_string().contains("no commands"));
+    let mut bad = poses.clone();
+    bad[3].yaw = f64::NAN;
+    let e = build_trajectories(&bad, &[cmd(0, &[0.0])], &PipelineConfig::default()).unwrap_err();
+    assert!(
+        matches!(&e, DataError::NonFinite { field, t_ns, .. } if field == "pose.yaw" && *t_ns == 30 * MS),
+        "{e}"
+    );
+    let e = build_trajectories(
+        &poses,
+        &[cmd(0, &[0.0]), cmd(5, &[f64::INFINITY])],
+        &PipelineConfig::default(),
+    )
+    .unwrap_err();
+    assert!(
+        e.to_string().contains("command[0] at t = 5000000 ns"),
+        "{e}"
+    );
+    let e =
+        build_trajectories(&poses, &[cmd(100, &[0.0])], &PipelineConfig::default()).unwrap_err();
+    assert!(matches!(e, DataError::NoPoseWithCommand { .. }), "{e}");
+    let e = windows(&[3, 4, 2], 5).unwrap_err();
+    assert_eq!(
+        e.to_string(),
+        "too little data: need at least 6 poses per trajectory for a window of 5 steps; the longest trajectory has 4 (3 trajectories); record longer runs or lower the number of steps"
+    );
+    assert!(build_trajectories(&[], &[cmd(0, &[0.0])], &PipelineConfig::default()).is_err());
+}
+
+#[test]
+fn savgol_is_exact_on_polynomials_with_irregular_stamps_including_edges() {
+    // cubic, irregular stamps: a degree-3 fit reproduces value and slope everywhere
+    let t: Vec<f64> = (0..40)
+        .map(|i| i as f64 * 0.01 + 0.003 * ((i * 7 % 5) as f64 - 2.0))
+        .collect();
+    let y: Vec<f64> = t
+        .iter()
+        .map(|&t| 1.0 - 2.0 * t + 3.0 * t * t - 5.0 * t * t * t)
+        .collect();
+    let (v, d) = savgol(
+        &t,
+        &y,
+        &SavGol {
+            window: 9,
+            order: 3,
+        },
+    )
+    .unwrap();
+    for i in 0..t.len() {
+        let dy = -2.0 + 6.0 * t[i] - 15.0 * t[i] * t[i];
+        assert!((v[i] - y[i]).abs() < 1e-10, "value at {i}");
+        assert!((d[i] - dy).abs() < 1e-8, "slope at {i}: {} vs {dy}", d[i]);
+    }
+}
+
+#[test]
+fn savgol_on_equidistant_stamps_is_the_classic_filter() {
+    // window 5, order 2: smoothing coefficients (−3, 12, 17, 12, −3)/35, derivative (−2, −1, 0, 1, 2)/10
+    let t: Vec<f64> = (0..9).map(|i| i as f64 * 0.5).collect();
+    let y = [0.3, -1.0, 2.5, 0.7, 1.9, -0.4, 0.0, 1.1, 3.0];
+    let (v, d) = savgol(
+        &t,
+        &y,
+        &SavGol {
+            window: 5,
+            order: 2,
+        },
+    )
+    .unwrap();
+    let i = 4;
+    let sm = (-3.0 * y[2] + 12.0 * y[3] + 17.0 * y[4] + 12.0 * y[5] - 3.0 * y[6]) / 35.0;
+    let de = (-2.0 * y[2] - y[3] + y[5] + 2.0 * y[6]) / 10.0 / 0.5;
+    assert!((v[i] - sm).abs() < 1e-12);
+    assert!((d[i] - de).abs() < 1e-12);
+    assert!(
+        savgol(
+            &t,
+            &y,
+            &SavGol {
+                window: 4,
+                order: 2
+            }
+        )
+        .is_err()
+    );
+    assert!(
+        savgol(
+            &t[..3],
+            &y[..3],
+            &SavGol {
+                window: 5,
+                order: 2
+            }
+        )
+        .is_err()
+    );
+}
+
+#[test]
+fn car_states_recover_body_velocities_on_a_circle() {
+    // constant speed v on a circle of radius R, heading tangent, 200 Hz with jitter-free stamps
+    let (v, r) = (1.5, 2.0);
+    let w = v / r;
+    let poses: Vec<_> = (0..200)
+        .map(|i| {
+            let t = i as f64 * 0.005;
+            let a = w * t;
+            PoseSample {
+                t_ns: (t * 1e9).round() as i64,
+                x: r * a.sin(),
+                y: r * (1.0 - a.cos()),
+                yaw: wrap_angle(a),
+            }
+        })
+        .collect();
+    let (trajs, _) =
+        build_trajectories(&poses, &[cmd(0, &[0.1, 0.3])], &PipelineConfig::default()).unwrap();
+    let s = car_states(
+        &trajs[0],
+        &SavGol {
+            window: 11,
+            order: 3,
+        },
+    )
+    .unwrap();
+    for st in &s {
+        assert!((st[3] - v).abs() < 1e-3, "vx {}", st[3]);
+        assert!(st[4].abs() < 1e-3, "vy {}", st[4]);
+        assert!((st[5] - w).abs() < 1e-3, "ω {}", st[5]);
+    }
+    let st = StateTrajectory::car(&trajs[0], &SavGol::default()).unwrap();
+    assert_eq!((st.len(), st.dim_s, st.dim_u), (200, 6, 2));
+}
+
+#[test]
+fn windows_never_cross_trajectory_boundaries_and_gather_is_step_major() {
+    let lens = [5, 2, 7];
+    let ws = windows(&lens, 3).unwrap();
+    assert_eq!(ws.len(), (5 - 3) + (7 - 3));
+    for w in &ws {
+        assert!(w.start + 3 < lens[w.trajectory]);
+    }
+    let trajs: Vec<StateTrajectory> = lens
+        .iter()
+        .enumerate()
+        .map(|(ti, &n)| StateTrajectory {
+            s: (0..n).flat_map(|i| [ti as f64, i as f64]).collect(),
+            u: (0..n).map(|i| 100.0 * ti as f64 + i as f64).collect(),
+            dim_s: 2,
+            dim_u: 1,
+            dt: 0.1,
+        })
+        .collect();
+    let b = gather(&trajs, &ws, 3);
+    assert_eq!((b.n, b.k), (6, 3));
+    for (i, w) in ws.iter().enumerate() {
+        assert_eq!(
+            b.s0[2 * i..2 * i + 2],
+            [w.trajectory as f64, w.start as f64]
+        );
+        for j in 0..3 {
+            assert_eq!(
+                b.u[j * 6 + i],
+                100.0 * w.trajectory as f64 + (w.start + j) as f64
+            );
+            assert_eq!(b.target[(j * 6 + i) * 2 + 1], (w.start + j + 1) as f64);
+            assert_eq!(b.target[(j * 6 + i) * 2], w.trajectory as f64);
+        }
+    }
+}
+
+#[test]
+fn trajectory_splits_are_disjoint_seeded_and_reproducible() {
+    let s = split_trajectories(100, 0.2, 42).unwrap();
+    assert_eq!((s.train.len(), s.validation.len()), (80, 20));
+    let mut all: Vec<usize> = s.train.iter().chain(&s.validation).copied().collect();
+    all.sort_unstable();
+    assert_eq!(all, (0..100).collect::<Vec<_>>());
+    assert_eq!(s, split_trajectories(100, 0.2, 42).unwrap());
+    assert_ne!(s, split_trajectories(100, 0.2, 43).unwrap());
+    assert_eq!(split_trajectories(2, 0.01, 1).unwrap().validation.len(), 1);
+    assert!(split_trajectories(1, 0.2, 1).is_err());
+    assert!(split_trajectories(10, 1.0, 1).is_err());
+    // the paper's overlapping-window split, for comparison: windows of one trajectory on both sides
+    let ws = windows(&[11; 100], 1).unwrap();
+    let o = split_windows_overlapping(&ws, 0.2, 42).unwrap();
+    assert_eq!((o.train.len(), o.validation.len()), (800, 200));
+    let shared = o
+        .validation
+        .iter()
+        .filter(|v| o.train.iter().any(|t| t.trajectory == v.trajectory))
+        .count();
+    assert!(
+        shared > 150,
+        "overlapping split shares trajectories ({shared})"
+    );
+}
+
+#[test]
+fn splitmix_stream_is_fixed_across_platforms() {
+    // reference values of SplitMix64 from seed 0 (Vigna's reference implementation)
+    let mut r = SplitMix64::new(0);
+    assert_eq!(r.next_u64(), 0xE220_A839_7B1D_CDAF);
+    assert_eq!(r.next_u64(), 0x6E78_9E6A_A1B9_65F4);
+}
+
+#[test]
+fn normalizer_guards_constant_dimensions_and_round_trips() {
+    let rows = [1.0, 5.0, 2.0, 3.0, 5.0, 2.0, 5.0, 5.0, 2.0];
+    let n = Normalizer::fit(&rows, 3, 1e-9).unwrap();
+    assert_eq!(n.constant_dims, vec![1, 2]);
+    assert_eq!(n.std[1], 1.0);
+    assert!((n.mean[0] - 3.0).abs() < 1e-15);
+    assert!((n.std[0] - (8.0f64 / 3.0).sqrt()).abs() < 1e-15);
+    let mut x = rows;
+    n.normalize(&mut x);
+    assert!(x.iter().all(|v| v.is_finite()));
+    assert!((x[0] + x[3] + x[6]).abs() < 1e-12);
+    assert_eq!(x[1], 0.0);
+    n.denormalize(&mut x);
+    for (a, b) in x.iter().zip(rows) {
+        assert!((a - b).abs() < 1e-12);
+    }
+    assert!(Normalizer::fit(&[], 3, 1e-9).is_err());
+}
