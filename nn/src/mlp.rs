@@ -283,7 +283,7 @@ impl Mlp {
 
     fn batch_of(&self, x: &[f32]) -> Result<usize, NnError> {
         let n_in = self.n_in();
-        if x.len() % n_in != 0 {
+        if !x.len().is_multiple_of(n_in) {
             return Err(NnError::RaggedBatch { len: x.len(), n_in });
         }
         Ok(x.len() / n_in)

@@ -46,7 +46,7 @@ where
     if row_len == 0 {
         return Ok(());
     }
-    if out.len() % row_len != 0 {
+    if !out.len().is_multiple_of(row_len) {
         return Err(NnError::RaggedBatch {
             len: out.len(),
             n_in: row_len,
