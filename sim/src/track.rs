@@ -1,0 +1,222 @@
+//! A closed race track: centre line with inner and outer borders.
+
+use serde::Deserialize;
+
+use crate::error::SimError;
+use crate::geometry::{Pose2, wrap_angle};
+
+/// A race track as a polyline centre line with borders (the MPCC `track.json` layout).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Track {
+    centre: Vec<[f64; 2]>,
+    half_width: Vec<f64>,
+}
+
+#[derive(Deserialize)]
+#[allow(non_snake_case)]
+struct TrackFile {
+    X: Vec<f64>,
+    Y: Vec<f64>,
+    X_i: Vec<f64>,
+    Y_i: Vec<f64>,
+    X_o: Vec<f64>,
+    Y_o: Vec<f64>,
+}
+
+/// Where a point is relative to the track.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TrackProjection {
+    /// Index of the centre-line segment the point projects onto.
+    pub segment: usize,
+    /// Signed lateral offset from the centre line [m] (left positive).
+    pub lateral: f64,
+    /// Heading of the centre line there [rad].
+    pub heading: f64,
+    /// Half width of the track there [m].
+    pub half_width: f64,
+}
+
+impl Track {
+    /// A track from centre points and half widths (at least 3 points; the loop closes itself).
+    pub fn new(centre: Vec<[f64; 2]>, half_width: Vec<f64>) -> Result<Self, SimError> {
+        let bad = |m: String| SimError::Track {
+            origin: "<memory>".into(),
+            message: m,
+        };
+        if centre.len() < 3 || centre.len() != half_width.len() {
+            return Err(bad(format!(
+                "need ≥ 3 centre points and one half width each, got {} and {}",
+                centre.len(),
+                half_width.len()
+            )));
+        }
+        if centre.iter().flatten().chain(&half_width).any(|v| !v.is_finite())
+            || half_width.iter().any(|w| *w <= 0.0)
+        {
+            return Err(bad("every coordinate must be finite and every width > 0".into()));
+        }
+        Ok(Self { centre, half_width })
+    }
+
+    /// Parses the MPCC JSON layout (`X, Y, X_i, Y_i, X_o, Y_o` arrays, metres).
+    pub fn from_json_str(text: &str, origin: &str) -> Result<Self, SimError> {
+        let f: TrackFile = serde_json::from_str(text).map_err(|e| SimError::Track {
+            origin: origin.into(),
+            message: format!("{e}; expected arrays X, Y, X_i, Y_i, X_o, Y_o"),
+        })?;
+        let n = f.X.len();
+        if [f.Y.len(), f.X_i.len(), f.Y_i.len(), f.X_o.len(), f.Y_o.len()]
+            .iter()
+            .any(|&l| l != n)
+        {
+            return Err(SimError::Track {
+                origin: origin.into(),
+                message: "arrays X, Y, X_i, Y_i, X_o, Y_o must have the same length".into(),
+            });
+        }
+        let centre: Vec<[f64; 2]> = (0..n).map(|i| [f.X[i], f.Y[i]]).collect();
+        let half_width = (0..n)
+            .map(|i| 0.5 * (f.X_o[i] - f.X_i[i]).hypot(f.Y_o[i] - f.Y_i[i]))
+            .collect();
+        Self::new(centre, half_width).map_err(|e| match e {
+            SimError::Track { message, .. } => SimError::Track {
+                origin: origin.into(),
+                message,
+            },
+            other => other,
+        })
+    }
+
+    /// Reads a track file.
+    pub fn from_file(path: impl AsRef<std::path::Path>) -> Result<Self, SimError> {
+        let path = path.as_ref();
+        let text = std::fs::read_to_string(path).map_err(|source| SimError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        Self::from_json_str(&text, &path.display().to_string())
+    }
+
+    /// An oval (two straights and two half circles) centred at the origin, for tests and demos.
+    pub fn oval(straight: f64, radius: f64, half_width: f64, points: usize) -> Result<Self, SimError> {
+        let n = points.max(8);
+        let perimeter = 2.0 * straight + std::f64::consts::TAU * radius;
+        let mut centre = Vec::with_capacity(n);
+        for i in 0..n {
+            let s = perimeter * i as f64 / n as f64;
+            let p = if s < straight {
+                [-0.5 * straight + s, -radius]
+            } else if s < straight + std::f64::consts::PI * radius {
+                let a = (s - straight) / radius - std::f64::consts::FRAC_PI_2;
+                [0.5 * straight + radius * a.cos(), radius * a.sin()]
+            } else if s < 2.0 * straight + std::f64::consts::PI * radius {
+                let d = s - straight - std::f64::consts::PI * radius;
+                [0.5 * straight - d, radius]
+            } else {
+                let a = (s - 2.0 * straight - std::f64::consts::PI * radius) / radius
+                    + std::f64::consts::FRAC_PI_2;
+                [-0.5 * straight + radius * a.cos(), radius * a.sin()]
+            };
+            centre.push(p);
+        }
+        Self::new(centre, vec![half_width; n])
+    }
+
+    /// Number of centre points.
+    pub fn len(&self) -> usize {
+        self.centre.len()
+    }
+
+    /// Always false (a track has ≥ 3 points).
+    pub fn is_empty(&self) -> bool {
+        self.centre.is_empty()
+    }
+
+    /// Centre point `i` (wrapping around).
+    pub fn point(&self, i: usize) -> [f64; 2] {
+        self.centre[i % self.centre.len()]
+    }
+
+    /// The first centre point, heading along the track.
+    pub fn start_pose(&self) -> Pose2 {
+        let a = self.point(0);
+        let b = self.point(1);
+        Pose2::new(a[0], a[1], (b[1] - a[1]).atan2(b[0] - a[0]))
+    }
+
+    /// Lower corner of the bounding box grown by `margin`.
+    pub fn bounds_min(&self, margin: f64) -> [f64; 2] {
+        let w = self.half_width.iter().cloned().fold(0.0, f64::max);
+        let x = self.centre.iter().map(|p| p[0]).fold(f64::INFINITY, f64::min);
+        let y = self.centre.iter().map(|p| p[1]).fold(f64::INFINITY, f64::min);
+        [x - w - margin, y - w - margin]
+    }
+
+    /// Upper corner of the bounding box grown by `margin`.
+    pub fn bounds_max(&self, margin: f64) -> [f64; 2] {
+        let w = self.half_width.iter().cloned().fold(0.0, f64::max);
+        let x = self.centre.iter().map(|p| p[0]).fold(f64::NEG_INFINITY, f64::max);
+        let y = self.centre.iter().map(|p| p[1]).fold(f64::NEG_INFINITY, f64::max);
+        [x + w + margin, y + w + margin]
+    }
+
+    /// Projects a point onto the closest centre-line segment.
+    pub fn project(&self, p: [f64; 2]) -> TrackProjection {
+        let n = self.centre.len();
+        let mut best = (f64::INFINITY, 0usize, 0.0f64);
+        for i in 0..n {
+            let a = self.centre[i];
+            let b = self.centre[(i + 1) % n];
+            let d = [b[0] - a[0], b[1] - a[1]];
+            let l2 = d[0] * d[0] + d[1] * d[1];
+            let t = if l2 > 0.0 {
+                (((p[0] - a[0]) * d[0] + (p[1] - a[1]) * d[1]) / l2).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
+            let q = [a[0] + t * d[0], a[1] + t * d[1]];
+            let dist2 = (p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2);
+            if dist2 < best.0 {
+                best = (dist2, i, t);
+            }
+        }
+        let i = best.1;
+        let a = self.centre[i];
+        let b = self.centre[(i + 1) % n];
+        let heading = (b[1] - a[1]).atan2(b[0] - a[0]);
+        let (s, c) = heading.sin_cos();
+        let lateral = -(p[0] - a[0]) * s + (p[1] - a[1]) * c;
+        let hw = self.half_width[i] + best.2 * (self.half_width[(i + 1) % n] - self.half_width[i]);
+        TrackProjection {
+            segment: i,
+            lateral,
+            heading: wrap_angle(heading),
+            half_width: hw,
+        }
+    }
+
+    /// Whether a point lies on the track surface.
+    pub fn contains(&self, p: [f64; 2]) -> bool {
+        let pr = self.project(p);
+        pr.lateral.abs() <= pr.half_width
+    }
+
+    /// The centre point roughly `distance` metres ahead of segment `from` along the track.
+    pub fn ahead(&self, from: usize, distance: f64) -> [f64; 2] {
+        let n = self.centre.len();
+        let mut left = distance;
+        let mut i = from % n;
+        for _ in 0..n {
+            let a = self.centre[i];
+            let b = self.centre[(i + 1) % n];
+            let l = (b[0] - a[0]).hypot(b[1] - a[1]);
+            if l >= left {
+                let f = if l > 0.0 { left / l } else { 0.0 };
+                return [a[0] + f * (b[0] - a[0]), a[1] + f * (b[1] - a[1])];
+            }
+            left -= l;
+            i = (i + 1) % n;
+        }
+        self.centre[i]
+    }
+}
