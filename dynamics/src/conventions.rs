@@ -3,8 +3,8 @@
 //!
 //! | robot | state | input | step |
 //! |---|---|---|---|
-//! | pushing (Tu & Lin) | block pose `(x, y, θ)` [m, m, rad] in the table frame | one push `(p, φ, ℓ)`: location on the pushed edge ∈ [−1, 1], angle ∈ [−π/2, π/2], length ∈ [0, 1] × 0.1 m | one push (normalised time 0 → 1) |
-//! | car (Kohler et al.) | `(x, y, ψ, vx, vy, ω)`: world pose and body-frame velocities [m/s, m/s, rad/s] | `(δ, d)`: front wheel angle [rad], normalised throttle | `dt` [s] |
+//! | pushing (Tu & Lin) | block pose `(x, y, θ)` \[m, m, rad\] in the table frame | one push `(p, φ, ℓ)`: location on the pushed edge ∈ [−1, 1], angle ∈ [−π/2, π/2], length ∈ [0, 1] × 0.1 m | one push (normalised time 0 → 1) |
+//! | car (Kohler et al.) | `(x, y, ψ, vx, vy, ω)`: world pose and body-frame velocities \[m/s, m/s, rad/s\] | `(δ, d)`: front wheel angle \[rad\], normalised throttle | `dt` \[s\] |
 
 use std::f64::consts::PI;
 
@@ -26,11 +26,11 @@ pub const CAR_ANGLE_INDEX: usize = 2;
 /// Block pose on the table.
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct PushState {
-    /// Position x [m].
+    /// Position x \[m\].
     pub x: f64,
-    /// Position y [m].
+    /// Position y \[m\].
     pub y: f64,
-    /// Orientation θ [rad].
+    /// Orientation θ \[rad\].
     pub theta: f64,
 }
 
@@ -39,7 +39,7 @@ pub struct PushState {
 pub struct PushAction {
     /// Location p ∈ [−1, 1] along the block's pushed edge.
     pub p: f64,
-    /// Angle φ ∈ [−π/2, π/2] of the push from the edge normal [rad].
+    /// Angle φ ∈ [−π/2, π/2] of the push from the edge normal \[rad\].
     pub phi: f64,
     /// Length ℓ ∈ [0, 1], a fraction of [`PUSH_MAX_LENGTH_M`].
     pub length: f64,
@@ -48,24 +48,24 @@ pub struct PushAction {
 /// Car state: world pose and body-frame velocities.
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct CarState {
-    /// Position x [m].
+    /// Position x \[m\].
     pub x: f64,
-    /// Position y [m].
+    /// Position y \[m\].
     pub y: f64,
-    /// Heading ψ [rad].
+    /// Heading ψ \[rad\].
     pub psi: f64,
-    /// Longitudinal body velocity vx [m/s].
+    /// Longitudinal body velocity vx \[m/s\].
     pub vx: f64,
-    /// Lateral body velocity vy [m/s].
+    /// Lateral body velocity vy \[m/s\].
     pub vy: f64,
-    /// Yaw rate ω [rad/s].
+    /// Yaw rate ω \[rad/s\].
     pub omega: f64,
 }
 
 /// Car input, held over one model step.
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct CarInput {
-    /// Front wheel angle δ [rad].
+    /// Front wheel angle δ \[rad\].
     pub delta: f64,
     /// Normalised throttle d (−1 … 1).
     pub d: f64,

@@ -37,7 +37,7 @@ pub enum DataError {
     NonFinite {
         /// Which field (`pose.x`, `command[1]`, …).
         field: String,
-        /// Stamp of the message [ns].
+        /// Stamp of the message \[ns\].
         t_ns: i64,
         /// The offending value.
         value: f64,
@@ -47,7 +47,7 @@ pub enum DataError {
         "command at t = {t_ns} ns has {got} values, earlier commands have {expected}; all commands must have the same dimension"
     )]
     CommandDimension {
-        /// Stamp [ns].
+        /// Stamp \[ns\].
         t_ns: i64,
         /// Dimension of the first command.
         expected: usize,
@@ -59,9 +59,9 @@ pub enum DataError {
         "no pose has a command held at its stamp: the first command is at t = {first_command_ns} ns, the last pose at t = {last_pose_ns} ns; record commands from the start"
     )]
     NoPoseWithCommand {
-        /// First command stamp [ns].
+        /// First command stamp \[ns\].
         first_command_ns: i64,
-        /// Last pose stamp [ns].
+        /// Last pose stamp \[ns\].
         last_pose_ns: i64,
     },
     /// Not enough poses for the requested windows.
@@ -93,20 +93,20 @@ pub enum DataError {
 /// A measured planar pose.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct PoseSample {
-    /// Stamp [ns].
+    /// Stamp \[ns\].
     pub t_ns: i64,
-    /// Position x [m].
+    /// Position x \[m\].
     pub x: f64,
-    /// Position y [m].
+    /// Position y \[m\].
     pub y: f64,
-    /// Heading [rad] (any branch; unwrapped by the pipeline).
+    /// Heading \[rad\] (any branch; unwrapped by the pipeline).
     pub yaw: f64,
 }
 
 /// A command (car `(δ, d)`, push `(p, φ, ℓ)`) with its stamp.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct CommandSample {
-    /// Stamp [ns].
+    /// Stamp \[ns\].
     pub t_ns: i64,
     /// Command values.
     pub u: Vec<f64>,
@@ -138,9 +138,9 @@ pub enum Resample {
         /// Largest tolerated relative deviation of an interval from the median (e.g. 0.1).
         max_jitter: f64,
     },
-    /// Always resample to this step [ns].
+    /// Always resample to this step \[ns\].
     Fixed {
-        /// Step [ns].
+        /// Step \[ns\].
         dt_ns: i64,
     },
 }
@@ -149,12 +149,12 @@ pub enum Resample {
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(default)]
 pub struct PipelineConfig {
-    /// A larger interval between consecutive poses splits the trajectory [ns]. `None` (default):
+    /// A larger interval between consecutive poses splits the trajectory \[ns\]. `None` (default):
     /// 5 × the median pose interval.
     pub max_gap_ns: Option<i64>,
     /// Command association (default [`CommandHold::AtPose`]).
     pub hold: CommandHold,
-    /// Commands older than this at the pose stamp count as missing [ns] (default `None`: a
+    /// Commands older than this at the pose stamp count as missing \[ns\] (default `None`: a
     /// command is held until the next one).
     pub max_command_age_ns: Option<i64>,
     /// Trajectories with fewer poses (after dropping poses without command) are dropped and
@@ -179,9 +179,9 @@ impl Default for PipelineConfig {
 /// A gap that split a trajectory.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Gap {
-    /// Stamp of the last pose before the gap [ns].
+    /// Stamp of the last pose before the gap \[ns\].
     pub from_ns: i64,
-    /// Stamp of the first pose after it [ns].
+    /// Stamp of the first pose after it \[ns\].
     pub to_ns: i64,
 }
 
@@ -196,7 +196,7 @@ pub struct PipelineReport {
     pub duplicate_stamps: usize,
     /// Whether the input had to be sorted by stamp.
     pub sorted: bool,
-    /// The gap threshold used [ns].
+    /// The gap threshold used \[ns\].
     pub max_gap_ns: i64,
     /// Gaps that split trajectories.
     pub gaps: Vec<Gap>,
@@ -206,7 +206,7 @@ pub struct PipelineReport {
     pub short_trajectories_dropped: usize,
     /// Poses in the dropped short trajectories.
     pub short_trajectory_poses: usize,
-    /// Median pose interval over the input [s].
+    /// Median pose interval over the input \[s\].
     pub median_dt_s: f64,
     /// Largest relative deviation of an interval from its trajectory's median.
     pub max_jitter: f64,
@@ -221,15 +221,15 @@ pub struct PipelineReport {
 /// One uninterrupted run of poses, each with the command held from it to the next pose.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Trajectory {
-    /// Stamps [ns] (equidistant if resampled).
+    /// Stamps \[ns\] (equidistant if resampled).
     pub t_ns: Vec<i64>,
-    /// Poses `[x, y, yaw]` with yaw unwrapped (continuous).
+    /// Poses `\[x, y, yaw\]` with yaw unwrapped (continuous).
     pub pose: Vec<[f64; 3]>,
     /// Commands, `len × dim_u`, row `i` held over `[t_i, t_{i+1})`.
     pub u: Vec<f64>,
     /// Command dimension.
     pub dim_u: usize,
-    /// Median step [s].
+    /// Median step \[s\].
     pub dt: f64,
     /// Whether the trajectory was resampled to a fixed step.
     pub resampled: bool,
@@ -558,7 +558,7 @@ fn lstsq(a: &[f64], m: usize, k: usize, b: &[f64]) -> Option<Vec<f64>> {
 }
 
 /// Savitzky–Golay smoothing and first derivative of `y(t)` on arbitrary increasing stamps `t`
-/// [s]: at each sample, a polynomial of degree `order` is fitted by least squares to the
+/// \[s\]: at each sample, a polynomial of degree `order` is fitted by least squares to the
 /// `window` samples centred on it (in `t`, so irregular stamps are handled exactly), and its value
 /// and slope at that sample's stamp are returned. On equidistant stamps this is the classic
 /// filter.
@@ -644,7 +644,7 @@ pub struct StateTrajectory {
     pub dim_s: usize,
     /// Command dimension.
     pub dim_u: usize,
-    /// Model step [s].
+    /// Model step \[s\].
     pub dt: f64,
 }
 

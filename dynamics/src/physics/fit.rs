@@ -17,7 +17,7 @@ pub struct Transition {
     pub u: Vec<f64>,
     /// Measured next state: at least as many values as there are residual weights.
     pub s1: Vec<f64>,
-    /// Step [s] (pushing: 1 push).
+    /// Step \[s\] (pushing: 1 push).
     pub dt: f64,
 }
 
