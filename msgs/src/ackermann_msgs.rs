@@ -1,6 +1,6 @@
 //! `ackermann_msgs` messages: drive commands for car-like vehicles with Ackermann steering.
 //!
-//! In dynlab's topic contract (`/car/cmd`), `drive.steering_angle` is the front wheel angle [rad]
+//! In dynlab's topic contract (`/car/cmd`), `drive.steering_angle` is the front wheel angle \[rad\]
 //! and `drive.acceleration` carries the normalised throttle command (−1…1); the other fields are
 //! unused. All fields are `float32` on the wire.
 
@@ -12,19 +12,19 @@ use crate::std_msgs::Header;
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct AckermannDrive {
-    /// Desired angle of a virtual wheel at the centre of the front axle [rad], positive left.
+    /// Desired angle of a virtual wheel at the centre of the front axle \[rad\], positive left.
     #[serde(with = "crate::float_serde::f32_field")]
     pub steering_angle: f32,
-    /// Desired rate of change of the steering angle [rad/s]; 0 means as fast as possible.
+    /// Desired rate of change of the steering angle \[rad/s\]; 0 means as fast as possible.
     #[serde(with = "crate::float_serde::f32_field")]
     pub steering_angle_velocity: f32,
-    /// Desired forward speed [m/s]; negative means reverse.
+    /// Desired forward speed \[m/s\]; negative means reverse.
     #[serde(with = "crate::float_serde::f32_field")]
     pub speed: f32,
-    /// Desired acceleration magnitude [m/s²]; 0 means as fast as possible.
+    /// Desired acceleration magnitude \[m/s²\]; 0 means as fast as possible.
     #[serde(with = "crate::float_serde::f32_field")]
     pub acceleration: f32,
-    /// Desired jerk magnitude [m/s³]; 0 means as fast as possible.
+    /// Desired jerk magnitude \[m/s³\]; 0 means as fast as possible.
     #[serde(with = "crate::float_serde::f32_field")]
     pub jerk: f32,
 }

@@ -14,7 +14,7 @@ pub struct PushAction {
     /// Contact location `p ∈ [−1, 1]` along the pushed edge of the block (0 = edge centre).
     #[serde(with = "crate::float_serde::f64_field")]
     pub location: f64,
-    /// Push angle `φ ∈ [−π/2, π/2]` [rad] from the inward normal of the pushed edge.
+    /// Push angle `φ ∈ [−π/2, π/2]` \[rad\] from the inward normal of the pushed edge.
     #[serde(with = "crate::float_serde::f64_field")]
     pub angle: f64,
     /// Push length `ℓ ∈ [0, 1]`, in units of 0.1 m (ℓ = 1 pushes 0.1 m).
@@ -25,7 +25,7 @@ pub struct PushAction {
 impl PushAction {
     /// Bounds of [`PushAction::location`].
     pub const LOCATION_RANGE: (f64, f64) = (-1.0, 1.0);
-    /// Bounds of [`PushAction::angle`] [rad].
+    /// Bounds of [`PushAction::angle`] \[rad\].
     pub const ANGLE_RANGE: (f64, f64) = (-std::f64::consts::FRAC_PI_2, std::f64::consts::FRAC_PI_2);
     /// Bounds of [`PushAction::length`].
     pub const LENGTH_RANGE: (f64, f64) = (0.0, 1.0);

@@ -9,13 +9,13 @@ use crate::std_msgs::Header;
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Point {
-    /// x [m].
+    /// x \[m\].
     #[serde(with = "crate::float_serde::f64_field")]
     pub x: f64,
-    /// y [m].
+    /// y \[m\].
     #[serde(with = "crate::float_serde::f64_field")]
     pub y: f64,
-    /// z [m].
+    /// z \[m\].
     #[serde(with = "crate::float_serde::f64_field")]
     pub z: f64,
 }
@@ -86,7 +86,7 @@ pub struct Pose {
 }
 
 impl Pose {
-    /// A pose in the plane `z = 0`: position `(x, y)` and heading `yaw` [rad] about z.
+    /// A pose in the plane `z = 0`: position `(x, y)` and heading `yaw` \[rad\] about z.
     pub fn planar(x: f64, y: f64, yaw: f64) -> Self {
         Pose {
             position: Point { x, y, z: 0.0 },
@@ -125,13 +125,13 @@ pub struct Vector3 {
     pub z: f64,
 }
 
-/// `geometry_msgs/msg/Twist`: linear [m/s] and angular [rad/s] velocity.
+/// `geometry_msgs/msg/Twist`: linear \[m/s\] and angular \[rad/s\] velocity.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Twist {
-    /// Linear velocity [m/s].
+    /// Linear velocity \[m/s\].
     pub linear: Vector3,
-    /// Angular velocity [rad/s].
+    /// Angular velocity \[rad/s\].
     pub angular: Vector3,
 }
 
