@@ -1,0 +1,940 @@
+//! [`Bag`]: reads a bag as typed, time-ordered messages, recovering what it can from damaged
+//! files.
+//!
+//! Reading is linear over the whole file (read into memory), record by record, without trusting
+//! the summary section: a file cut anywhere, with a half-written record, a bad chunk CRC or
+//! garbage still yields every message before the damage. A chunk counts only when it is complete
+//! and its CRC (when written) matches, so the messages recovered from a cut file are exactly the
+//! messages of the chunks written before the cut. A chunk that is damaged inside but whose
+//! framing is intact is skipped and reading goes on after it.
+
+use std::collections::HashMap;
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+use dynlab_msgs::RosMessage;
+use mcap::records::{Record, op};
+
+use crate::error::{BagError, TopicSummary};
+use crate::metadata::read_metadata;
+use crate::qos::QosProfile;
+
+/// One topic of a bag, with what is known about it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TopicInfo {
+    /// Topic name, e.g. `/car/pose`.
+    pub name: String,
+    /// ROS type name from the schema, e.g. `geometry_msgs/msg/PoseStamped` (empty when the
+    /// channel has no schema).
+    pub type_name: String,
+    /// Schema encoding (`ros2msg` for rosbag2 bags).
+    pub schema_encoding: String,
+    /// The full schema text (the type's definition followed by its dependencies).
+    pub definition: String,
+    /// Message encoding (`cdr`).
+    pub message_encoding: String,
+    /// The offered QoS profiles recorded with the topic (empty when none or unreadable).
+    pub qos: Vec<QosProfile>,
+    /// The RIHS01 type hash recorded with the topic (empty when none).
+    pub type_hash: String,
+    /// Messages read.
+    pub count: u64,
+    /// Log time of the earliest message.
+    pub first_ns: Option<u64>,
+    /// Log time of the latest message.
+    pub last_ns: Option<u64>,
+}
+
+impl TopicInfo {
+    /// Mean message rate over the topic's span, `(count − 1) / (last − first)`; `None` with
+    /// fewer than two messages or a zero span.
+    pub fn rate_hz(&self) -> Option<f64> {
+        let (first, last) = (self.first_ns?, self.last_ns?);
+        (self.count >= 2 && last > first)
+            .then(|| (self.count - 1) as f64 / ((last - first) as f64 * 1e-9))
+    }
+}
+
+/// One `.mcap` file of a bag.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct FileInfo {
+    /// Path of the file.
+    pub path: PathBuf,
+    /// Size in bytes.
+    pub bytes: u64,
+    /// Messages read from it.
+    pub message_count: u64,
+    /// Whether the file ended properly (footer and closing magic).
+    pub complete: bool,
+}
+
+/// A chunk that was skipped because its content was damaged while the records around it were
+/// intact.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct SkippedChunk {
+    /// Byte offset of the chunk record.
+    pub offset: u64,
+    /// What was wrong.
+    pub reason: String,
+}
+
+/// How reading one damaged file went.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct FileRecovery {
+    /// The file.
+    pub path: PathBuf,
+    /// Its size in bytes.
+    pub file_bytes: u64,
+    /// Bytes from the start up to the end of the last record that was read.
+    pub readable_bytes: u64,
+    /// Messages recovered from the file.
+    pub messages: u64,
+    /// Where reading stopped (byte offset), if it stopped before the end of the data.
+    pub stopped_at: Option<u64>,
+    /// Why reading stopped, or what was missing.
+    pub reason: String,
+    /// Damaged chunks skipped on the way.
+    pub skipped_chunks: Vec<SkippedChunk>,
+}
+
+/// For a damaged bag: how much was readable, where and why reading stopped.
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct Recovery {
+    /// Messages recovered in total.
+    pub messages: u64,
+    /// The damaged files.
+    pub files: Vec<FileRecovery>,
+    /// Problems with the bag directory itself (missing or unusable `metadata.yaml`, missing
+    /// files).
+    pub notes: Vec<String>,
+}
+
+impl fmt::Display for Recovery {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        writeln!(f, "damaged bag: recovered {} messages", self.messages)?;
+        for note in &self.notes {
+            writeln!(f, "  note: {note}")?;
+        }
+        for r in &self.files {
+            write!(
+                f,
+                "  {}: {} messages from {} of {} bytes",
+                r.path.display(),
+                r.messages,
+                r.readable_bytes,
+                r.file_bytes
+            )?;
+            match r.stopped_at {
+                Some(at) => writeln!(f, "; stopped at byte {at}: {}", r.reason)?,
+                None => writeln!(f, "; {}", r.reason)?,
+            }
+            for s in &r.skipped_chunks {
+                writeln!(f, "    skipped chunk at byte {}: {}", s.offset, s.reason)?;
+            }
+        }
+        Ok(())
+    }
+}
+
+/// One message of a bag, borrowed from it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RawMessage<'a> {
+    /// Topic name.
+    pub topic: &'a str,
+    /// ROS type name.
+    pub type_name: &'a str,
+    /// Time the recorder received the message.
+    pub log_time_ns: u64,
+    /// Time the message was published (as recorded).
+    pub publish_time_ns: u64,
+    /// The serialized message (CDR with its 4-byte encapsulation header).
+    pub data: &'a [u8],
+}
+
+/// A decoded message with its bag times.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Stamped<T> {
+    /// Time the recorder received the message.
+    pub log_time_ns: u64,
+    /// Time the message was published (as recorded).
+    pub publish_time_ns: u64,
+    /// The message.
+    pub msg: T,
+}
+
+/// Everything [`Bag::info`] reports.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BagInfo {
+    /// The path the bag was opened from.
+    pub path: PathBuf,
+    /// Topics in order of first appearance.
+    pub topics: Vec<TopicInfo>,
+    /// Messages in the bag.
+    pub message_count: u64,
+    /// Earliest log time.
+    pub start_ns: Option<u64>,
+    /// Latest log time.
+    pub end_ns: Option<u64>,
+    /// `end − start` (0 for an empty bag).
+    pub duration_ns: u64,
+    /// The `.mcap` files read, in order.
+    pub files: Vec<FileInfo>,
+    /// Set for a damaged bag.
+    pub recovery: Option<Recovery>,
+}
+
+fn fmt_stamp(ns: Option<u64>) -> String {
+    match ns {
+        Some(ns) => format!("{}.{:09}", ns / 1_000_000_000, ns % 1_000_000_000),
+        None => "-".to_string(),
+    }
+}
+
+impl fmt::Display for BagInfo {
+    /// A table of topics (type, count, rate, first and last stamp), the duration, the files and
+    /// any recovery notes.
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        writeln!(f, "bag:       {}", self.path.display())?;
+        writeln!(
+            f,
+            "duration:  {:.3} s  ({} .. {})",
+            self.duration_ns as f64 * 1e-9,
+            fmt_stamp(self.start_ns),
+            fmt_stamp(self.end_ns)
+        )?;
+        writeln!(f, "messages:  {}", self.message_count)?;
+        let headers = [
+            "topic",
+            "type",
+            "count",
+            "rate Hz",
+            "first stamp",
+            "last stamp",
+        ];
+        let rows: Vec<[String; 6]> = self
+            .topics
+            .iter()
+            .map(|t| {
+                [
+                    t.name.clone(),
+                    t.type_name.clone(),
+                    t.count.to_string(),
+                    t.rate_hz()
+                        .map(|r| format!("{r:.2}"))
+                        .unwrap_or_else(|| "-".into()),
+                    fmt_stamp(t.first_ns),
+                    fmt_stamp(t.last_ns),
+                ]
+            })
+            .collect();
+        let mut widths = headers.map(str::len);
+        for row in &rows {
+            for (w, cell) in widths.iter_mut().zip(row) {
+                *w = (*w).max(cell.chars().count());
+            }
+        }
+        let line = |f: &mut fmt::Formatter<'_>, cells: [&str; 6]| -> fmt::Result {
+            let [a, b, c, d, e, g] = cells;
+            let [wa, wb, wc, wd, we, wg] = widths;
+            writeln!(
+                f,
+                "{a:<wa$}  {b:<wb$}  {c:>wc$}  {d:>wd$}  {e:<we$}  {g:<wg$}"
+            )
+        };
+        writeln!(f)?;
+        line(f, headers)?;
+        for row in &rows {
+            line(f, [&row[0], &row[1], &row[2], &row[3], &row[4], &row[5]])?;
+        }
+        writeln!(f)?;
+        for file in &self.files {
+            writeln!(
+                f,
+                "file:      {}  ({} bytes, {} messages{})",
+                file.path.display(),
+                file.bytes,
+                file.message_count,
+                if file.complete { "" } else { ", incomplete" }
+            )?;
+        }
+        if let Some(r) = &self.recovery {
+            write!(f, "{r}")?;
+        }
+        Ok(())
+    }
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Entry {
+    topic: u32,
+    log_time_ns: u64,
+    publish_time_ns: u64,
+    start: usize,
+    len: usize,
+}
+
+/// A bag opened for reading: a bag directory (with or without `metadata.yaml`) or a bare
+/// `.mcap` file, read whole into memory.
+#[derive(Debug)]
+pub struct Bag {
+    path: PathBuf,
+    topics: Vec<TopicInfo>,
+    files: Vec<FileInfo>,
+    entries: Vec<Entry>,
+    data: Vec<u8>,
+    recovery: Option<Recovery>,
+}
+
+/// Which `.mcap` files a path means, plus notes about the directory.
+fn resolve_files(path: &Path) -> Result<(Vec<PathBuf>, Vec<String>), BagError> {
+    let not_a_bag = |reason: String| BagError::NotABag {
+        path: path.to_path_buf(),
+        reason,
+    };
+    if !path.exists() {
+        return Err(not_a_bag(
+            "does not exist; give a bag directory (with metadata.yaml) or an .mcap file".into(),
+        ));
+    }
+    if path.is_file() {
+        return Ok((vec![path.to_path_buf()], Vec::new()));
+    }
+    let mut notes = Vec::new();
+    let meta_path = path.join("metadata.yaml");
+    if meta_path.exists() {
+        match read_metadata(&meta_path) {
+            Ok(meta) => {
+                // Like rosbag2 and rosbags, file names are taken relative to the bag directory.
+                let listed: Vec<PathBuf> = meta
+                    .relative_file_paths
+                    .iter()
+                    .map(|p| path.join(Path::new(p).file_name().unwrap_or(p.as_ref())))
+                    .collect();
+                let (present, missing): (Vec<_>, Vec<_>) =
+                    listed.into_iter().partition(|p| p.is_file());
+                if !missing.is_empty() {
+                    notes.push(format!(
+                        "metadata.yaml lists files that are missing: {}",
+                        missing
+                            .iter()
+                            .map(|p| p.display().to_string())
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    ));
+                }
+                if !present.is_empty() {
+                    return Ok((present, notes));
+                }
+                if meta.relative_file_paths.is_empty() {
+                    notes.push("metadata.yaml lists no files".into());
+                }
+            }
+            Err(e @ BagError::BadMetadata { .. }) if e.to_string().contains("not supported") => {
+                return Err(e);
+            }
+            Err(e) => notes.push(format!(
+                "{e}; reading the .mcap files in the directory instead"
+            )),
+        }
+    } else {
+        notes.push(
+            "no metadata.yaml (the recorder did not finish?); reading the .mcap files in the \
+             directory"
+                .into(),
+        );
+    }
+    let mut found: Vec<PathBuf> = std::fs::read_dir(path)
+        .map_err(|e| BagError::io("reading directory", path, e))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.is_file() && p.extension().is_some_and(|x| x == "mcap"))
+        .collect();
+    // rosbag2 splits are <name>_<index>.mcap: order by that index, then by name.
+    let index = |p: &PathBuf| -> (u64, String) {
+        let stem = p
+            .file_stem()
+            .and_then(|s| s.to_str())
+            .unwrap_or_default()
+            .to_string();
+        let n = stem
+            .rsplit('_')
+            .next()
+            .and_then(|n| n.parse().ok())
+            .unwrap_or(u64::MAX);
+        (n, stem)
+    };
+    found.sort_by_key(index);
+    if found.is_empty() {
+        return Err(not_a_bag(format!(
+            "is a directory without .mcap files{}; give a bag directory written by rosbag2 or \
+             dynlab, or an .mcap file",
+            if meta_path.exists() {
+                ""
+            } else {
+                " or metadata.yaml"
+            }
+        )));
+    }
+    Ok((found, notes))
+}
+
+/// The largest uncompressed chunk this reader will inflate, and the largest plausible
+/// compression ratio: a damaged chunk header must not make the reader allocate gigabytes.
+const MAX_CHUNK_BYTES: u64 = 2 << 30;
+const MAX_CHUNK_RATIO: u64 = 1000;
+
+/// Schemas and channels of one file, and the messages read.
+struct FileReader<'b> {
+    bag: &'b mut BagBuilder,
+    schemas: HashMap<u16, (String, String, String)>,
+    channels: HashMap<u16, u32>,
+    messages: u64,
+}
+
+#[derive(Default)]
+struct BagBuilder {
+    topics: Vec<TopicInfo>,
+    topic_index: HashMap<(String, String), u32>,
+    entries: Vec<Entry>,
+    data: Vec<u8>,
+}
+
+/// A record from a chunk or the data section, kept until the chunk proves whole.
+enum Pending {
+    Schema(u16, String, String, String),
+    Channel(mcap::records::Channel),
+    Message(mcap::records::MessageHeader, Vec<u8>),
+}
+
+impl FileReader<'_> {
+    fn to_pending(record: Record<'_>) -> Option<Pending> {
+        match record {
+            Record::Schema { header, data } => Some(Pending::Schema(
+                header.id,
+                header.name,
+                header.encoding,
+                String::from_utf8_lossy(&data).into_owned(),
+            )),
+            Record::Channel(c) => Some(Pending::Channel(c)),
+            Record::Message { header, data } => Some(Pending::Message(header, data.into_owned())),
+            _ => None,
+        }
+    }
+
+    /// Checks a batch of records (one chunk) against the known schemas and channels without
+    /// changing anything; `Err` names the first inconsistency.
+    fn check(&self, batch: &[Pending]) -> Result<(), String> {
+        let mut schemas: Vec<u16> = Vec::new();
+        let mut channels: Vec<u16> = Vec::new();
+        for p in batch {
+            match p {
+                Pending::Schema(id, ..) => schemas.push(*id),
+                Pending::Channel(c) => {
+                    if c.schema_id != 0
+                        && !self.schemas.contains_key(&c.schema_id)
+                        && !schemas.contains(&c.schema_id)
+                    {
+                        return Err(format!(
+                            "channel {} ({}) refers to unknown schema {}",
+                            c.id, c.topic, c.schema_id
+                        ));
+                    }
+                    channels.push(c.id);
+                }
+                Pending::Message(h, _) => {
+                    if !self.channels.contains_key(&h.channel_id)
+                        && !channels.contains(&h.channel_id)
+                    {
+                        return Err(format!("message for unknown channel {}", h.channel_id));
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn apply(&mut self, batch: Vec<Pending>) {
+        for p in batch {
+            match p {
+                Pending::Schema(id, name, encoding, text) => {
+                    self.schemas.entry(id).or_insert((name, encoding, text));
+                }
+                Pending::Channel(c) => {
+                    if self.channels.contains_key(&c.id) {
+                        continue;
+                    }
+                    let (type_name, encoding, definition) =
+                        self.schemas.get(&c.schema_id).cloned().unwrap_or_default();
+                    let key = (c.topic.clone(), type_name.clone());
+                    let next = self.bag.topics.len() as u32;
+                    let idx = *self.bag.topic_index.entry(key).or_insert(next);
+                    if idx == next {
+                        let qos = c
+                            .metadata
+                            .get("offered_qos_profiles")
+                            .and_then(|t| QosProfile::list_from_yaml_text(t).ok())
+                            .unwrap_or_default();
+                        self.bag.topics.push(TopicInfo {
+                            name: c.topic.clone(),
+                            type_name,
+                            schema_encoding: encoding,
+                            definition,
+                            message_encoding: c.message_encoding.clone(),
+                            qos,
+                            type_hash: c
+                                .metadata
+                                .get("topic_type_hash")
+                                .cloned()
+                                .unwrap_or_default(),
+                            count: 0,
+                            first_ns: None,
+                            last_ns: None,
+                        });
+                    }
+                    self.channels.insert(c.id, idx);
+                }
+                Pending::Message(h, data) => {
+                    let Some(&topic) = self.channels.get(&h.channel_id) else {
+                        continue;
+                    };
+                    let t = &mut self.bag.topics[topic as usize];
+                    t.count += 1;
+                    t.first_ns = Some(t.first_ns.map_or(h.log_time, |f| f.min(h.log_time)));
+                    t.last_ns = Some(t.last_ns.map_or(h.log_time, |l| l.max(h.log_time)));
+                    self.bag.entries.push(Entry {
+                        topic,
+                        log_time_ns: h.log_time,
+                        publish_time_ns: h.publish_time,
+                        start: self.bag.data.len(),
+                        len: data.len(),
+                    });
+                    self.bag.data.extend_from_slice(&data);
+                    self.messages += 1;
+                }
+            }
+        }
+    }
+
+    /// Reads the records of one chunk record body; `Err` says why the chunk is unusable.
+    fn read_chunk(body: &[u8]) -> Result<Vec<Pending>, String> {
+        let record = mcap::parse_record(op::CHUNK, body).map_err(|e| format!("bad chunk: {e}"))?;
+        let Record::Chunk { header, data } = record else {
+            return Err("bad chunk record".into());
+        };
+        let limit =
+            MAX_CHUNK_BYTES.min(header.compressed_size.saturating_mul(MAX_CHUNK_RATIO) + (1 << 20));
+        if header.uncompressed_size > limit {
+            return Err(format!(
+                "chunk claims {} uncompressed bytes from {} compressed (implausible)",
+                header.uncompressed_size, header.compressed_size
+            ));
+        }
+        if header.compression.is_empty() && header.uncompressed_size != header.compressed_size {
+            return Err("uncompressed chunk whose sizes disagree".into());
+        }
+        let reader = mcap::read::ChunkReader::new(header, &data).map_err(|e| format!("{e}"))?;
+        let mut batch = Vec::new();
+        for record in reader {
+            let record = record.map_err(|e| match e {
+                mcap::McapError::BadChunkCrc { saved, calculated } => format!(
+                    "chunk CRC mismatch (stored {saved:08x}, computed {calculated:08x}): the \
+                     chunk's bytes were changed"
+                ),
+                other => format!("chunk content unreadable: {other}"),
+            })?;
+            batch.extend(Self::to_pending(record));
+        }
+        Ok(batch)
+    }
+}
+
+/// Whether a record that starts at `pos` looks plausible (for resuming after a damaged chunk).
+fn plausible_record_at(data: &[u8], pos: usize) -> bool {
+    if pos == data.len() {
+        return true;
+    }
+    let Some(head) = data.get(pos..pos + 9) else {
+        return false;
+    };
+    let opcode = head[0];
+    let len = u64::from_le_bytes(head[1..9].try_into().unwrap_or([0xff; 8]));
+    (0x01..=0x0f).contains(&opcode) && len <= (data.len() - pos - 9) as u64
+}
+
+fn op_name(opcode: u8) -> String {
+    let name = match opcode {
+        op::HEADER => "header",
+        op::FOOTER => "footer",
+        op::SCHEMA => "schema",
+        op::CHANNEL => "channel",
+        op::MESSAGE => "message",
+        op::CHUNK => "chunk",
+        op::MESSAGE_INDEX => "message index",
+        op::CHUNK_INDEX => "chunk index",
+        op::ATTACHMENT => "attachment",
+        op::ATTACHMENT_INDEX => "attachment index",
+        op::STATISTICS => "statistics",
+        op::METADATA => "metadata",
+        op::METADATA_INDEX => "metadata index",
+        op::SUMMARY_OFFSET => "summary offset",
+        op::DATA_END => "data end",
+        _ => return format!("opcode 0x{opcode:02x}"),
+    };
+    name.to_string()
+}
+
+/// Reads one file into `bag`; returns its info and, if damaged, its recovery record.
+fn read_file(bag: &mut BagBuilder, path: &Path, data: &[u8]) -> (FileInfo, Option<FileRecovery>) {
+    let mut fr = FileReader {
+        bag,
+        schemas: HashMap::new(),
+        channels: HashMap::new(),
+        messages: 0,
+    };
+    let mut skipped = Vec::new();
+    let len = data.len();
+    let mut pos = 0usize;
+    let mut complete = false;
+    let mut data_end = false;
+    let mut stop: Option<(Option<u64>, String)> = None;
+    if len == 0 {
+        stop = Some((Some(0), "the file is empty".into()));
+    } else if len < mcap::MAGIC.len() || &data[..mcap::MAGIC.len()] != mcap::MAGIC {
+        let what = if mcap::MAGIC.starts_with(data) {
+            "the file ends inside the MCAP magic bytes"
+        } else {
+            "not an MCAP file (it does not start with the MCAP magic bytes)"
+        };
+        stop = Some((Some(0), what.into()));
+    } else {
+        pos = mcap::MAGIC.len();
+    }
+    while stop.is_none() {
+        if pos == len {
+            stop = Some((
+                None,
+                if data_end {
+                    "the file ends without its footer (the summary was cut off); all data was read"
+                        .into()
+                } else {
+                    "the file ends after its last complete record, without a summary or footer \
+                     (the writer did not finish: killed or still recording?)"
+                        .into()
+                },
+            ));
+            break;
+        }
+        let Some(head) = data.get(pos..pos + 9) else {
+            stop = Some((
+                Some(pos as u64),
+                format!(
+                    "the file is cut inside a record header ({} bytes left)",
+                    len - pos
+                ),
+            ));
+            break;
+        };
+        let opcode = head[0];
+        let mut len_bytes = [0u8; 8];
+        len_bytes.copy_from_slice(&head[1..9]);
+        let rec_len = u64::from_le_bytes(len_bytes);
+        let available = (len - pos - 9) as u64;
+        if opcode == 0 || (0x10..0x80).contains(&opcode) {
+            stop = Some((
+                Some(pos as u64),
+                format!("invalid record opcode 0x{opcode:02x}: the file is corrupt from here"),
+            ));
+            break;
+        }
+        if rec_len > available {
+            stop = Some((
+                Some(pos as u64),
+                format!(
+                    "the file is cut inside a {} record ({rec_len} bytes long, {available} present)",
+                    op_name(opcode)
+                ),
+            ));
+            break;
+        }
+        let body = &data[pos + 9..pos + 9 + rec_len as usize];
+        let next = pos + 9 + rec_len as usize;
+        match opcode {
+            op::CHUNK => match FileReader::read_chunk(body).and_then(|batch| {
+                fr.check(&batch)?;
+                Ok(batch)
+            }) {
+                Ok(batch) => fr.apply(batch),
+                Err(reason) => {
+                    if plausible_record_at(data, next) {
+                        skipped.push(SkippedChunk {
+                            offset: pos as u64,
+                            reason,
+                        });
+                    } else {
+                        stop = Some((Some(pos as u64), format!("damaged chunk: {reason}")));
+                        break;
+                    }
+                }
+            },
+            op::SCHEMA | op::CHANNEL | op::MESSAGE => {
+                match mcap::parse_record(opcode, body)
+                    .map_err(|e| e.to_string())
+                    .and_then(|r| {
+                        let batch: Vec<Pending> = FileReader::to_pending(r).into_iter().collect();
+                        fr.check(&batch)?;
+                        Ok(batch)
+                    }) {
+                    Ok(batch) => {
+                        // Schemas and channels repeat in the summary section; only data-section
+                        // messages count (a message record never appears in the summary).
+                        fr.apply(batch)
+                    }
+                    Err(reason) => {
+                        stop = Some((
+                            Some(pos as u64),
+                            format!("damaged {} record: {reason}", op_name(opcode)),
+                        ));
+                        break;
+                    }
+                }
+            }
+            op::DATA_END => data_end = true,
+            op::FOOTER => {
+                let end = next + mcap::MAGIC.len();
+                if data.get(next..end) == Some(mcap::MAGIC) {
+                    complete = true;
+                    pos = end;
+                } else {
+                    stop = Some((
+                        None,
+                        "the footer is not followed by the closing magic bytes; all data was read"
+                            .into(),
+                    ));
+                    pos = next;
+                }
+                break;
+            }
+            // Headers, indexes, statistics, metadata, attachments and private records carry no
+            // messages.
+            _ => {}
+        }
+        pos = next;
+    }
+    let readable = if stop.as_ref().is_some_and(|(at, _)| at.is_some()) {
+        stop.as_ref().and_then(|(at, _)| *at).unwrap_or(0)
+    } else {
+        pos as u64
+    };
+    let info = FileInfo {
+        path: path.to_path_buf(),
+        bytes: len as u64,
+        message_count: fr.messages,
+        complete,
+    };
+    let recovery = (stop.is_some() || !skipped.is_empty()).then(|| {
+        let (stopped_at, reason) = stop.unwrap_or((None, "some chunks were damaged".into()));
+        FileRecovery {
+            path: path.to_path_buf(),
+            file_bytes: len as u64,
+            readable_bytes: readable,
+            messages: fr.messages,
+            stopped_at,
+            reason,
+            skipped_chunks: skipped,
+        }
+    });
+    (info, recovery)
+}
+
+impl Bag {
+    /// Opens a bag directory (reading the files `metadata.yaml` lists, or every `.mcap` file
+    /// when there is none) or a single `.mcap` file. Damaged files are read up to the damage and
+    /// reported by [`Bag::recovery`]; the result is an error only when nothing at all could be
+    /// read.
+    pub fn open(path: impl AsRef<Path>) -> Result<Bag, BagError> {
+        let path = path.as_ref();
+        let (files, notes) = resolve_files(path)?;
+        let mut builder = BagBuilder::default();
+        let mut infos = Vec::new();
+        let mut damaged = Vec::new();
+        for file in &files {
+            let data = std::fs::read(file).map_err(|e| BagError::io("reading", file, e))?;
+            let (info, recovery) = read_file(&mut builder, file, &data);
+            infos.push(info);
+            damaged.extend(recovery);
+        }
+        let total = builder.entries.len() as u64;
+        if total == 0 && !damaged.is_empty() {
+            let recovery = Recovery {
+                messages: 0,
+                files: damaged,
+                notes,
+            };
+            return Err(BagError::Unreadable {
+                path: path.to_path_buf(),
+                details: recovery.to_string().trim_end().replace('\n', "; "),
+            });
+        }
+        builder.entries.sort_by_key(|e| e.log_time_ns);
+        let recovery = (!damaged.is_empty() || !notes.is_empty()).then_some(Recovery {
+            messages: total,
+            files: damaged,
+            notes,
+        });
+        Ok(Bag {
+            path: path.to_path_buf(),
+            topics: builder.topics,
+            files: infos,
+            entries: builder.entries,
+            data: builder.data,
+            recovery,
+        })
+    }
+
+    /// The path the bag was opened from.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Number of messages in the bag.
+    pub fn message_count(&self) -> u64 {
+        self.entries.len() as u64
+    }
+
+    /// Topics, types, counts, times, rates, files and recovery notes.
+    pub fn info(&self) -> BagInfo {
+        let start_ns = self.entries.first().map(|e| e.log_time_ns);
+        let end_ns = self.entries.last().map(|e| e.log_time_ns);
+        BagInfo {
+            path: self.path.clone(),
+            topics: self.topics.clone(),
+            message_count: self.message_count(),
+            start_ns,
+            end_ns,
+            duration_ns: end_ns.zip(start_ns).map(|(e, s)| e - s).unwrap_or(0),
+            files: self.files.clone(),
+            recovery: self.recovery.clone(),
+        }
+    }
+
+    /// The topics, in order of first appearance.
+    pub fn topics(&self) -> &[TopicInfo] {
+        &self.topics
+    }
+
+    /// Looks up a topic by name.
+    pub fn topic(&self, name: &str) -> Option<&TopicInfo> {
+        self.topics.iter().find(|t| t.name == name)
+    }
+
+    fn raw(&self, e: &Entry) -> RawMessage<'_> {
+        let t = &self.topics[e.topic as usize];
+        RawMessage {
+            topic: &t.name,
+            type_name: &t.type_name,
+            log_time_ns: e.log_time_ns,
+            publish_time_ns: e.publish_time_ns,
+            data: &self.data[e.start..e.start + e.len],
+        }
+    }
+
+    /// All messages of all topics, ordered by log time; messages with equal log times keep
+    /// their order in the files.
+    pub fn messages(&self) -> impl Iterator<Item = RawMessage<'_>> {
+        self.entries.iter().map(|e| self.raw(e))
+    }
+
+    /// The messages of `topic` in log-time order, still serialized.
+    pub fn raw_messages<'a>(
+        &'a self,
+        topic: &str,
+    ) -> Result<impl Iterator<Item = RawMessage<'a>> + 'a, BagError> {
+        let indices: Vec<u32> = self
+            .topics
+            .iter()
+            .enumerate()
+            .filter(|(_, t)| t.name == topic)
+            .map(|(i, _)| i as u32)
+            .collect();
+        if indices.is_empty() {
+            return Err(self.missing_topic(topic));
+        }
+        Ok(self
+            .entries
+            .iter()
+            .filter(move |e| indices.contains(&e.topic))
+            .map(|e| self.raw(e)))
+    }
+
+    fn missing_topic(&self, topic: &str) -> BagError {
+        BagError::MissingTopic {
+            topic: topic.to_string(),
+            bag: self.path.clone(),
+            available: self
+                .topics
+                .iter()
+                .map(|t| TopicSummary {
+                    name: t.name.clone(),
+                    type_name: t.type_name.clone(),
+                    count: t.count,
+                })
+                .collect(),
+        }
+    }
+
+    /// Decodes every message of `topic` as `T`, in log-time order. Errors if the topic is not in
+    /// the bag (naming the topics that are), if it carries another type, or if a message does
+    /// not decode (naming its index and time).
+    pub fn read<T: RosMessage>(&self, topic: &str) -> Result<Vec<Stamped<T>>, BagError> {
+        let candidates: Vec<(usize, &TopicInfo)> = self
+            .topics
+            .iter()
+            .enumerate()
+            .filter(|(_, t)| t.name == topic)
+            .collect();
+        let Some(&(idx, _)) = candidates.iter().find(|(_, t)| t.type_name == T::TYPE_NAME) else {
+            return Err(match candidates.first() {
+                None => self.missing_topic(topic),
+                Some((_, t)) => BagError::TypeMismatch {
+                    topic: topic.to_string(),
+                    actual: t.type_name.clone(),
+                    requested: T::TYPE_NAME.to_string(),
+                },
+            });
+        };
+        self.entries
+            .iter()
+            .filter(|e| e.topic as usize == idx)
+            .enumerate()
+            .map(|(index, e)| {
+                let raw = self.raw(e);
+                dynlab_msgs::from_cdr::<T>(raw.data)
+                    .map(|msg| Stamped {
+                        log_time_ns: e.log_time_ns,
+                        publish_time_ns: e.publish_time_ns,
+                        msg,
+                    })
+                    .map_err(|source| BagError::Decode {
+                        topic: topic.to_string(),
+                        index,
+                        log_time_ns: e.log_time_ns,
+                        source,
+                    })
+            })
+            .collect()
+    }
+
+    /// Checks that every topic in `topics` is present; the error names the first missing one and
+    /// lists the topics the bag has.
+    pub fn require_topics(&self, topics: &[&str]) -> Result<(), BagError> {
+        match topics.iter().find(|t| self.topic(t).is_none()) {
+            Some(t) => Err(self.missing_topic(t)),
+            None => Ok(()),
+        }
+    }
+
+    /// For a damaged bag (or a bag directory with a missing or unusable `metadata.yaml`): how
+    /// many messages were readable, where and why reading stopped. `None` for a sound bag.
+    pub fn recovery(&self) -> Option<&Recovery> {
+        self.recovery.as_ref()
+    }
+}
