@@ -216,3 +216,17 @@ fn push_action_definition_documents_meanings_and_ranges() {
     }
     assert!(def.is_ascii());
 }
+
+#[test]
+fn two_level_schema_has_a_blank_line_before_the_separator() {
+    // The layout rosbag2's own tests expect for a message with one nested message field.
+    let texts = |name: &str| match name {
+        "demo_msgs/Outer" => Some("demo_msgs/Inner b\n"),
+        "demo_msgs/Inner" => Some("float32 c\n"),
+        _ => None,
+    };
+    assert_eq!(
+        compose("demo_msgs/Outer", texts).unwrap(),
+        format!("demo_msgs/Inner b\n\n{SEPARATOR}\nMSG: demo_msgs/Inner\nfloat32 c\n")
+    );
+}
