@@ -236,10 +236,8 @@ impl fmt::Display for BagInfo {
         let line = |f: &mut fmt::Formatter<'_>, cells: [&str; 6]| -> fmt::Result {
             let [a, b, c, d, e, g] = cells;
             let [wa, wb, wc, wd, we, wg] = widths;
-            writeln!(
-                f,
-                "{a:<wa$}  {b:<wb$}  {c:>wc$}  {d:>wd$}  {e:<we$}  {g:<wg$}"
-            )
+            let text = format!("{a:<wa$}  {b:<wb$}  {c:>wc$}  {d:>wd$}  {e:<we$}  {g:<wg$}");
+            writeln!(f, "{}", text.trim_end())
         };
         writeln!(f)?;
         line(f, headers)?;

@@ -1,2 +1,57 @@
-//! The dynlab offline command line: collect, train, compare, diagnose, eval, bag info
-fn main() {}
+//! The dynlab offline command line: collect, train, compare, diagnose, eval, bag info.
+//!
+//! Each command group lives in its own module (`bag_cmd` for `dynlab bag …`) and is a thin
+//! adapter over a library crate.
+
+mod bag_cmd;
+
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+/// Learned robot dynamics you can trust, explain and control with: the offline tools.
+#[derive(Debug, Parser)]
+#[command(name = "dynlab", version, about)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Inspect, export and import rosbag2 (MCAP) bags.
+    Bag(bag_cmd::BagArgs),
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Bag(args) => bag_cmd::run(args),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(err) => {
+            eprintln!("error: {}", error_chain(&err));
+            ExitCode::FAILURE
+        }
+    }
+}
+
+/// The error and its causes joined by `: `, leaving out a cause whose text the message before it
+/// already contains (library errors often quote their source).
+fn error_chain(err: &anyhow::Error) -> String {
+    let mut out = String::new();
+    let mut previous = String::new();
+    for cause in err.chain() {
+        let text = cause.to_string();
+        if previous.contains(&text) {
+            continue;
+        }
+        if !out.is_empty() {
+            out.push_str(": ");
+        }
+        out.push_str(&text);
+        previous = text;
+    }
+    out
+}
