@@ -260,16 +260,17 @@ impl CarDriver {
                 // Pure pursuit towards a point ahead on the track, offset sideways by a slow
                 // random fraction of the half width.
                 let pr = track.project([pose.x, pose.y]);
-                let lookahead = 0.25 + 0.25 * state.speed();
+                let lookahead = 0.15 + 0.12 * state.speed();
                 let p = track.ahead(pr.segment, lookahead);
                 let ahead_pr = track.project(p);
-                let off = self.lateral_target.clamp(-0.6, 0.6) * ahead_pr.half_width;
+                let off = (0.5 * self.lateral_target).clamp(-0.4, 0.4) * ahead_pr.half_width;
                 let (s, co) = ahead_pr.heading.sin_cos();
                 let target = [p[0] - off * s, p[1] + off * co];
                 let alpha = wrap_angle((target[1] - pose.y).atan2(target[0] - pose.x) - pose.theta);
                 let ld = (target[0] - pose.x).hypot(target[1] - pose.y).max(1e-3);
                 let pursuit = (2.0 * car.wheelbase() * alpha.sin() / ld).atan();
-                let off_track = ((pr.lateral.abs() - pr.half_width) / pr.half_width).clamp(0.0, 1.0);
+                let off_track =
+                    ((pr.lateral.abs() - 0.5 * pr.half_width) / pr.half_width).clamp(0.0, 1.0);
                 (pursuit + 0.3 * self.steer_ou, off_track)
             }
             None => {
@@ -301,8 +302,13 @@ impl CarDriver {
             if homing > 0.3 {
                 self.aggressive_left = 0.0;
             }
-            steering = self.aggressive_sign * c.aggressive_steering + 0.3 * self.steer_ou;
             throttle = c.aggressive_throttle;
+            steering = if self.scenario.track_data.is_some() {
+                // On a track: keep pursuing and add a smaller flick (power oversteer in a bend).
+                steering + 0.3 * self.aggressive_sign * c.aggressive_steering
+            } else {
+                self.aggressive_sign * c.aggressive_steering + 0.3 * self.steer_ou
+            };
         } else if start_aggressive && homing == 0.0 {
             self.aggressive_left = agg_len;
             self.aggressive_sign = agg_sign;
