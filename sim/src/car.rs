@@ -433,7 +433,10 @@ impl CarScenario {
         if c.substep > 0.002 {
             return Err(SimError::invalid(
                 "car.substep",
-                format!("must be ≤ 0.002 s for a stable tire model, got {}", c.substep),
+                format!(
+                    "must be ≤ 0.002 s for a stable tire model, got {}",
+                    c.substep
+                ),
             ));
         }
         finite2("arena.min", self.arena.min)?;

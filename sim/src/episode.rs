@@ -97,8 +97,8 @@ pub fn push_episode(
     let mut end = EpisodeEnd::Completed;
     let mut step = 0u64;
     loop {
-        let at_push = step % period_steps == 0;
-        if step % pose_every == 0 || at_push {
+        let at_push = step.is_multiple_of(period_steps);
+        if step.is_multiple_of(pose_every) || at_push {
             samples.push(Sample {
                 t_ns: step * dt_ns,
                 record: Record::BlockPose(world.measure(&mut noise)),
@@ -168,7 +168,7 @@ pub fn car_episode(
         if i == ticks {
             break;
         }
-        if i % cmd_every == 0 {
+        if i.is_multiple_of(cmd_every) {
             u = driver.command(&state, cmd_dt, &mut explore);
             samples.push(Sample {
                 t_ns,

@@ -251,7 +251,8 @@ impl CarDriver {
         let a_s = (-dt / c.steering_tau).exp();
         self.steer_ou = a_s * self.steer_ou + c.steering_std * (1.0 - a_s * a_s).sqrt() * n[0];
         let a_t = (-dt / c.throttle_tau).exp();
-        self.throttle_ou = a_t * self.throttle_ou + c.throttle_std * (1.0 - a_t * a_t).sqrt() * n[1];
+        self.throttle_ou =
+            a_t * self.throttle_ou + c.throttle_std * (1.0 - a_t * a_t).sqrt() * n[1];
         self.lateral_target = a_t * self.lateral_target + 0.5 * (1.0 - a_t * a_t).sqrt() * n[2];
 
         let pose = state.pose();

@@ -43,10 +43,7 @@ impl Pose2 {
     /// A point given in this pose's frame, expressed in the world frame.
     pub fn transform_point(self, p: [f64; 2]) -> [f64; 2] {
         let (s, c) = self.theta.sin_cos();
-        [
-            self.x + c * p[0] - s * p[1],
-            self.y + s * p[0] + c * p[1],
-        ]
+        [self.x + c * p[0] - s * p[1], self.y + s * p[0] + c * p[1]]
     }
 
     /// Distance between the positions of two poses.
@@ -173,7 +170,10 @@ pub(crate) fn finite(key: &str, v: f64) -> Result<(), SimError> {
     if v.is_finite() {
         Ok(())
     } else {
-        Err(SimError::invalid(key, format!("must be a finite number, got {v}")))
+        Err(SimError::invalid(
+            key,
+            format!("must be a finite number, got {v}"),
+        ))
     }
 }
 

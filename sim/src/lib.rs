@@ -9,6 +9,17 @@
 //! into time-stamped records ([`Sample`]) ready to be written to a bag.
 //!
 //! No DDS, no clocks, no unseeded randomness: seeds and time are inputs.
+//!
+//! ```
+//! use dynlab_sim::{Pose2, PushAction, PushScenario, PushWorld};
+//!
+//! let mut world = PushWorld::new(&PushScenario::free())?;
+//! world.reset(Pose2::new(0.4, 0.0, 0.0))?;
+//! // Push the middle of the back face straight ahead for 0.05 m.
+//! let outcome = world.apply(PushAction::new(0.0, 0.0, 0.5))?;
+//! assert!((outcome.final_pose.x - 0.45).abs() < 2e-3);
+//! # Ok::<(), dynlab_sim::SimError>(())
+//! ```
 #![warn(missing_docs)]
 
 pub mod error;
@@ -28,9 +39,9 @@ pub mod episode;
 pub mod explore;
 pub mod track;
 pub use car::{CarEffects, CarInput, CarScenario, CarState, CarWorld};
-pub use track::Track;
 pub use episode::{
     Episode, EpisodeEnd, Record, Sample, car_episode, concatenate, generate_car_episodes,
     generate_push_episodes, push_episode,
 };
 pub use explore::{CarDriver, CarExplorer, PushExplorer};
+pub use track::Track;

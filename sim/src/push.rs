@@ -78,7 +78,9 @@ impl PushAction {
             } else {
                 Err(SimError::Input {
                     what,
-                    message: format!("must be within [{lo}, {hi}], got {v}; clip it (PushAction::clamped)"),
+                    message: format!(
+                        "must be within [{lo}, {hi}], got {v}; clip it (PushAction::clamped)"
+                    ),
                 })
             }
         };
@@ -703,7 +705,10 @@ impl PushWorld {
         let inertia = m * (a * a + b * b) / 12.0;
         let start = s.start_pose();
         let block_body = RigidBodyBuilder::dynamic()
-            .pose(Pose::new(Vector::new(start.x as f32, start.y as f32), start.theta as f32))
+            .pose(Pose::new(
+                Vector::new(start.x as f32, start.y as f32),
+                start.theta as f32,
+            ))
             .additional_mass_properties(MassProperties::new(
                 Vector::new(com[0] as f32, com[1] as f32),
                 m as f32,
@@ -929,8 +934,10 @@ impl PushWorld {
             if p.step <= p.motion_steps {
                 let s = p.profile.position(p.step as f64 * dt);
                 let target = path_point(&p.path, s);
-                self.world.bodies[self.pusher]
-                    .set_next_kinematic_translation(Vector::new(target[0] as f32, target[1] as f32));
+                self.world.bodies[self.pusher].set_next_kinematic_translation(Vector::new(
+                    target[0] as f32,
+                    target[1] as f32,
+                ));
             } else if p.step == p.motion_steps + 1 {
                 lift = true;
             }
@@ -988,8 +995,8 @@ impl PushWorld {
     pub fn apply(&mut self, action: PushAction) -> Result<PushOutcome, SimError> {
         self.begin_push(action)?;
         self.last_outcome = None;
-        let every = ((1.0 / (self.scenario.sim.sample_rate * self.scenario.sim.dt)).round() as u64)
-            .max(1);
+        let every =
+            ((1.0 / (self.scenario.sim.sample_rate * self.scenario.sim.dt)).round() as u64).max(1);
         let t0 = self.steps;
         let mut trajectory = vec![TimedPose {
             t: 0.0,
@@ -998,7 +1005,7 @@ impl PushWorld {
         while self.push.is_some() {
             self.step();
             let k = self.steps - t0;
-            if k % every == 0 || self.push.is_none() {
+            if k.is_multiple_of(every) || self.push.is_none() {
                 trajectory.push(TimedPose {
                     t: k as f64 * self.scenario.sim.dt,
                     pose: self.block_pose(),

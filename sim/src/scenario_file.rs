@@ -63,7 +63,11 @@ fn locate_key(text: &str, offset: usize) -> (String, usize) {
         h
     } else if let Some((k, _)) = trimmed.split_once('=') {
         let k = k.trim().trim_matches('"').trim_matches('\'').to_string();
-        if table.is_empty() { k } else { format!("{table}.{k}") }
+        if table.is_empty() {
+            k
+        } else {
+            format!("{table}.{k}")
+        }
     } else {
         table
     };
@@ -72,7 +76,14 @@ fn locate_key(text: &str, offset: usize) -> (String, usize) {
 
 fn header(line: &str) -> Option<String> {
     let t = line.trim();
-    let inner = t.strip_prefix("[[").and_then(|s| s.split_once("]]")).map(|(h, _)| h);
-    let inner = inner.or_else(|| t.strip_prefix('[').and_then(|s| s.split_once(']')).map(|(h, _)| h));
+    let inner = t
+        .strip_prefix("[[")
+        .and_then(|s| s.split_once("]]"))
+        .map(|(h, _)| h);
+    let inner = inner.or_else(|| {
+        t.strip_prefix('[')
+            .and_then(|s| s.split_once(']'))
+            .map(|(h, _)| h)
+    });
     inner.map(|h| h.trim().to_string())
 }

@@ -50,10 +50,16 @@ impl Track {
                 half_width.len()
             )));
         }
-        if centre.iter().flatten().chain(&half_width).any(|v| !v.is_finite())
+        if centre
+            .iter()
+            .flatten()
+            .chain(&half_width)
+            .any(|v| !v.is_finite())
             || half_width.iter().any(|w| *w <= 0.0)
         {
-            return Err(bad("every coordinate must be finite and every width > 0".into()));
+            return Err(bad(
+                "every coordinate must be finite and every width > 0".into()
+            ));
         }
         Ok(Self { centre, half_width })
     }
@@ -65,9 +71,15 @@ impl Track {
             message: format!("{e}; expected arrays X, Y, X_i, Y_i, X_o, Y_o"),
         })?;
         let n = f.X.len();
-        if [f.Y.len(), f.X_i.len(), f.Y_i.len(), f.X_o.len(), f.Y_o.len()]
-            .iter()
-            .any(|&l| l != n)
+        if [
+            f.Y.len(),
+            f.X_i.len(),
+            f.Y_i.len(),
+            f.X_o.len(),
+            f.Y_o.len(),
+        ]
+        .iter()
+        .any(|&l| l != n)
         {
             return Err(SimError::Track {
                 origin: origin.into(),
@@ -98,7 +110,12 @@ impl Track {
     }
 
     /// An oval (two straights and two half circles) centred at the origin, for tests and demos.
-    pub fn oval(straight: f64, radius: f64, half_width: f64, points: usize) -> Result<Self, SimError> {
+    pub fn oval(
+        straight: f64,
+        radius: f64,
+        half_width: f64,
+        points: usize,
+    ) -> Result<Self, SimError> {
         let n = points.max(8);
         let perimeter = 2.0 * straight + std::f64::consts::TAU * radius;
         let mut centre = Vec::with_capacity(n);
@@ -147,16 +164,32 @@ impl Track {
     /// Lower corner of the bounding box grown by `margin`.
     pub fn bounds_min(&self, margin: f64) -> [f64; 2] {
         let w = self.half_width.iter().cloned().fold(0.0, f64::max);
-        let x = self.centre.iter().map(|p| p[0]).fold(f64::INFINITY, f64::min);
-        let y = self.centre.iter().map(|p| p[1]).fold(f64::INFINITY, f64::min);
+        let x = self
+            .centre
+            .iter()
+            .map(|p| p[0])
+            .fold(f64::INFINITY, f64::min);
+        let y = self
+            .centre
+            .iter()
+            .map(|p| p[1])
+            .fold(f64::INFINITY, f64::min);
         [x - w - margin, y - w - margin]
     }
 
     /// Upper corner of the bounding box grown by `margin`.
     pub fn bounds_max(&self, margin: f64) -> [f64; 2] {
         let w = self.half_width.iter().cloned().fold(0.0, f64::max);
-        let x = self.centre.iter().map(|p| p[0]).fold(f64::NEG_INFINITY, f64::max);
-        let y = self.centre.iter().map(|p| p[1]).fold(f64::NEG_INFINITY, f64::max);
+        let x = self
+            .centre
+            .iter()
+            .map(|p| p[0])
+            .fold(f64::NEG_INFINITY, f64::max);
+        let y = self
+            .centre
+            .iter()
+            .map(|p| p[1])
+            .fold(f64::NEG_INFINITY, f64::max);
         [x + w + margin, y + w + margin]
     }
 

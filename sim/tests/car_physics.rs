@@ -4,7 +4,9 @@ use dynlab_sim::{CarInput, CarScenario, CarState, CarWorld};
 
 fn drive(world: &mut CarWorld, u: CarInput, seconds: f64) -> Vec<CarState> {
     let n = (seconds / 0.01).round() as usize;
-    (0..n).map(|_| world.step(u, 0.01).expect("finite input")).collect()
+    (0..n)
+        .map(|_| world.step(u, 0.01).expect("finite input"))
+        .collect()
 }
 
 #[test]
@@ -17,7 +19,11 @@ fn straight_line_top_speed_matches_the_drivetrain_balance() {
     let mut w = CarWorld::new(&s).unwrap();
     let traj = drive(&mut w, CarInput::new(0.0, 1.0), 20.0);
     let end = traj.last().unwrap();
-    assert!((end.vx - v_top).abs() < 0.01 * v_top, "vx {} vs {v_top}", end.vx);
+    assert!(
+        (end.vx - v_top).abs() < 0.01 * v_top,
+        "vx {} vs {v_top}",
+        end.vx
+    );
     assert_eq!(end.vy, 0.0);
     assert_eq!(end.omega, 0.0);
     assert_eq!(end.y, 0.0);
@@ -32,7 +38,11 @@ fn grips_at_gentle_input() {
     drive(&mut w, CarInput::new(0.0, 0.2), 1.0);
     let traj = drive(&mut w, CarInput::new(0.1, 0.2), 8.0);
     for st in &traj {
-        assert!(st.sideslip().abs() < 5f64.to_radians(), "sideslip {} deg", st.sideslip().to_degrees());
+        assert!(
+            st.sideslip().abs() < 5f64.to_radians(),
+            "sideslip {} deg",
+            st.sideslip().to_degrees()
+        );
     }
     let end = traj.last().unwrap();
     let kinematic = end.speed() * 0.1f64.tan() / s.car.wheelbase();
@@ -57,7 +67,11 @@ fn drifts_at_high_throttle_and_steering() {
         .filter(|st| st.speed() > 0.3)
         .map(|st| st.sideslip().abs())
         .fold(0.0, f64::max);
-    assert!(max_beta > 30f64.to_radians(), "max sideslip {} deg", max_beta.to_degrees());
+    assert!(
+        max_beta > 30f64.to_radians(),
+        "max sideslip {} deg",
+        max_beta.to_degrees()
+    );
     // Without the friction ellipse (the published model) the same input is far tamer.
     let mut published = s.clone();
     published.car.friction_ellipse = false;
@@ -82,7 +96,11 @@ fn car_at_rest_stays_at_rest_and_brakes_to_a_stop() {
     let traj = drive(&mut w, CarInput::new(0.0, -0.1), 5.0);
     assert!(traj.last().unwrap().x.abs() < 5e-3);
     // Rolling at 1 m/s with zero throttle, the car coasts to a stop.
-    w.reset(CarState { vx: 1.0, ..CarState::default() }).unwrap();
+    w.reset(CarState {
+        vx: 1.0,
+        ..CarState::default()
+    })
+    .unwrap();
     let traj = drive(&mut w, CarInput::new(0.0, 0.0), 5.0);
     assert!(traj.last().unwrap().vx.abs() < 2e-3, "{:?}", traj.last());
 }
@@ -92,10 +110,19 @@ fn sliding_sideways_at_low_speed_comes_to_rest() {
     // The slip-angle regularisation turns v → 0 into a bounded lateral force, no blow-up.
     let s = CarScenario::floor();
     let mut w = CarWorld::new(&s).unwrap();
-    w.reset(CarState { vx: 0.01, vy: 0.5, omega: 3.0, ..CarState::default() }).unwrap();
+    w.reset(CarState {
+        vx: 0.01,
+        vy: 0.5,
+        omega: 3.0,
+        ..CarState::default()
+    })
+    .unwrap();
     let traj = drive(&mut w, CarInput::new(0.0, 0.0), 3.0);
     let end = traj.last().unwrap();
-    assert!(traj.iter().all(|s| s.speed().is_finite() && s.speed() < 0.6));
+    assert!(
+        traj.iter()
+            .all(|s| s.speed().is_finite() && s.speed() < 0.6)
+    );
     assert!(end.speed() < 0.01 && end.omega.abs() < 0.1, "{end:?}");
 }
 
@@ -109,7 +136,13 @@ fn inputs_are_clamped_and_bad_inputs_rejected() {
     assert_eq!(a.state(), b.state());
     assert!(a.step(CarInput::new(f64::NAN, 0.0), 0.01).is_err());
     assert!(a.step(CarInput::new(0.0, 0.0), -0.01).is_err());
-    assert!(a.reset(CarState { vx: f64::NAN, ..CarState::default() }).is_err());
+    assert!(
+        a.reset(CarState {
+            vx: f64::NAN,
+            ..CarState::default()
+        })
+        .is_err()
+    );
 }
 
 #[test]
@@ -123,5 +156,9 @@ fn step_splits_into_substeps_consistently() {
         b.step(CarInput::new(0.2, 0.5), 0.01).unwrap();
     }
     let (x, y) = (a.state(), b.state());
-    assert!((x.x - y.x).abs() < 1e-12 && (x.vx - y.vx).abs() < 1e-12 && (x.omega - y.omega).abs() < 1e-12);
+    assert!(
+        (x.x - y.x).abs() < 1e-12
+            && (x.vx - y.vx).abs() < 1e-12
+            && (x.omega - y.omega).abs() < 1e-12
+    );
 }

@@ -11,11 +11,17 @@ fn bits(e: &[Episode]) -> String {
 }
 
 fn short_push() -> PushExplorer {
-    PushExplorer { pushes_per_episode: 3, ..PushExplorer::default() }
+    PushExplorer {
+        pushes_per_episode: 3,
+        ..PushExplorer::default()
+    }
 }
 
 fn short_car() -> CarExplorer {
-    CarExplorer { duration: 5.0, ..CarExplorer::default() }
+    CarExplorer {
+        duration: 5.0,
+        ..CarExplorer::default()
+    }
 }
 
 #[test]
@@ -29,7 +35,10 @@ fn push_episodes_same_seed_same_bits_any_thread_count() {
     let other = generate_push_episodes(&s, &short_push(), 43, 6, 4).unwrap();
     assert_ne!(bits(&one), bits(&other));
     // Episodes differ from one another (per-episode seeds).
-    assert_ne!(format!("{:?}", one[0].samples), format!("{:?}", one[1].samples));
+    assert_ne!(
+        format!("{:?}", one[0].samples),
+        format!("{:?}", one[1].samples)
+    );
 }
 
 #[test]
@@ -40,7 +49,10 @@ fn car_episodes_same_seed_same_bits_any_thread_count() {
     let again = generate_car_episodes(&s, &short_car(), 9, 5, 3).unwrap();
     assert_eq!(bits(&one), bits(&four));
     assert_eq!(bits(&one), bits(&again));
-    assert_ne!(bits(&one), bits(&generate_car_episodes(&s, &short_car(), 10, 5, 1).unwrap()));
+    assert_ne!(
+        bits(&one),
+        bits(&generate_car_episodes(&s, &short_car(), 10, 5, 1).unwrap())
+    );
 }
 
 #[test]
@@ -49,8 +61,16 @@ fn push_episode_layout() {
     let ex = PushExplorer::default();
     let eps = generate_push_episodes(&s, &ex, 1, 2, 2).unwrap();
     for e in &eps {
-        let actions: Vec<_> = e.samples.iter().filter(|x| matches!(x.record, Record::PushAction(_))).collect();
-        let poses: Vec<_> = e.samples.iter().filter(|x| matches!(x.record, Record::BlockPose(_))).collect();
+        let actions: Vec<_> = e
+            .samples
+            .iter()
+            .filter(|x| matches!(x.record, Record::PushAction(_)))
+            .collect();
+        let poses: Vec<_> = e
+            .samples
+            .iter()
+            .filter(|x| matches!(x.record, Record::BlockPose(_)))
+            .collect();
         assert_eq!(actions.len(), 10);
         // 10 Hz over 20 s, both ends included.
         assert_eq!(poses.len(), 201);
@@ -64,7 +84,11 @@ fn push_episode_layout() {
             assert!(w[0].t_ns <= w[1].t_ns);
         }
         // At an action's stamp the pose comes first (the state the action was chosen in).
-        let i = e.samples.iter().position(|x| matches!(x.record, Record::PushAction(_))).unwrap();
+        let i = e
+            .samples
+            .iter()
+            .position(|x| matches!(x.record, Record::PushAction(_)))
+            .unwrap();
         assert!(matches!(e.samples[i - 1].record, Record::BlockPose(_)));
         assert_eq!(e.samples[i - 1].t_ns, e.samples[i].t_ns);
     }
@@ -127,7 +151,10 @@ fn concatenation_lays_episodes_end_to_end() {
     let s = PushScenario::free();
     let eps = generate_push_episodes(&s, &short_push(), 1, 3, 1).unwrap();
     let all = concatenate(&eps, 1_000, 60_000_000_000);
-    assert_eq!(all.len(), eps.iter().map(|e| e.samples.len()).sum::<usize>());
+    assert_eq!(
+        all.len(),
+        eps.iter().map(|e| e.samples.len()).sum::<usize>()
+    );
     assert_eq!(all[0].t_ns, 1_000);
     for w in all.windows(2) {
         assert!(w[0].t_ns <= w[1].t_ns);

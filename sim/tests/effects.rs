@@ -22,8 +22,16 @@ fn drive(s: &CarScenario, start: CarState, u: CarInput, seconds: f64) -> Vec<Car
         .collect()
 }
 
-const START: Pose2 = Pose2 { x: 0.4, y: 0.0, theta: 0.0 };
-const CENTRE_PUSH: PushAction = PushAction { location: 0.0, angle: 0.0, length: 1.0 };
+const START: Pose2 = Pose2 {
+    x: 0.4,
+    y: 0.0,
+    theta: 0.0,
+};
+const CENTRE_PUSH: PushAction = PushAction {
+    location: 0.0,
+    angle: 0.0,
+    length: 1.0,
+};
 
 #[test]
 fn com_offset_rotates_a_centre_push() {
@@ -31,7 +39,10 @@ fn com_offset_rotates_a_centre_push() {
     // (F, 0) acts on the line y = 0, i.e. at −c_y from it: torque −(−c_y)F > 0, so the block
     // turns counter-clockwise (θ increases).
     let mut s = PushScenario::free();
-    s.effects.com_offset = Some(ComOffset { enabled: true, offset: [0.0, 0.02] });
+    s.effects.com_offset = Some(ComOffset {
+        enabled: true,
+        offset: [0.0, 0.02],
+    });
     let o = push(&s, START, CENTRE_PUSH);
     let nominal = push(&PushScenario::free(), START, CENTRE_PUSH);
     assert!(nominal.final_pose.theta.abs() < 1e-3);
@@ -56,7 +67,11 @@ fn table_tilt_drifts_downhill_and_holds_below_the_friction_angle() {
     for _ in 0..500 {
         w.step();
     }
-    assert!(w.block_pose().distance(START) < 1e-6, "{:?}", w.block_pose());
+    assert!(
+        w.block_pose().distance(START) < 1e-6,
+        "{:?}",
+        w.block_pose()
+    );
     // …but while pushed (sliding) it drifts downhill (+y).
     let o = push(&s, START, CENTRE_PUSH);
     assert!(o.final_pose.y > 0.01, "y {}", o.final_pose.y);
@@ -102,16 +117,27 @@ fn pusher_friction_drags_the_block_sideways() {
     let a = PushAction::new(0.3, 0.8, 1.0);
     let nominal = push(&PushScenario::free(), START, a);
     let mut s = PushScenario::free();
-    s.effects.pusher_friction = Some(PusherFriction { enabled: true, mu: 0.5 });
+    s.effects.pusher_friction = Some(PusherFriction {
+        enabled: true,
+        mu: 0.5,
+    });
     let o = push(&s, START, a);
-    assert!(o.final_pose.y > nominal.final_pose.y + 0.003, "{} vs {}", o.final_pose.y, nominal.final_pose.y);
+    assert!(
+        o.final_pose.y > nominal.final_pose.y + 0.003,
+        "{} vs {}",
+        o.final_pose.y,
+        nominal.final_pose.y
+    );
 }
 
 #[test]
 fn aero_drag_lowers_top_speed() {
     let mut s = CarScenario::floor();
     let nominal = drive(&s, CarState::default(), CarInput::new(0.0, 1.0), 15.0);
-    s.effects.aero_drag = Some(AeroDrag { enabled: true, c: 0.01 });
+    s.effects.aero_drag = Some(AeroDrag {
+        enabled: true,
+        c: 0.01,
+    });
     let dragged = drive(&s, CarState::default(), CarInput::new(0.0, 1.0), 15.0);
     let (v0, v1) = (nominal.last().unwrap().vx, dragged.last().unwrap().vx);
     assert!(v1 < v0 - 0.5, "top speed {v1} with drag vs {v0}");
@@ -121,7 +147,10 @@ fn aero_drag_lowers_top_speed() {
 fn steering_offset_turns_straight_driving() {
     let mut s = CarScenario::floor();
     let nominal = drive(&s, CarState::default(), CarInput::new(0.0, 0.2), 4.0);
-    s.effects.steering_offset = Some(SteeringOffset { enabled: true, offset: 0.03 });
+    s.effects.steering_offset = Some(SteeringOffset {
+        enabled: true,
+        offset: 0.03,
+    });
     let offset = drive(&s, CarState::default(), CarInput::new(0.0, 0.2), 4.0);
     assert_eq!(nominal.last().unwrap().psi, 0.0);
     // A positive offset steers left: heading and y increase.
@@ -133,9 +162,17 @@ fn steering_offset_turns_straight_driving() {
 fn motor_lag_delays_acceleration_but_not_top_speed() {
     let mut s = CarScenario::floor();
     let nominal = drive(&s, CarState::default(), CarInput::new(0.0, 0.5), 10.0);
-    s.effects.motor_lag = Some(MotorLag { enabled: true, tau: 0.2 });
+    s.effects.motor_lag = Some(MotorLag {
+        enabled: true,
+        tau: 0.2,
+    });
     let lagged = drive(&s, CarState::default(), CarInput::new(0.0, 0.5), 10.0);
-    assert!(lagged[19].vx < 0.8 * nominal[19].vx, "{} vs {}", lagged[19].vx, nominal[19].vx);
+    assert!(
+        lagged[19].vx < 0.8 * nominal[19].vx,
+        "{} vs {}",
+        lagged[19].vx,
+        nominal[19].vx
+    );
     let (a, b) = (nominal.last().unwrap().vx, lagged.last().unwrap().vx);
     assert!((a - b).abs() < 0.01 * a);
 }
@@ -144,25 +181,55 @@ fn motor_lag_delays_acceleration_but_not_top_speed() {
 fn grip_patch_lowers_cornering_acceleration() {
     let mut s = CarScenario::floor();
     let u = CarInput::new(0.25, 0.3);
-    let rolling = CarState { vx: 1.0, ..CarState::default() };
+    let rolling = CarState {
+        vx: 1.0,
+        ..CarState::default()
+    };
     let lateral = |t: &[CarState]| t.last().map(|s| s.vx * s.omega).unwrap_or(0.0);
     let nominal = drive(&s, rolling, u, 6.0);
     s.effects.grip_patch = Some(GripPatch {
         enabled: true,
         scale: 0.5,
-        region: Region { centre: [0.0, 0.0], size: [100.0, 100.0], ..Region::default() },
+        region: Region {
+            centre: [0.0, 0.0],
+            size: [100.0, 100.0],
+            ..Region::default()
+        },
     });
     let slippery = drive(&s, rolling, u, 6.0);
-    assert!(lateral(&slippery) < 0.85 * lateral(&nominal), "{} vs {}", lateral(&slippery), lateral(&nominal));
+    assert!(
+        lateral(&slippery) < 0.85 * lateral(&nominal),
+        "{} vs {}",
+        lateral(&slippery),
+        lateral(&nominal)
+    );
 }
 
 fn bits_push(s: &PushScenario) -> String {
-    let e = push_episode(s, &PushExplorer { pushes_per_episode: 4, ..PushExplorer::default() }, 7, 0).unwrap();
+    let e = push_episode(
+        s,
+        &PushExplorer {
+            pushes_per_episode: 4,
+            ..PushExplorer::default()
+        },
+        7,
+        0,
+    )
+    .unwrap();
     format!("{:?}", e.samples)
 }
 
 fn bits_car(s: &CarScenario) -> String {
-    let e = car_episode(s, &CarExplorer { duration: 8.0, ..CarExplorer::default() }, 7, 0).unwrap();
+    let e = car_episode(
+        s,
+        &CarExplorer {
+            duration: 8.0,
+            ..CarExplorer::default()
+        },
+        7,
+        0,
+    )
+    .unwrap();
     format!("{:?}", e.samples)
 }
 
@@ -170,14 +237,26 @@ fn bits_car(s: &CarScenario) -> String {
 fn switched_off_effects_leave_the_nominal_push_world_bit_identical() {
     let nominal = PushScenario::free();
     let mut off = nominal.clone();
-    off.effects.com_offset = Some(ComOffset { enabled: false, ..ComOffset::default() });
-    off.effects.table_tilt = Some(TableTilt { enabled: false, ..TableTilt::default() });
+    off.effects.com_offset = Some(ComOffset {
+        enabled: false,
+        ..ComOffset::default()
+    });
+    off.effects.table_tilt = Some(TableTilt {
+        enabled: false,
+        ..TableTilt::default()
+    });
     off.effects.friction_patch = Some(FrictionPatch {
         enabled: false,
-        region: Region { centre: [0.4, 0.0], ..Region::default() },
+        region: Region {
+            centre: [0.4, 0.0],
+            ..Region::default()
+        },
         ..FrictionPatch::default()
     });
-    off.effects.pusher_friction = Some(PusherFriction { enabled: false, mu: 0.9 });
+    off.effects.pusher_friction = Some(PusherFriction {
+        enabled: false,
+        mu: 0.9,
+    });
     assert!(off.effects.active().is_empty());
     assert_eq!(bits_push(&nominal), bits_push(&off));
     // And switching one on does change the data (the comparison can fail).
@@ -192,12 +271,25 @@ fn switched_off_effects_leave_the_nominal_push_world_bit_identical() {
 fn switched_off_effects_leave_the_nominal_car_world_bit_identical() {
     let nominal = CarScenario::floor();
     let mut off = nominal.clone();
-    off.effects.aero_drag = Some(AeroDrag { enabled: false, c: 0.05 });
-    off.effects.motor_lag = Some(MotorLag { enabled: false, tau: 0.3 });
-    off.effects.steering_offset = Some(SteeringOffset { enabled: false, offset: 0.1 });
+    off.effects.aero_drag = Some(AeroDrag {
+        enabled: false,
+        c: 0.05,
+    });
+    off.effects.motor_lag = Some(MotorLag {
+        enabled: false,
+        tau: 0.3,
+    });
+    off.effects.steering_offset = Some(SteeringOffset {
+        enabled: false,
+        offset: 0.1,
+    });
     off.effects.grip_patch = Some(GripPatch {
         enabled: false,
-        region: Region { centre: [0.0, 0.0], size: [10.0, 10.0], ..Region::default() },
+        region: Region {
+            centre: [0.0, 0.0],
+            size: [10.0, 10.0],
+            ..Region::default()
+        },
         ..GripPatch::default()
     });
     assert!(off.effects.active().is_empty());

@@ -3,17 +3,27 @@
 use dynlab_sim::{CarScenario, PushExplorer, PushScenario, SimError, Track};
 
 fn parse_err_push(text: &str) -> String {
-    PushScenario::from_toml_str(text).expect_err("must be rejected").to_string()
+    PushScenario::from_toml_str(text)
+        .expect_err("must be rejected")
+        .to_string()
 }
 
 fn parse_err_car(text: &str) -> String {
-    CarScenario::from_toml_str(text).expect_err("must be rejected").to_string()
+    CarScenario::from_toml_str(text)
+        .expect_err("must be rejected")
+        .to_string()
 }
 
 #[test]
 fn empty_files_are_the_nominal_defaults() {
-    assert_eq!(PushScenario::from_toml_str("").unwrap(), PushScenario::free());
-    assert_eq!(CarScenario::from_toml_str("").unwrap(), CarScenario::floor());
+    assert_eq!(
+        PushScenario::from_toml_str("").unwrap(),
+        PushScenario::free()
+    );
+    assert_eq!(
+        CarScenario::from_toml_str("").unwrap(),
+        CarScenario::floor()
+    );
 }
 
 #[test]
@@ -40,7 +50,10 @@ fn effects_switch_on_by_file() {
     )
     .unwrap();
     assert_eq!(s.effects.active(), vec!["table_tilt", "friction_patch"]);
-    let c = CarScenario::from_toml_str("[effects.aero_drag]\nc = 0.02\n[effects.motor_lag]\nenabled = false\n").unwrap();
+    let c = CarScenario::from_toml_str(
+        "[effects.aero_drag]\nc = 0.02\n[effects.motor_lag]\nenabled = false\n",
+    )
+    .unwrap();
     assert_eq!(c.effects.active(), vec!["aero_drag"]);
 }
 
@@ -66,9 +79,13 @@ fn impossible_values_are_named_with_the_fix() {
     assert_eq!(e.key(), Some("effects.com_offset.offset[0]"));
     let e = PushScenario::from_toml_str("[sim]\ndt = 0.5\n").unwrap_err();
     assert_eq!(e.key(), Some("sim.dt"));
-    let e = PushScenario::from_toml_str("[effects.friction_patch.region]\nshape = \"disc\"\nradius = 0.0\n").unwrap_err();
+    let e = PushScenario::from_toml_str(
+        "[effects.friction_patch.region]\nshape = \"disc\"\nradius = 0.0\n",
+    )
+    .unwrap_err();
     assert_eq!(e.key(), Some("effects.friction_patch.region.radius"));
-    let e = CarScenario::from_toml_str("[car]\nthrottle_min = 0.5\nthrottle_max = 0.2\n").unwrap_err();
+    let e =
+        CarScenario::from_toml_str("[car]\nthrottle_min = 0.5\nthrottle_max = 0.2\n").unwrap_err();
     assert_eq!(e.key(), Some("car.throttle_max"));
     let e = CarScenario::from_toml_str("[car]\nsubstep = 0.01\n").unwrap_err();
     assert_eq!(e.key(), Some("car.substep"));
@@ -89,7 +106,12 @@ fn wrong_types_name_the_key() {
 #[test]
 fn explorer_period_must_fit_the_push() {
     let s = PushScenario::free();
-    let e = PushExplorer { push_period: 0.5, ..PushExplorer::default() }.validate(&s).unwrap_err();
+    let e = PushExplorer {
+        push_period: 0.5,
+        ..PushExplorer::default()
+    }
+    .validate(&s)
+    .unwrap_err();
     assert_eq!(e.key(), Some("explore.push_period"));
     assert!(PushExplorer::default().validate(&s).is_ok());
 }
@@ -99,7 +121,11 @@ fn files_and_tracks_load_from_disk() {
     let dir = tempfile::tempdir().unwrap();
     let track = r#"{"X":[0,1,1,0],"Y":[0,0,1,1],"X_i":[0.1,0.9,0.9,0.1],"Y_i":[0.1,0.1,0.9,0.9],"X_o":[-0.1,1.1,1.1,-0.1],"Y_o":[-0.1,-0.1,1.1,1.1]}"#;
     std::fs::write(dir.path().join("square.json"), track).unwrap();
-    std::fs::write(dir.path().join("car.toml"), "[arena]\ntrack = \"square.json\"\n").unwrap();
+    std::fs::write(
+        dir.path().join("car.toml"),
+        "[arena]\ntrack = \"square.json\"\n",
+    )
+    .unwrap();
     let s = CarScenario::from_file(dir.path().join("car.toml")).unwrap();
     let t = s.track_data.expect("track loaded");
     assert_eq!(t.len(), 4);
@@ -109,5 +135,8 @@ fn files_and_tracks_load_from_disk() {
     assert!(matches!(missing, SimError::Io { .. }));
     assert!(missing.to_string().contains("nope.toml"));
     let bad = Track::from_json_str(r#"{"X":[0,1]}"#, "t.json").unwrap_err();
-    assert!(bad.to_string().contains("X_i") || bad.to_string().contains("missing field"), "{bad}");
+    assert!(
+        bad.to_string().contains("X_i") || bad.to_string().contains("missing field"),
+        "{bad}"
+    );
 }
