@@ -1,2 +1,15 @@
-//! ROS 2 node binaries: recorder, player and the robot nodes
+//! ROS 2 node binaries: recorder, player and the robot nodes.
+//!
+//! The logic of each node lives in a small module here, testable without DDS; the binaries in
+//! `src/bin/` only wire it to [`dynlab_ros`] entities:
+//!
+//! | module | binary | what |
+//! |---|---|---|
+//! | [`record`] | `recorder` | topics discovered → rosbag2-compatible MCAP bag, flushed every second |
+//! | [`play`] | `player` | bag → topics with original timing, `--rate`, `--loop`, `/clock` |
+//! | [`probe`] | `dds_probe` | publish / receive `PoseStamped` and measure latency (benchmarks) |
 #![warn(missing_docs)]
+
+pub mod play;
+pub mod probe;
+pub mod record;

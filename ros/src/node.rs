@@ -372,7 +372,19 @@ impl Node {
         qos: QosProfile,
     ) -> Result<RawPublisher, NodeError> {
         let resolved = self.resolve_topic(topic)?;
-        let t = self.raw_topic(&resolved, type_name, &qos)?;
+        self.create_raw_publisher_exact(&resolved, type_name, qos)
+    }
+
+    /// Like [`Node::create_raw_publisher`] on a fully qualified name taken as is (no remapping),
+    /// e.g. a name seen on the wire.
+    pub fn create_raw_publisher_exact(
+        &mut self,
+        resolved: &str,
+        type_name: &str,
+        qos: QosProfile,
+    ) -> Result<RawPublisher, NodeError> {
+        names::expand_topic_name(resolved, &self.name, &self.namespace)?;
+        let t = self.raw_topic(resolved, type_name, &qos)?;
         let participant = self.participant();
         let publisher = match &self.raw_publisher {
             Some(p) => p.clone(),
@@ -405,7 +417,19 @@ impl Node {
         qos: QosProfile,
     ) -> Result<RawSubscription, NodeError> {
         let resolved = self.resolve_topic(topic)?;
-        let t = self.raw_topic(&resolved, type_name, &qos)?;
+        self.create_raw_subscription_exact(&resolved, type_name, qos)
+    }
+
+    /// Like [`Node::create_raw_subscription`] on a fully qualified name taken as is (no
+    /// remapping), e.g. a topic discovered on the wire.
+    pub fn create_raw_subscription_exact(
+        &mut self,
+        resolved: &str,
+        type_name: &str,
+        qos: QosProfile,
+    ) -> Result<RawSubscription, NodeError> {
+        names::expand_topic_name(resolved, &self.name, &self.namespace)?;
+        let t = self.raw_topic(resolved, type_name, &qos)?;
         let participant = self.participant();
         let subscriber = match &self.raw_subscriber {
             Some(s) => s.clone(),
@@ -638,6 +662,15 @@ impl RawPublisher {
     /// Subscriptions on this topic in other processes, from discovery.
     pub fn subscription_count(&self) -> usize {
         self.peers.readers()
+    }
+
+    /// For a reliable publisher: waits up to `max_wait` until every matched subscription has
+    /// acknowledged everything published; `false` on timeout. Call before exiting so the last
+    /// messages are not lost with the process.
+    pub fn wait_for_acknowledgments(&self, max_wait: Duration) -> bool {
+        self.writer
+            .wait_for_acknowledgments(max_wait)
+            .unwrap_or(false)
     }
 }
 

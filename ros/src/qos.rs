@@ -95,17 +95,31 @@ pub fn latched() -> QosProfile {
     }
 }
 
-/// The profile a recorder subscribes with so that it matches a publisher offering `offered`:
-/// reliable only if the publisher is reliable (a reliable reader does not match a best-effort
-/// writer), transient local only if the publisher is (to receive latched samples), and a deep
-/// history so that bursts are not dropped before they are written.
-pub fn recording_profile_for(offered: &QosProfile, depth: usize) -> QosProfile {
+/// The profile a recorder subscribes with so that it matches every publisher offering one of
+/// `offered`: reliable only if all of them are reliable (a reliable reader does not match a
+/// best-effort writer), transient local only if all of them are (to receive latched samples),
+/// and a deep history so that bursts are not dropped before they are written. This is how
+/// rosbag2 adapts its subscriptions to the offered QoS.
+pub fn recording_profile(offered: &[QosProfile], depth: usize) -> QosProfile {
+    let all_reliable = !offered.is_empty()
+        && offered
+            .iter()
+            .all(|q| matches!(q.reliability, Reliability::Reliable { .. }));
+    let all_transient_local = !offered.is_empty()
+        && offered
+            .iter()
+            .all(|q| q.durability == Durability::TransientLocal);
     QosProfile {
-        reliability: match offered.reliability {
-            Reliability::BestEffort => Reliability::BestEffort,
-            Reliability::Reliable { .. } => reliable(),
+        reliability: if all_reliable {
+            reliable()
+        } else {
+            Reliability::BestEffort
         },
-        durability: offered.durability,
+        durability: if all_transient_local {
+            Durability::TransientLocal
+        } else {
+            Durability::Volatile
+        },
         history: History::KeepLast {
             depth: depth.max(1),
         },
@@ -201,13 +215,23 @@ mod tests {
     }
 
     #[test]
-    fn recording_profile_follows_the_offer() {
-        let r = recording_profile_for(&sensor_data(), 1000);
+    fn recording_profile_follows_the_offers() {
+        let r = recording_profile(&[sensor_data()], 1000);
         assert_eq!(r.reliability, Reliability::BestEffort);
         assert_eq!(r.history, History::KeepLast { depth: 1000 });
-        let r = recording_profile_for(&latched(), 0);
+        let r = recording_profile(&[latched()], 0);
         assert!(matches!(r.reliability, Reliability::Reliable { .. }));
         assert_eq!(r.durability, Durability::TransientLocal);
         assert_eq!(r.history, History::KeepLast { depth: 1 });
+        // one best-effort publisher among reliable ones: the reader must be best effort
+        let r = recording_profile(&[default_profile(), sensor_data()], 10);
+        assert_eq!(r.reliability, Reliability::BestEffort);
+        let r = recording_profile(&[latched(), default_profile()], 10);
+        assert!(matches!(r.reliability, Reliability::Reliable { .. }));
+        assert_eq!(r.durability, Durability::Volatile);
+        assert_eq!(
+            recording_profile(&[], 10).reliability,
+            Reliability::BestEffort
+        );
     }
 }
