@@ -154,6 +154,7 @@ impl Metadata {
 pub(crate) struct ReadMetadata {
     pub version: u64,
     pub relative_file_paths: Vec<String>,
+    pub message_count: Option<u64>,
 }
 
 /// Reads the parts of `metadata.yaml` this crate uses.
@@ -198,9 +199,11 @@ pub(crate) fn read_metadata(path: &Path) -> Result<ReadMetadata, BagError> {
              decompress the bag with `ros2 bag convert` first"
         )));
     }
+    let message_count = info.get("message_count").and_then(Value::as_u64);
     Ok(ReadMetadata {
         version,
         relative_file_paths,
+        message_count,
     })
 }
 

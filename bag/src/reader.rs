@@ -283,8 +283,11 @@ pub struct Bag {
     recovery: Option<Recovery>,
 }
 
-/// Which `.mcap` files a path means, plus notes about the directory.
-fn resolve_files(path: &Path) -> Result<(Vec<PathBuf>, Vec<String>), BagError> {
+/// Which `.mcap` files a path means, notes about the directory, and the message count
+/// `metadata.yaml` gives (when it is used).
+type ResolvedFiles = (Vec<PathBuf>, Vec<String>, Option<u64>);
+
+fn resolve_files(path: &Path) -> Result<ResolvedFiles, BagError> {
     let not_a_bag = |reason: String| BagError::NotABag {
         path: path.to_path_buf(),
         reason,
@@ -295,13 +298,21 @@ fn resolve_files(path: &Path) -> Result<(Vec<PathBuf>, Vec<String>), BagError> {
         ));
     }
     if path.is_file() {
-        return Ok((vec![path.to_path_buf()], Vec::new()));
+        return Ok((vec![path.to_path_buf()], Vec::new(), None));
     }
     let mut notes = Vec::new();
     let meta_path = path.join("metadata.yaml");
     if meta_path.exists() {
         match read_metadata(&meta_path) {
             Ok(meta) => {
+                if meta.version > u64::from(crate::METADATA_VERSION) {
+                    notes.push(format!(
+                        "metadata.yaml has version {}, newer than the {} this reader knows; \
+                         the bag is read from its .mcap files",
+                        meta.version,
+                        crate::METADATA_VERSION
+                    ));
+                }
                 // Like rosbag2 and rosbags, file names are taken relative to the bag directory.
                 let listed: Vec<PathBuf> = meta
                     .relative_file_paths
@@ -321,7 +332,8 @@ fn resolve_files(path: &Path) -> Result<(Vec<PathBuf>, Vec<String>), BagError> {
                     ));
                 }
                 if !present.is_empty() {
-                    return Ok((present, notes));
+                    let count = missing.is_empty().then_some(meta.message_count).flatten();
+                    return Ok((present, notes, count));
                 }
                 if meta.relative_file_paths.is_empty() {
                     notes.push("metadata.yaml lists no files".into());
@@ -372,7 +384,7 @@ fn resolve_files(path: &Path) -> Result<(Vec<PathBuf>, Vec<String>), BagError> {
             }
         )));
     }
-    Ok((found, notes))
+    Ok((found, notes, None))
 }
 
 /// The largest uncompressed chunk this reader will inflate, and the largest plausible
@@ -717,6 +729,11 @@ fn read_file(bag: &mut BagBuilder, path: &Path, data: &[u8]) -> (FileInfo, Optio
         }
         pos = next;
     }
+    if data_end && let Some((Some(_), reason)) = &mut stop {
+        reason.push_str(
+            " (after the data section: every message was read, only the summary is damaged)",
+        );
+    }
     let readable = if stop.as_ref().is_some_and(|(at, _)| at.is_some()) {
         stop.as_ref().and_then(|(at, _)| *at).unwrap_or(0)
     } else {
@@ -750,7 +767,7 @@ impl Bag {
     /// read.
     pub fn open(path: impl AsRef<Path>) -> Result<Bag, BagError> {
         let path = path.as_ref();
-        let (files, notes) = resolve_files(path)?;
+        let (files, mut notes, listed_count) = resolve_files(path)?;
         let mut builder = BagBuilder::default();
         let mut infos = Vec::new();
         let mut damaged = Vec::new();
@@ -767,10 +784,31 @@ impl Bag {
                 files: damaged,
                 notes,
             };
+            let mut details: Vec<String> = recovery
+                .files
+                .iter()
+                .map(|r| {
+                    format!(
+                        "{}: {} ({} of {} bytes readable)",
+                        r.path.display(),
+                        r.reason,
+                        r.readable_bytes,
+                        r.file_bytes
+                    )
+                })
+                .collect();
+            details.extend(recovery.notes.iter().cloned());
             return Err(BagError::Unreadable {
                 path: path.to_path_buf(),
-                details: recovery.to_string().trim_end().replace('\n', "; "),
+                details: details.join("; "),
             });
+        }
+        if let Some(listed) = listed_count
+            && listed != total
+        {
+            notes.push(format!(
+                "metadata.yaml lists {listed} messages, {total} were readable from the files"
+            ));
         }
         builder.entries.sort_by_key(|e| e.log_time_ns);
         let recovery = (!damaged.is_empty() || !notes.is_empty()).then_some(Recovery {

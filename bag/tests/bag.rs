@@ -336,6 +336,11 @@ fn corrupt_chunk_is_skipped_and_reported() {
     assert_eq!(r.files[0].skipped_chunks.len(), 1);
     assert!(r.files[0].skipped_chunks[0].reason.contains("CRC"), "{r}");
     assert!(r.to_string().contains("skipped chunk"));
+    let listed = format!(
+        "metadata.yaml lists {total} messages, {} were readable",
+        bag.message_count()
+    );
+    assert!(r.notes.iter().any(|n| n.starts_with(&listed)), "{r}");
 }
 
 #[test]

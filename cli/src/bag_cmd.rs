@@ -43,6 +43,9 @@ enum BagCommand {
         #[arg(long, value_name = "FILE")]
         out: Option<PathBuf>,
     },
+    /// Lists the message types export and import understand, one JSON line each:
+    /// `{"type": …, "definition": …}` (the full ros2msg schema text written into bags).
+    Types,
     /// Builds a bag from JSON lines (the export format; `publish_time_ns` is optional).
     Import {
         /// The JSON-lines file (`-` for standard input).
@@ -80,6 +83,13 @@ enum QosArg {
 pub fn run(args: BagArgs) -> anyhow::Result<()> {
     match args.command {
         BagCommand::Info { bag } => info(bag),
+        BagCommand::Types => {
+            for t in dynlab_msgs::all() {
+                let line = serde_json::json!({"type": t.type_name, "definition": t.definition});
+                println!("{line}");
+            }
+            Ok(())
+        }
         BagCommand::Export { bag, topics, out } => export(bag, &topics, out),
         BagCommand::Import {
             jsonl,
