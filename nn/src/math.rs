@@ -192,3 +192,9 @@ pub fn exp_f32(x: f32) -> f32 {
         exp::<false>(x)
     }
 }
+
+/// `x ← tanh(x)` over a slice with the runtime-selected SIMD kernel (the loop the forward pass
+/// uses; exposed for benchmarks and for callers with their own buffers).
+pub fn tanh_slice(x: &mut [f32]) {
+    crate::kernels::tanh_in_place(x);
+}

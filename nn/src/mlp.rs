@@ -301,27 +301,30 @@ impl Mlp {
             let (input, rest) = ws.a.split_at_mut(l);
             let input: &[f32] = if l == 0 { &ws.x } else { &input[l - 1] };
             let out = &mut rest[0][..batch * layer.n_out];
-            gemm_a_bt(
-                batch,
-                layer.n_in,
-                layer.n_out,
-                &input[..batch * layer.n_in],
+            let n_pad = kernels::pack_transposed(
                 &self.params[layer.weight.clone()],
-                0.0,
-                out,
+                &self.params[layer.bias.clone()],
+                layer.n_out,
+                layer.n_in,
+                &mut ws.wt,
+                &mut ws.bias_pad,
             );
-            let z = &mut ws.z[l];
             let z_len = if layer.activation.needs_preactivation() {
                 batch * layer.n_out
             } else {
                 0
             };
-            kernels::bias_act(
+            kernels::dense_forward(
                 layer.activation,
+                batch,
+                layer.n_in,
                 layer.n_out,
-                &self.params[layer.bias.clone()],
+                n_pad,
+                &input[..batch * layer.n_in],
+                &ws.wt,
+                &ws.bias_pad,
                 out,
-                &mut z[..z_len],
+                &mut ws.z[l][..z_len],
             );
         }
         ws.batch = Some(batch);
@@ -634,6 +637,8 @@ pub struct Workspace {
     j0: Vec<f32>,
     j1: Vec<f32>,
     jac: Vec<f32>,
+    wt: Vec<f32>,
+    bias_pad: Vec<f32>,
 }
 
 impl Workspace {
@@ -654,6 +659,8 @@ impl Workspace {
             j0: Vec::new(),
             j1: Vec::new(),
             jac: Vec::new(),
+            wt: Vec::new(),
+            bias_pad: Vec::new(),
         }
     }
 

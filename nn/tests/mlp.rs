@@ -223,7 +223,14 @@ fn vjp_and_jvp_are_adjoint() {
                 let rhs: f64 = (0..n_in)
                     .map(|i| f64::from(jtw[b * n_in + i]) * f64::from(v[b * n_in + i]))
                     .sum();
-                let scale = lhs.abs().max(rhs.abs()).max(1e-2);
+                // Rounding scales with the magnitude of the terms, not of their (possibly
+                // cancelling) sum.
+                let scale: f64 = (0..n_out)
+                    .map(|o| f64::from((w[b * n_out + o] * jv[b * n_out + o]).abs()))
+                    .sum::<f64>()
+                    + (0..n_in)
+                        .map(|i| f64::from((jtw[b * n_in + i] * v[b * n_in + i]).abs()))
+                        .sum::<f64>();
                 assert!(
                     (lhs - rhs).abs() < 1e-5 * scale,
                     "{act} sample {b}: {lhs} vs {rhs}"
