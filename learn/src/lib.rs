@@ -1,2 +1,37 @@
-//! Learned and fitted dynamics models: model kinds, the model file, training and evaluation
+//! Learned and fitted dynamics models of the two robots: every model kind behind one [`Model`]
+//! type, one model file format, training from bags, and evaluation.
+//!
+//! | module | what |
+//! |---|---|
+//! | [`world`] | the two robots: states, actions, topics, the part of the state a network learns |
+//! | [`dataset`] | bags → model-state trajectories (topic contract, world inference, bag hashes) |
+//! | [`net`] | the MLP with its normalisation, as a vector field for the ODE solvers |
+//! | [`model`] | [`Model`]: `residual`, `node-euler`, `node-rk4`, `node-dopri5`, `physics`, `hybrid`; steps, rollouts, exact input Jacobians, the fast batched rollout for MPPI |
+//! | [`file`] | the model directory: `model.json` + `weights.safetensors`, validated on load |
+//! | [`train`] | discounted multi-step training (Adam, seeded, best-validation checkpoint), physics fitting (bounded Levenberg–Marquardt) |
+//! | [`eval`] | one-step and k-step errors per dimension, TVE |
+//!
+//! No wall clock and no unseeded randomness: seeds are inputs, and the same seed on the same data
+//! gives a bit-identical model file on any number of threads.
 #![warn(missing_docs)]
+#![allow(clippy::needless_range_loop)]
+
+pub mod dataset;
+mod error;
+pub mod eval;
+pub mod file;
+pub mod model;
+pub mod net;
+pub mod train;
+pub mod world;
+
+pub use dataset::{BagSource, Dataset, Topics, load_bags};
+pub use error::LearnError;
+
+pub use model::{Model, ModelKind, RolloutWorkspace, StepJacobians};
+pub use net::{Network, Normalization};
+
+pub use world::World;
+pub use eval::{EvalReport, evaluate};
+pub use file::{ModelFile, load_model, save_model};
+pub use train::{Loss, Progress, Split, TrainConfig, TrainOutcome, train};

@@ -1,0 +1,210 @@
+//! Evaluation of a model on a data set: one-step and k-step open-loop errors per state dimension
+//! (RMSE and MAE, angles wrapped), the training-loss metric at k steps, and for the car the
+//! trajectory validation error TVE (Kohler et al. eq. 10) over segments.
+
+use dynlab_dynamics::conventions::{LossNorm, l_rel, tve, wrap_angle};
+use dynlab_dynamics::data::{Window, gather, windows};
+use dynlab_dynamics::ode::OdeStatus;
+use serde::{Deserialize, Serialize};
+
+use crate::train::{Loss, segment};
+use crate::{Dataset, LearnError, Model, World};
+
+/// Errors of one state dimension.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct DimError {
+    /// State name.
+    pub name: String,
+    /// Root mean square error.
+    pub rmse: f64,
+    /// Mean absolute error.
+    pub mae: f64,
+}
+
+/// Trajectory validation error over segments.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TveReport {
+    /// Mean L1 norm of the final pose error `(x, y, ψ)` \[m, m, rad summed\].
+    pub tve: f64,
+    /// Segments rolled out.
+    pub segments: usize,
+    /// Segment length \[s\].
+    pub segment_s: f64,
+}
+
+/// What [`evaluate`] measures.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct EvalReport {
+    /// World.
+    pub world: World,
+    /// Model kind.
+    pub kind: String,
+    /// k of the k-step errors.
+    pub steps: usize,
+    /// Windows evaluated.
+    pub windows: usize,
+    /// One-step errors per state dimension.
+    pub one_step: Vec<DimError>,
+    /// Errors after k open-loop steps per state dimension.
+    pub k_step: Vec<DimError>,
+    /// The world's default training loss over k steps (pushing: Tu & Lin's discounted weighted
+    /// pose MSE; car: discounted `L_rel`), mean over windows.
+    pub loss: f64,
+    /// TVE (car only).
+    pub tve: Option<TveReport>,
+    /// Model steps whose solver did not succeed.
+    pub failed_rollouts: usize,
+}
+
+fn dim_errors(world: World, sq: &[f64], abs: &[f64], n: usize) -> Vec<DimError> {
+    world
+        .state_names()
+        .iter()
+        .enumerate()
+        .map(|(d, name)| DimError {
+            name: name.to_string(),
+            rmse: (sq[d] / n.max(1) as f64).sqrt(),
+            mae: abs[d] / n.max(1) as f64,
+        })
+        .collect()
+}
+
+/// Evaluates `model` on every k-step window of `data` (and, for the car, TVE over segments of
+/// `segment_s` seconds).
+pub fn evaluate(model: &Model, data: &Dataset, k: usize, segment_s: f64) -> Result<EvalReport, LearnError> {
+    let world = model.world();
+    if data.world != world {
+        return Err(LearnError::WorldMismatch {
+            what: "the data".into(),
+            found: data.world.name().into(),
+            expected: world.name().into(),
+            hint: "evaluate on a bag of the robot the model was trained for".into(),
+        });
+    }
+    if k == 0 {
+        return Err(LearnError::setting("steps", 0, "evaluate at least 1 step"));
+    }
+    let ds = world.state_dim();
+    let all: Vec<Window> = windows(&data.lengths(), k)?;
+    let loss = Loss::default_for(world);
+    let mut sq1 = vec![0.0; ds];
+    let mut ab1 = vec![0.0; ds];
+    let mut sqk = vec![0.0; ds];
+    let mut abk = vec![0.0; ds];
+    let mut total_loss = 0.0;
+    let mut failed = 0;
+    let lr = world.learned_dims();
+    for ws in all.chunks(2048) {
+        let b = gather(&data.trajectories, ws, k);
+        let n = b.n;
+        let mut out = vec![0.0; k * n * ds];
+        if model.rollout(&b.s0, &b.u, &mut out)? != OdeStatus::Success {
+            failed += 1;
+        }
+        for i in 0..n {
+            let mut g = 1.0;
+            for j in 0..k {
+                let p = &out[(j * n + i) * ds..(j * n + i + 1) * ds];
+                let t = &b.target[(j * n + i) * ds..(j * n + i + 1) * ds];
+                let e: Vec<f64> = (0..ds)
+                    .map(|d| {
+                        let x = p[d] - t[d];
+                        if d == world.angle_dim() { wrap_angle(x) } else { x }
+                    })
+                    .collect();
+                if j == 0 {
+                    for d in 0..ds {
+                        sq1[d] += e[d] * e[d];
+                        ab1[d] += e[d].abs();
+                    }
+                }
+                if j + 1 == k {
+                    for d in 0..ds {
+                        sqk[d] += e[d] * e[d];
+                        abk[d] += e[d].abs();
+                    }
+                }
+                total_loss += g * match &loss {
+                    Loss::PoseMse { weights } => weights
+                        .iter()
+                        .enumerate()
+                        .map(|(q, w)| w * e[lr.start + q] * e[lr.start + q])
+                        .sum::<f64>(),
+                    Loss::LRel { norm, eps } => l_rel(&p[lr.clone()], &t[lr.clone()], *eps, *norm),
+                };
+                g *= 0.9;
+            }
+        }
+    }
+    let n = all.len();
+    let tve_report = if world == World::Car {
+        let seg_len = (segment_s / data.pose_dt_s).round().max(1.0) as usize + 1;
+        let segs = segment(&data.trajectories, seg_len);
+        let mut finals = Vec::new();
+        for sgm in segs.iter().filter(|s| s.len() == seg_len) {
+            let steps = sgm.len() - 1;
+            let mut out = vec![0.0; steps * ds];
+            model.rollout(&sgm.s[..ds], &sgm.u[..steps * sgm.dim_u], &mut out)?;
+            let p = &out[(steps - 1) * ds..steps * ds];
+            let m = &sgm.s[steps * ds..(steps + 1) * ds];
+            finals.push(([p[0], p[1], p[2]], [m[0], m[1], m[2]]));
+        }
+        Some(TveReport {
+            tve: tve(&finals),
+            segments: finals.len(),
+            segment_s,
+        })
+    } else {
+        None
+    };
+    let _ = LossNorm::L1;
+    Ok(EvalReport {
+        world,
+        kind: model.kind().name().to_string(),
+        steps: k,
+        windows: n,
+        one_step: dim_errors(world, &sq1, &ab1, n),
+        k_step: dim_errors(world, &sqk, &abk, n),
+        loss: total_loss / n.max(1) as f64,
+        tve: tve_report,
+        failed_rollouts: failed,
+    })
+}
+
+impl EvalReport {
+    /// The report as a text table.
+    pub fn table(&self) -> String {
+        let mut s = format!(
+            "{} model, {} world, {} windows of {} steps\n",
+            self.kind, self.world, self.windows, self.steps
+        );
+        s += &format!(
+            "{:<8} {:>12} {:>12} {:>12} {:>12}\n",
+            "state",
+            "RMSE 1-step",
+            "MAE 1-step",
+            format!("RMSE {}-step", self.steps),
+            format!("MAE {}-step", self.steps)
+        );
+        for (a, b) in self.one_step.iter().zip(&self.k_step) {
+            s += &format!(
+                "{:<8} {:>12.4e} {:>12.4e} {:>12.4e} {:>12.4e}\n",
+                a.name, a.rmse, a.mae, b.rmse, b.mae
+            );
+        }
+        s += &format!("loss ({} steps, γ = 0.9): {:.4e}\n", self.steps, self.loss);
+        if let Some(t) = &self.tve {
+            s += &format!(
+                "TVE over {} segments of {:.1} s: {:.4}\n",
+                t.segments, t.segment_s, t.tve
+            );
+        }
+        if self.failed_rollouts > 0 {
+            s += &format!(
+                "warning: {} rollout batches had a solver failure\n",
+                self.failed_rollouts
+            );
+        }
+        s
+    }
+}

@@ -1,0 +1,288 @@
+//! The learned part of a model: an MLP with fixed input and output normalisation, and its
+//! adapter to the ODE solvers ([`NetField`], a batched `VectorField<f32>`).
+//!
+//! The network maps `[z, u]` (the learned state dimensions and the action) to a change of `z`
+//! per model step: `out = μ_o + σ_o ⊙ mlp((x − μ_i) / σ_i)`. A residual model adds it once, a
+//! NeuralODE integrates it as a vector field over normalised step time τ ∈ [0, 1] (Tu & Lin
+//! integrate from t = 0 to 1 as well), so the same output statistics fit both.
+
+use std::cell::RefCell;
+
+use dynlab_dynamics::ode::VectorField;
+use dynlab_nn::{Mlp, Workspace};
+use serde::{Deserialize, Serialize};
+
+/// Fixed affine normalisation of the network's inputs and outputs (fitted on the training data).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Normalization {
+    /// Mean of each input `[z…, u…]`.
+    pub input_mean: Vec<f64>,
+    /// Standard deviation of each input (1 for constant inputs).
+    pub input_std: Vec<f64>,
+    /// Mean of each output (the change of `z` per step).
+    pub output_mean: Vec<f64>,
+    /// Standard deviation of each output.
+    pub output_std: Vec<f64>,
+}
+
+impl Normalization {
+    /// The identity normalisation for `n_in` inputs and `n_out` outputs.
+    pub fn identity(n_in: usize, n_out: usize) -> Self {
+        Self {
+            input_mean: vec![0.0; n_in],
+            input_std: vec![1.0; n_in],
+            output_mean: vec![0.0; n_out],
+            output_std: vec![1.0; n_out],
+        }
+    }
+}
+
+/// An MLP with its normalisation, in `f32`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Network {
+    /// The network (`n_in = dz + du`, `n_out = dz`).
+    pub mlp: Mlp,
+    /// The normalisation as stored in the model file.
+    pub norm: Normalization,
+    pub(crate) in_mean: Vec<f32>,
+    pub(crate) in_inv_std: Vec<f32>,
+    pub(crate) out_mean: Vec<f32>,
+    pub(crate) out_std: Vec<f32>,
+    pub(crate) dz: usize,
+}
+
+impl Network {
+    /// Wraps an MLP with a normalisation (lengths checked by the caller).
+    pub fn new(mlp: Mlp, norm: Normalization) -> Self {
+        let f = |v: &[f64]| v.iter().map(|&x| x as f32).collect::<Vec<f32>>();
+        let dz = mlp.n_out();
+        Self {
+            in_mean: f(&norm.input_mean),
+            in_inv_std: norm.input_std.iter().map(|&s| (1.0 / s) as f32).collect(),
+            out_mean: f(&norm.output_mean),
+            out_std: f(&norm.output_std),
+            dz,
+            mlp,
+            norm,
+        }
+    }
+
+    /// Learned state dimension.
+    pub fn dz(&self) -> usize {
+        self.dz
+    }
+
+    /// Action dimension.
+    pub fn du(&self) -> usize {
+        self.mlp.n_in() - self.dz
+    }
+
+    /// Writes the normalised network input of `n` samples into `x`.
+    #[inline]
+    pub(crate) fn fill_input(&self, n: usize, z: &[f32], u: &[f32], x: &mut Vec<f32>) {
+        let (dz, du) = (self.dz, self.du());
+        let ni = dz + du;
+        x.resize(n * ni, 0.0);
+        for i in 0..n {
+            let row = &mut x[i * ni..(i + 1) * ni];
+            for d in 0..dz {
+                row[d] = (z[i * dz + d] - self.in_mean[d]) * self.in_inv_std[d];
+            }
+            for d in 0..du {
+                row[dz + d] = (u[i * du + d] - self.in_mean[dz + d]) * self.in_inv_std[dz + d];
+            }
+        }
+    }
+
+    /// Denormalises network outputs into `out`.
+    #[inline]
+    pub(crate) fn write_output(&self, y: &[f32], out: &mut [f32]) {
+        let dz = self.dz;
+        for (o_row, y_row) in out.chunks_exact_mut(dz).zip(y.chunks_exact(dz)) {
+            for d in 0..dz {
+                o_row[d] = self.out_mean[d] + self.out_std[d] * y_row[d];
+            }
+        }
+    }
+
+    /// `out = net(z, u)` for `n` samples with a caller-provided workspace and input buffer.
+    pub(crate) fn eval_with(
+        &self,
+        n: usize,
+        z: &[f32],
+        u: &[f32],
+        out: &mut [f32],
+        ws: &mut Workspace,
+        x: &mut Vec<f32>,
+    ) {
+        self.fill_input(n, z, u, x);
+        match self.mlp.forward(x, ws) {
+            Ok(y) => self.write_output(y, out),
+            // shapes are fixed by construction; a mismatch would be a bug in this crate
+            Err(_) => out.iter_mut().for_each(|o| *o = f32::NAN),
+        }
+    }
+
+    /// Input Jacobian of the (denormalised) output wrt `[z, u]` for `n` samples:
+    /// `n × dz × (dz + du)` row-major, in physical units.
+    pub(crate) fn input_jacobian(&self, n: usize, z: &[f32], u: &[f32]) -> Vec<f64> {
+        let mut x = Vec::new();
+        self.fill_input(n, z, u, &mut x);
+        let mut ws = self.mlp.workspace();
+        let ni = self.mlp.n_in();
+        let dz = self.dz;
+        match self.mlp.jacobian(&x, &mut ws) {
+            Ok(j) => {
+                let mut out = vec![0.0; n * dz * ni];
+                for b in 0..n {
+                    for o in 0..dz {
+                        for i in 0..ni {
+                            let idx = b * dz * ni + o * ni + i;
+                            out[idx] = f64::from(j[idx])
+                                * f64::from(self.out_std[o])
+                                * f64::from(self.in_inv_std[i]);
+                        }
+                    }
+                }
+                out
+            }
+            Err(_) => vec![f64::NAN; n * dz * ni],
+        }
+    }
+}
+
+/// What [`NetField`] records for its reverse pass: the network workspace (created on first
+/// use: the solver tapes need `Default`) and scratch buffers.
+#[derive(Debug, Default)]
+pub struct NetTape(RefCell<NetTapeInner>);
+
+#[derive(Debug, Default)]
+struct NetTapeInner {
+    ws: Option<Workspace>,
+    x: Vec<f32>,
+    dy: Vec<f32>,
+    dx: Vec<f32>,
+    n: usize,
+}
+
+/// A [`Network`] as a batched vector field `ż = net(z, u)` in `f32` for the solvers of
+/// `dynlab-dynamics` (forward, reverse and forward mode).
+pub struct NetField<'a> {
+    net: &'a Network,
+    scratch: RefCell<(Option<Workspace>, Vec<f32>, Vec<f32>)>,
+}
+
+impl<'a> NetField<'a> {
+    /// The field of `net`.
+    pub fn new(net: &'a Network) -> Self {
+        Self {
+            net,
+            scratch: RefCell::new((None, Vec::new(), Vec::new())),
+        }
+    }
+}
+
+impl VectorField<f32> for NetField<'_> {
+    type Tape = NetTape;
+
+    fn dim_s(&self) -> usize {
+        self.net.dz
+    }
+    fn dim_u(&self) -> usize {
+        self.net.du()
+    }
+    fn n_params(&self) -> usize {
+        self.net.mlp.n_params()
+    }
+    fn eval(&self, n: usize, s: &[f32], u: &[f32], out: &mut [f32]) {
+        let mut sc = self.scratch.borrow_mut();
+        let (ws, x, _) = &mut *sc;
+        let ws = ws.get_or_insert_with(|| self.net.mlp.workspace());
+        self.net.eval_with(n, s, u, out, ws, x);
+    }
+    fn eval_taped(&self, n: usize, s: &[f32], u: &[f32], out: &mut [f32], tape: &mut NetTape) {
+        let t = tape.0.get_mut();
+        let ws = t.ws.get_or_insert_with(|| self.net.mlp.workspace());
+        t.n = n;
+        self.net.eval_with(n, s, u, out, ws, &mut t.x);
+    }
+    fn vjp(&self, tape: &NetTape, ybar: &[f32], sbar: &mut [f32], ubar: &mut [f32], pbar: &mut [f32]) {
+        let mut t = tape.0.borrow_mut();
+        let t = &mut *t;
+        let (n, dz, du) = (t.n, self.net.dz, self.net.du());
+        let ni = dz + du;
+        t.dy.clear();
+        t.dy.extend(
+            ybar.chunks_exact(dz)
+                .flat_map(|r| r.iter().zip(&self.net.out_std).map(|(a, s)| a * s)),
+        );
+        t.dx.resize(n * ni, 0.0);
+        let Some(ws) = t.ws.as_mut() else {
+            return;
+        };
+        let mut scratch = Vec::new();
+        let grad: &mut [f32] = if pbar.is_empty() {
+            scratch.resize(self.net.mlp.n_params(), 0.0);
+            &mut scratch
+        } else {
+            pbar
+        };
+        if self
+            .net
+            .mlp
+            .backward(ws, &t.dy, grad, Some(&mut t.dx[..n * ni]))
+            .is_err()
+        {
+            return;
+        }
+        for i in 0..n {
+            for d in 0..dz {
+                sbar[i * dz + d] = t.dx[i * ni + d] * self.net.in_inv_std[d];
+            }
+            for d in 0..du {
+                ubar[i * du + d] = t.dx[i * ni + dz + d] * self.net.in_inv_std[dz + d];
+            }
+        }
+    }
+    fn jvp(
+        &self,
+        n: usize,
+        s: &[f32],
+        u: &[f32],
+        sdot: &[f32],
+        udot: &[f32],
+        out: &mut [f32],
+        out_dot: &mut [f32],
+    ) {
+        let mut sc = self.scratch.borrow_mut();
+        let (ws, x, xd) = &mut *sc;
+        let ws = ws.get_or_insert_with(|| self.net.mlp.workspace());
+        let (dz, du) = (self.net.dz, self.net.du());
+        let ni = dz + du;
+        self.net.fill_input(n, s, u, x);
+        xd.resize(n * ni, 0.0);
+        for i in 0..n {
+            for d in 0..dz {
+                xd[i * ni + d] = sdot[i * dz + d] * self.net.in_inv_std[d];
+            }
+            for d in 0..du {
+                xd[i * ni + dz + d] = udot[i * du + d] * self.net.in_inv_std[dz + d];
+            }
+        }
+        match self.net.mlp.jvp(x, xd, ws) {
+            Ok((y, dy)) => {
+                self.net.write_output(y, out);
+                for (o, (d, k)) in out_dot
+                    .iter_mut()
+                    .zip(dy.iter().zip(self.net.out_std.iter().cycle()))
+                {
+                    *o = d * k;
+                }
+            }
+            Err(_) => {
+                out.iter_mut().for_each(|o| *o = f32::NAN);
+                out_dot.iter_mut().for_each(|o| *o = f32::NAN);
+            }
+        }
+    }
+}

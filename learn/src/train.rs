@@ -1,0 +1,1292 @@
+//! Training: the discounted multi-step loss, Adam, seeded splits and shuffles, the
+//! best-validation checkpoint, a progress callback; physics parameters by bounded
+//! Levenberg–Marquardt on the k-step residual.
+//!
+//! **Determinism.** Every random choice (split, shuffles, initial weights, physics subsample)
+//! comes from `seed`. A batch is cut into fixed-size chunks ([`TrainConfig::chunk`]) whose
+//! gradients are computed independently (on any thread) and summed in chunk order, so the result
+//! does not depend on [`TrainConfig::threads`]: the same seed and data give bit-identical weights.
+
+use dynlab_dynamics::conventions::{LossNorm, wrap_angle};
+use dynlab_dynamics::data::{SplitMix64, StateTrajectory, Window, split_trajectories, split_windows_overlapping, windows};
+use dynlab_dynamics::ode::{self, InputTape, OdeStatus, Solver, SolverTape, VectorField};
+use dynlab_dynamics::physics::{Effect, PhysicsModel};
+use dynlab_nn::{Activation, Adam, AdamConfig, Init, Mlp, MlpSpec};
+use serde::{Deserialize, Serialize};
+
+use crate::dataset::Dataset;
+use crate::model::{Model, ModelKind};
+use crate::net::{NetField, NetTape, Network, Normalization};
+use crate::{LearnError, World};
+
+/// How windows are split into training and validation.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Split {
+    /// By whole trajectories (default; long trajectories are first cut into segments of
+    /// [`TrainConfig::segment_s`]): no validation window overlaps training data.
+    Trajectories,
+    /// Tu & Lin's split for comparison: all k-step windows shuffled and cut, so validation windows
+    /// overlap training windows (leakage).
+    OverlappingWindows,
+}
+
+/// The training loss on the learned state dimensions, discounted over the k steps by `γ^(j−1)`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "type", rename_all = "snake_case")]
+pub enum Loss {
+    /// `Σ_d w_d · mean_n e_d²` with angle errors wrapped (Tu & Lin: `w = (1, 1, 0.0408)`).
+    PoseMse {
+        /// Weight per learned dimension.
+        weights: Vec<f64>,
+    },
+    /// Kohler et al. eq. 11: `mean_n ‖v⁺ − v̂⁺‖ / (‖v⁺‖ + ε)`.
+    LRel {
+        /// L1 (as published) or L2.
+        norm: LossNorm,
+        /// ε > 0 for small velocities.
+        eps: f64,
+    },
+}
+
+impl Loss {
+    /// The default loss of a world: Tu & Lin's weighted pose MSE for pushing (θ weight 0.0408, as
+    /// in their evaluation), `L_rel` with the L1 norm and ε = 0.1 for the car.
+    pub fn default_for(world: World) -> Self {
+        match world {
+            World::Push => Loss::PoseMse {
+                weights: vec![1.0, 1.0, 0.0408],
+            },
+            World::Car => Loss::LRel {
+                norm: LossNorm::L1,
+                eps: 0.1,
+            },
+        }
+    }
+}
+
+/// Training settings. Every field has a documented default (`TrainConfig::default()`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct TrainConfig {
+    /// Model kind (default `node-rk4`).
+    pub kind: ModelKind,
+    /// Rollout steps k of the loss (default 1).
+    pub steps: usize,
+    /// Discount γ (default 0.9).
+    pub gamma: f64,
+    /// Epochs (default 300; Tu & Lin train 3000 at lr 1e-4).
+    pub epochs: usize,
+    /// Stop after this many training windows (samples) in total, if set.
+    pub max_samples: Option<u64>,
+    /// Batch size (default 500).
+    pub batch: usize,
+    /// Adam learning rate (default 1e-3).
+    pub lr: f64,
+    /// Seed of the split, shuffles, initial weights and physics subsample (default 0).
+    pub seed: u64,
+    /// Validation fraction (default 0.2).
+    pub validation_fraction: f64,
+    /// Split (default by trajectories).
+    pub split: Split,
+    /// Car trajectories are cut into segments of this length \[s\] before a trajectory split and
+    /// for TVE (default 3 s, the length of Kohler et al.'s validation trajectories).
+    pub segment_s: f64,
+    /// Hidden layer widths (default: pushing `[100, 100]`, car `[64; 8]`).
+    pub hidden: Option<Vec<usize>>,
+    /// Hidden activation name (default: `tanh` for pushing, `gelu` for the car).
+    pub activation: Option<String>,
+    /// Network solver (default: the kind's, see [`ModelKind::default_solver`]).
+    pub solver: Option<Solver>,
+    /// Effects of the physics model (physics and hybrid only).
+    pub effects: Vec<String>,
+    /// The loss (default: [`Loss::default_for`] the world).
+    pub loss: Option<Loss>,
+    /// Threads (default 1; the result does not depend on it).
+    pub threads: usize,
+    /// Rows per gradient chunk (default 250).
+    pub chunk: usize,
+    /// Levenberg–Marquardt iterations of the physics fit (default 30).
+    pub physics_iterations: usize,
+    /// Windows used by the physics fit at most (seeded subsample; default 2000).
+    pub physics_max_windows: usize,
+}
+
+impl Default for TrainConfig {
+    fn default() -> Self {
+        Self {
+            kind: ModelKind::NodeRk4,
+            steps: 1,
+            gamma: 0.9,
+            epochs: 300,
+            max_samples: None,
+            batch: 500,
+            lr: 1e-3,
+            seed: 0,
+            validation_fraction: 0.2,
+            split: Split::Trajectories,
+            segment_s: 3.0,
+            hidden: None,
+            activation: None,
+            solver: None,
+            effects: Vec::new(),
+            loss: None,
+            threads: 1,
+            chunk: 250,
+            physics_iterations: 30,
+            physics_max_windows: 2000,
+        }
+    }
+}
+
+impl TrainConfig {
+    /// Checks ranges and consistency.
+    pub fn validate(&self) -> Result<(), LearnError> {
+        fn s(name: &'static str, value: impl ToString, hint: impl Into<String>) -> LearnError {
+            LearnError::setting(name, value, hint)
+        }
+        if self.steps == 0 || self.steps > 100 {
+            return Err(s("steps", self.steps, "use 1 … 100 rollout steps"));
+        }
+        if !(self.gamma > 0.0 && self.gamma <= 1.0) {
+            return Err(s("gamma", self.gamma, "the discount must be in (0, 1]"));
+        }
+        if self.batch == 0 {
+            return Err(s("batch", 0, "the batch size must be at least 1"));
+        }
+        if self.chunk == 0 {
+            return Err(s("chunk", 0, "the chunk size must be at least 1"));
+        }
+        if !(self.lr.is_finite() && self.lr > 0.0) {
+            return Err(s("lr", self.lr, "the learning rate must be finite and > 0"));
+        }
+        if !(self.validation_fraction > 0.0 && self.validation_fraction < 1.0) {
+            return Err(s(
+                "validation_fraction",
+                self.validation_fraction,
+                "must be strictly between 0 and 1",
+            ));
+        }
+        if self.kind.has_network() && self.epochs == 0 && self.max_samples.is_none() {
+            return Err(s("epochs", 0, "train at least one epoch"));
+        }
+        if !self.effects.is_empty() && !self.kind.has_physics() {
+            return Err(s(
+                "effects",
+                self.effects.join(","),
+                format!(
+                    "effects belong to a physics model; use --kind physics or hybrid, not {}",
+                    self.kind
+                ),
+            ));
+        }
+        if let Some(h) = &self.hidden
+            && (h.is_empty() || h.contains(&0))
+        {
+            return Err(s("hidden", format!("{h:?}"), "give at least one non-zero layer width"));
+        }
+        if !(self.segment_s > 0.0) {
+            return Err(s("segment_s", self.segment_s, "must be > 0 seconds"));
+        }
+        Ok(())
+    }
+
+    /// The loss for `world`.
+    pub fn loss_for(&self, world: World) -> Loss {
+        self.loss.clone().unwrap_or_else(|| Loss::default_for(world))
+    }
+}
+
+/// Progress of training, passed to the callback after every epoch.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Progress {
+    /// Epoch (1-based).
+    pub epoch: usize,
+    /// Planned epochs.
+    pub epochs: usize,
+    /// Mean training loss of the epoch.
+    pub train_loss: f64,
+    /// Validation loss after the epoch.
+    pub validation_loss: f64,
+    /// Best validation loss so far.
+    pub best_validation_loss: f64,
+    /// Training windows processed so far.
+    pub samples: u64,
+}
+
+/// What [`train`] returns: the model (at its best validation checkpoint) and the curve.
+#[derive(Clone, Debug)]
+pub struct TrainOutcome {
+    /// The trained model.
+    pub model: Model,
+    /// One entry per epoch (physics: one entry per Levenberg–Marquardt iteration).
+    pub curve: Vec<Progress>,
+    /// Epoch of the checkpoint (0: before training).
+    pub best_epoch: usize,
+    /// Validation loss of the checkpoint.
+    pub best_validation_loss: f64,
+    /// Training loss of the checkpoint's model over all training windows.
+    pub final_train_loss: f64,
+    /// Validation loss of the constant model `z⁺ = z` (what "learned nothing" scores).
+    pub baseline_validation_loss: f64,
+    /// Number of training and validation windows.
+    pub windows: (usize, usize),
+    /// Validation trajectories (indices into the segmented trajectories) for a trajectory split.
+    pub validation_segments: Vec<StateTrajectory>,
+    /// Physics fit summary, if a physics model was fitted.
+    pub physics_fit: Option<PhysicsFit>,
+}
+
+/// Summary of the physics fit.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PhysicsFit {
+    /// Weighted sum of squared residuals at the start.
+    pub initial_cost: f64,
+    /// … and at the end.
+    pub final_cost: f64,
+    /// Iterations run.
+    pub iterations: usize,
+    /// Residuals used.
+    pub residuals: usize,
+}
+
+/// Cuts trajectories longer than `max_len` states into contiguous segments sharing their
+/// boundary state (no transition is lost).
+pub fn segment(trajs: &[StateTrajectory], max_len: usize) -> Vec<StateTrajectory> {
+    let max_len = max_len.max(2);
+    let mut out = Vec::new();
+    for t in trajs {
+        let n = t.len();
+        if n <= max_len {
+            out.push(t.clone());
+            continue;
+        }
+        let mut a = 0;
+        while a + 1 < n {
+            let b = (a + max_len - 1).min(n - 1);
+            out.push(StateTrajectory {
+                s: t.s[a * t.dim_s..(b + 1) * t.dim_s].to_vec(),
+                u: t.u[a * t.dim_u..(b + 1) * t.dim_u].to_vec(),
+                dim_s: t.dim_s,
+                dim_u: t.dim_u,
+                dt: t.dt,
+            });
+            a = b;
+        }
+    }
+    out
+}
+
+/// Training data of one run, in the layouts the gradient code reads.
+struct Data {
+    trajs: Vec<StateTrajectory>,
+    /// Learned dims per trajectory in f32 (`len × dz`).
+    z: Vec<Vec<f32>>,
+    /// Commands in f32 (`len × du`).
+    u: Vec<Vec<f32>>,
+}
+
+impl Data {
+    fn new(trajs: Vec<StateTrajectory>, world: World) -> Self {
+        let lr = world.learned_dims();
+        let z = trajs
+            .iter()
+            .map(|t| {
+                (0..t.len())
+                    .flat_map(|i| t.s[i * t.dim_s + lr.start..i * t.dim_s + lr.end].iter().map(|&x| x as f32))
+                    .collect()
+            })
+            .collect();
+        let u = trajs
+            .iter()
+            .map(|t| t.u.iter().map(|&x| x as f32).collect())
+            .collect();
+        Self { trajs, z, u }
+    }
+}
+
+/// Buffers of one gradient chunk, reused across batches.
+#[derive(Default)]
+struct ChunkState {
+    z: Vec<Vec<f32>>,
+    u: Vec<Vec<f32>>,
+    tgt: Vec<Vec<f32>>,
+    pose: Vec<Vec<f64>>,
+    net_out: Vec<f32>,
+    node_tapes: Vec<SolverTape<f32, NetTape>>,
+    net_tapes: Vec<NetTape>,
+    phys_tapes: Vec<SolverTape<f64, InputTape<f64>>>,
+    sfull: Vec<f64>,
+    sfull_next: Vec<f64>,
+    u64: Vec<f64>,
+    zbar: Vec<f32>,
+    zbar_prev: Vec<f32>,
+    ubar: Vec<f32>,
+    tmp: Vec<f32>,
+    sbar_full: Vec<f64>,
+    sbar0_full: Vec<f64>,
+    ubar64: Vec<f64>,
+}
+
+struct Ctx<'a> {
+    model: &'a Model,
+    data: &'a Data,
+    k: usize,
+    gamma: f64,
+    loss: &'a Loss,
+}
+
+fn resize<T: Clone + Default>(v: &mut Vec<Vec<T>>, n: usize, len: usize) {
+    v.resize_with(n, Vec::new);
+    for x in v.iter_mut() {
+        x.resize(len, T::default());
+    }
+}
+
+impl Ctx<'_> {
+    /// Loss (sum over windows, scaled by `1/norm_n`) and, if `grad` is given, its gradient wrt
+    /// the network parameters (added to `grad`).
+    fn chunk(&self, ws: &[Window], st: &mut ChunkState, grad: Option<&mut [f32]>, norm_n: f64) -> f64 {
+        let model = self.model;
+        let world = model.world();
+        let net = model.network();
+        let lr = world.learned_dims();
+        let (dz, du, ds) = (lr.len(), world.action_dim(), world.state_dim());
+        let n = ws.len();
+        let k = self.k;
+        resize(&mut st.z, k + 1, n * dz);
+        resize(&mut st.u, k, n * du);
+        resize(&mut st.tgt, k, n * dz);
+        let hybrid = model.kind() == ModelKind::Hybrid;
+        if hybrid {
+            resize(&mut st.pose, k, n * 3);
+        }
+        for (i, w) in ws.iter().enumerate() {
+            let zt = &self.data.z[w.trajectory];
+            let ut = &self.data.u[w.trajectory];
+            st.z[0][i * dz..(i + 1) * dz].copy_from_slice(&zt[w.start * dz..(w.start + 1) * dz]);
+            for j in 0..k {
+                let a = w.start + j;
+                st.u[j][i * du..(i + 1) * du].copy_from_slice(&ut[a * du..(a + 1) * du]);
+                st.tgt[j][i * dz..(i + 1) * dz].copy_from_slice(&zt[(a + 1) * dz..(a + 2) * dz]);
+                if hybrid {
+                    let t = &self.data.trajs[w.trajectory];
+                    st.pose[j][i * 3..i * 3 + 3].copy_from_slice(&t.s[a * ds..a * ds + 3]);
+                }
+            }
+        }
+        let field = net.map(NetField::new);
+        st.net_out.resize(n * dz, 0.0);
+        if st.node_tapes.len() < k {
+            st.node_tapes.resize_with(k, Default::default);
+        }
+        if st.net_tapes.len() < k {
+            st.net_tapes.resize_with(k, Default::default);
+        }
+        if st.phys_tapes.len() < k {
+            st.phys_tapes.resize_with(k, Default::default);
+        }
+        // forward
+        let solver = model.solver().unwrap_or(Solver::rk4());
+        for j in 0..k {
+            let (head, tail) = st.z.split_at_mut(j + 1);
+            let (zj, zn) = (&head[j], &mut tail[0]);
+            match model.kind() {
+                ModelKind::Residual => {
+                    if let Some(f) = &field {
+                        f.eval_taped(n, zj, &st.u[j], zn, &mut st.net_tapes[j]);
+                    }
+                    for (a, b) in zn.iter_mut().zip(zj.iter()) {
+                        *a += b;
+                    }
+                }
+                ModelKind::Hybrid => {
+                    self.phys_forward(n, j, st);
+                    let zn = &mut st.z[j + 1];
+                    for i in 0..n {
+                        for d in 0..dz {
+                            zn[i * dz + d] = st.sfull_next[i * ds + lr.start + d] as f32;
+                        }
+                    }
+                    if let Some(f) = &field {
+                        let (head, tail) = st.z.split_at_mut(j + 1);
+                        f.eval_taped(n, &head[j], &st.u[j], &mut st.net_out, &mut st.net_tapes[j]);
+                        for (a, b) in tail[0].iter_mut().zip(&st.net_out) {
+                            *a += b;
+                        }
+                    }
+                }
+                _ => {
+                    if let Some(f) = &field {
+                        ode::integrate_taped(f, &solver, n, zj, &st.u[j], 1.0, zn, &mut st.node_tapes[j]);
+                    }
+                }
+            }
+        }
+        // loss and its gradient wrt each predicted state
+        let mut total = 0.0;
+        st.zbar.clear();
+        st.zbar.resize(n * dz, 0.0);
+        let want_grad = grad.is_some();
+        let mut dl: Vec<Vec<f32>> = Vec::new();
+        if want_grad {
+            resize(&mut dl, k, n * dz);
+        }
+        let mut g = 1.0;
+        let angle = if world == World::Push { Some(world.angle_dim()) } else { None };
+        for j in 0..k {
+            let pred = &st.z[j + 1];
+            let tgt = &st.tgt[j];
+            for i in 0..n {
+                let p = &pred[i * dz..(i + 1) * dz];
+                let t = &tgt[i * dz..(i + 1) * dz];
+                let mut e = [0.0f64; 8];
+                for d in 0..dz {
+                    let x = f64::from(p[d]) - f64::from(t[d]);
+                    e[d] = if Some(d) == angle { wrap_angle(x) } else { x };
+                }
+                match self.loss {
+                    Loss::PoseMse { weights } => {
+                        for d in 0..dz {
+                            let w = weights.get(d).copied().unwrap_or(1.0);
+                            total += g * w * e[d] * e[d] / norm_n;
+                            if want_grad {
+                                dl[j][i * dz + d] = (2.0 * g * w * e[d] / norm_n) as f32;
+                            }
+                        }
+                    }
+                    Loss::LRel { norm, eps } => {
+                        let (num, den) = match norm {
+                            LossNorm::L1 => (
+                                e[..dz].iter().map(|x| x.abs()).sum::<f64>(),
+                                t.iter().map(|x| f64::from(*x).abs()).sum::<f64>() + eps,
+                            ),
+                            LossNorm::L2 => (
+                                e[..dz].iter().map(|x| x * x).sum::<f64>().sqrt(),
+                                t.iter().map(|x| f64::from(*x).powi(2)).sum::<f64>().sqrt() + eps,
+                            ),
+                        };
+                        total += g * num / den / norm_n;
+                        if want_grad {
+                            for d in 0..dz {
+                                let de = match norm {
+                                    LossNorm::L1 => {
+                                        if e[d] > 0.0 {
+                                            1.0
+                                        } else if e[d] < 0.0 {
+                                            -1.0
+                                        } else {
+                                            0.0
+                                        }
+                                    }
+                                    LossNorm::L2 => {
+                                        if num > 0.0 {
+                                            e[d] / num
+                                        } else {
+                                            0.0
+                                        }
+                                    }
+                                };
+                                dl[j][i * dz + d] = (g * de / den / norm_n) as f32;
+                            }
+                        }
+                    }
+                }
+            }
+            g *= self.gamma;
+        }
+        let Some(grad) = grad else {
+            return total;
+        };
+        let Some(field) = &field else {
+            return total;
+        };
+        // backward
+        st.zbar_prev.resize(n * dz, 0.0);
+        st.ubar.resize(n * du, 0.0);
+        st.tmp.resize(n * dz, 0.0);
+        for j in (0..k).rev() {
+            for (a, b) in st.zbar.iter_mut().zip(&dl[j]) {
+                *a += b;
+            }
+            let need_state = j > 0;
+            match model.kind() {
+                ModelKind::Residual => {
+                    field.vjp(&st.net_tapes[j], &st.zbar, &mut st.tmp, &mut st.ubar, grad);
+                    for (p, (a, b)) in st.zbar_prev.iter_mut().zip(st.zbar.iter().zip(&st.tmp)) {
+                        *p = a + b;
+                    }
+                }
+                ModelKind::Hybrid => {
+                    field.vjp(&st.net_tapes[j], &st.zbar, &mut st.tmp, &mut st.ubar, grad);
+                    if need_state {
+                        self.phys_backward(n, j, st);
+                    } else {
+                        st.zbar_prev.iter_mut().for_each(|x| *x = 0.0);
+                    }
+                    for (p, b) in st.zbar_prev.iter_mut().zip(&st.tmp) {
+                        *p += b;
+                    }
+                }
+                _ => {
+                    ode::integrate_vjp(
+                        field,
+                        &st.node_tapes[j],
+                        &st.zbar,
+                        &mut st.zbar_prev,
+                        &mut st.ubar,
+                        grad,
+                    );
+                }
+            }
+            std::mem::swap(&mut st.zbar, &mut st.zbar_prev);
+        }
+        total
+    }
+
+    /// Physics step of the hybrid model at rollout step `j` (full state from the learned dims and,
+    /// for the car, the measured pose), recorded for the reverse pass.
+    fn phys_forward(&self, n: usize, j: usize, st: &mut ChunkState) {
+        let model = self.model;
+        let world = model.world();
+        let lr = world.learned_dims();
+        let (dz, ds, du) = (lr.len(), world.state_dim(), world.action_dim());
+        st.sfull.resize(n * ds, 0.0);
+        st.sfull_next.resize(n * ds, 0.0);
+        st.u64.resize(n * du, 0.0);
+        for i in 0..n {
+            if world == World::Car {
+                st.sfull[i * ds..i * ds + 3].copy_from_slice(&st.pose[j][i * 3..i * 3 + 3]);
+            }
+            for d in 0..dz {
+                st.sfull[i * ds + lr.start + d] = f64::from(st.z[j][i * dz + d]);
+            }
+        }
+        for (a, b) in st.u64.iter_mut().zip(&st.u[j]) {
+            *a = f64::from(*b);
+        }
+        if let Some(p) = model.physics() {
+            ode::integrate_taped(
+                p,
+                &model.physics_solver(),
+                n,
+                &st.sfull,
+                &st.u64,
+                model.physics_time(),
+                &mut st.sfull_next,
+                &mut st.phys_tapes[j],
+            );
+        }
+    }
+
+    /// `zbar_prev = (∂Φ_z/∂z)ᵀ zbar` through the recorded physics step `j`.
+    fn phys_backward(&self, n: usize, j: usize, st: &mut ChunkState) {
+        let model = self.model;
+        let world = model.world();
+        let lr = world.learned_dims();
+        let (dz, ds, du) = (lr.len(), world.state_dim(), world.action_dim());
+        st.sbar_full.clear();
+        st.sbar_full.resize(n * ds, 0.0);
+        st.sbar0_full.resize(n * ds, 0.0);
+        st.ubar64.resize(n * du, 0.0);
+        for i in 0..n {
+            for d in 0..dz {
+                st.sbar_full[i * ds + lr.start + d] = f64::from(st.zbar[i * dz + d]);
+            }
+        }
+        if let Some(p) = model.physics() {
+            ode::integrate_vjp(
+                p,
+                &st.phys_tapes[j],
+                &st.sbar_full,
+                &mut st.sbar0_full,
+                &mut st.ubar64,
+                &mut [],
+            );
+        }
+        for i in 0..n {
+            for d in 0..dz {
+                st.zbar_prev[i * dz + d] = st.sbar0_full[i * ds + lr.start + d] as f32;
+            }
+        }
+    }
+}
+
+/// Loss of the model over `ws` (mean over windows), on `threads` threads in fixed chunks.
+fn loss_over(ctx: &Ctx, ws: &[Window], states: &mut [ChunkState], chunk: usize, threads: usize) -> f64 {
+    if ws.is_empty() {
+        return 0.0;
+    }
+    let n = ws.len() as f64;
+    let chunks: Vec<&[Window]> = ws.chunks(chunk).collect();
+    let mut losses = vec![0.0; chunks.len()];
+    let mut done = 0;
+    while done < chunks.len() {
+        let m = (chunks.len() - done).min(states.len());
+        run_chunks(
+            ctx,
+            &chunks[done..done + m],
+            &mut states[..m],
+            None,
+            &mut losses[done..done + m],
+            n,
+            threads,
+        );
+        done += m;
+    }
+    losses.iter().sum()
+}
+
+fn run_chunks(
+    ctx: &Ctx,
+    chunks: &[&[Window]],
+    states: &mut [ChunkState],
+    grads: Option<&mut [Vec<f32>]>,
+    losses: &mut [f64],
+    norm_n: f64,
+    threads: usize,
+) {
+    let m = chunks.len();
+    let mut jobs: Vec<(&[Window], &mut ChunkState, Option<&mut Vec<f32>>, &mut f64)> = match grads {
+        Some(g) => chunks
+            .iter()
+            .zip(states.iter_mut())
+            .zip(g.iter_mut())
+            .zip(losses.iter_mut())
+            .map(|(((c, s), g), l)| (*c, s, Some(g), l))
+            .collect(),
+        None => chunks
+            .iter()
+            .zip(states.iter_mut())
+            .zip(losses.iter_mut())
+            .map(|((c, s), l)| (*c, s, None, l))
+            .collect(),
+    };
+    let run = |job: &mut (&[Window], &mut ChunkState, Option<&mut Vec<f32>>, &mut f64)| {
+        let (w, st, g, l) = job;
+        if let Some(g) = g.as_deref_mut() {
+            g.iter_mut().for_each(|x| *x = 0.0);
+        }
+        **l = ctx.chunk(w, st, g.as_deref_mut().map(|v| v.as_mut_slice()), norm_n);
+    };
+    let threads = threads.clamp(1, m.max(1));
+    if threads == 1 {
+        for job in jobs.iter_mut() {
+            run(job);
+        }
+        return;
+    }
+    let per = m.div_ceil(threads);
+    std::thread::scope(|scope| {
+        let mut groups = jobs.chunks_mut(per);
+        let first = groups.next();
+        let handles: Vec<_> = groups
+            .map(|grp| {
+                scope.spawn(|| {
+                    for job in grp.iter_mut() {
+                        run(job);
+                    }
+                })
+            })
+            .collect();
+        if let Some(grp) = first {
+            for job in grp.iter_mut() {
+                run(job);
+            }
+        }
+        for h in handles {
+            if let Err(p) = h.join() {
+                std::panic::resume_unwind(p);
+            }
+        }
+    });
+}
+
+fn parse_activation(name: &str) -> Result<Activation, LearnError> {
+    name.parse::<Activation>()
+        .map_err(|_| LearnError::setting("activation", name, "use tanh, gelu, relu or identity"))
+}
+
+/// Builds the (unfitted) physics model of the configuration.
+pub fn physics_model(world: World, effects: &[String]) -> Result<PhysicsModel, LearnError> {
+    let names: Vec<&str> = effects.iter().map(|s| s.as_str()).collect();
+    let effects: Vec<Effect> = PhysicsModel::parse_effects(&names)?;
+    Ok(PhysicsModel::new(world.robot(), &effects)?)
+}
+
+/// The solver of the physics model per world: RK4 with 2 substeps per push (the pushing field
+/// turns with θ), 1 per car step (steps of ≈ 4–10 ms).
+pub fn default_physics_solver(world: World) -> Solver {
+    match world {
+        World::Push => Solver::Rk4 { substeps: 2 },
+        World::Car => Solver::rk4(),
+    }
+}
+
+/// Trains a model of `cfg.kind` on `data`, calling `progress` after every epoch.
+pub fn train(
+    data: &Dataset,
+    cfg: &TrainConfig,
+    progress: &mut dyn FnMut(&Progress),
+) -> Result<TrainOutcome, LearnError> {
+    cfg.validate()?;
+    let world = data.world;
+    let k = cfg.steps;
+    let dt = match world {
+        World::Push => data.pose_dt_s.max(f64::MIN_POSITIVE),
+        World::Car => data.pose_dt_s,
+    };
+    if !(dt.is_finite() && dt > 0.0) {
+        return Err(LearnError::setting(
+            "pose interval",
+            dt,
+            "the data has no valid time step; check the pose stamps",
+        ));
+    }
+    // split
+    let trajs = match (world, cfg.split) {
+        (World::Car, _) => segment(&data.trajectories, (cfg.segment_s / dt).round().max(2.0) as usize + 1),
+        _ => data.trajectories.clone(),
+    };
+    let lengths: Vec<usize> = trajs.iter().map(|t| t.len()).collect();
+    let all = windows(&lengths, k)?;
+    let (train_w, val_w, val_segments) = match cfg.split {
+        Split::Trajectories => {
+            let sp = split_trajectories(trajs.len(), cfg.validation_fraction, cfg.seed)?;
+            let is_val: Vec<bool> = (0..trajs.len()).map(|i| sp.validation.binary_search(&i).is_ok()).collect();
+            let (v, t): (Vec<Window>, Vec<Window>) = all.iter().partition(|w| is_val[w.trajectory]);
+            let segs = sp.validation.iter().map(|&i| trajs[i].clone()).collect();
+            (t, v, segs)
+        }
+        Split::OverlappingWindows => {
+            let sp = split_windows_overlapping(&all, cfg.validation_fraction, cfg.seed)?;
+            (sp.train, sp.validation, Vec::new())
+        }
+    };
+    if train_w.is_empty() || val_w.is_empty() {
+        return Err(LearnError::Data(dynlab_dynamics::data::DataError::TooLittleData {
+            needed: k + 1,
+            k,
+            longest: lengths.iter().copied().max().unwrap_or(0),
+            trajectories: trajs.len(),
+        }));
+    }
+    let data_f = Data::new(trajs, world);
+    let loss = cfg.loss_for(world);
+    if let Loss::PoseMse { weights } = &loss
+        && weights.len() != world.learned_dims().len()
+    {
+        return Err(LearnError::setting(
+            "loss.weights",
+            format!("{weights:?}"),
+            format!("give one weight per learned dimension ({})", world.learned_dims().len()),
+        ));
+    }
+    // physics
+    let phys_solver = default_physics_solver(world);
+    let mut physics_fit = None;
+    let mut curve = Vec::new();
+    let physics = if cfg.kind.has_physics() {
+        let mut p = physics_model(world, &cfg.effects)?;
+        let fit = fit_physics(&mut p, &phys_solver, world, dt, &data_f.trajs, &train_w, k, cfg, &loss)?;
+        physics_fit = Some(fit);
+        Some(p)
+    } else {
+        None
+    };
+    let lr_dims = world.learned_dims();
+    let (dz, du) = (lr_dims.len(), world.action_dim());
+    // the constant model z⁺ = z as a baseline (identity residual network of zeros)
+    let net = if cfg.kind.has_network() {
+        let hidden = cfg.hidden.clone().unwrap_or_else(|| match world {
+            World::Push => vec![100, 100],
+            World::Car => vec![64; 8],
+        });
+        let act = match &cfg.activation {
+            Some(a) => parse_activation(a)?,
+            None => match world {
+                World::Push => Activation::Tanh,
+                World::Car => Activation::Gelu,
+            },
+        };
+        let spec = MlpSpec::uniform(dz + du, &hidden, dz, act)?;
+        let mlp = Mlp::new(spec, Init::Auto, cfg.seed);
+        let norm = normalization(world, physics.as_ref(), &phys_solver, dt, &data_f.trajs, &train_w)?;
+        Some(Network::new(mlp, norm))
+    } else {
+        None
+    };
+    let solver = match cfg.kind {
+        ModelKind::NodeEuler | ModelKind::NodeRk4 | ModelKind::NodeDopri5 => {
+            cfg.solver.or(cfg.kind.default_solver())
+        }
+        _ => None,
+    };
+    let mut model = Model::new(cfg.kind, world, dt, solver, net, physics, phys_solver)?;
+    let chunk = cfg.chunk;
+    let threads = cfg.threads.max(1);
+    let slots = cfg.batch.div_ceil(chunk).max(1);
+    let mut states: Vec<ChunkState> = (0..slots).map(|_| ChunkState::default()).collect();
+    let baseline = {
+        let zero_norm = Normalization::identity(dz + du, dz);
+        let mut zero = Mlp::zeros(MlpSpec::uniform(dz + du, &[1], dz, Activation::Tanh)?);
+        zero.params_mut().iter_mut().for_each(|p| *p = 0.0);
+        let m = Model::new(
+            ModelKind::Residual,
+            world,
+            dt,
+            None,
+            Some(Network::new(zero, zero_norm)),
+            None,
+            phys_solver,
+        )?;
+        let ctx = Ctx { model: &m, data: &data_f, k, gamma: cfg.gamma, loss: &loss };
+        loss_over(&ctx, &val_w, &mut states, chunk, threads)
+    };
+    let val0 = {
+        let ctx = Ctx { model: &model, data: &data_f, k, gamma: cfg.gamma, loss: &loss };
+        loss_over(&ctx, &val_w, &mut states, chunk, threads)
+    };
+    if !cfg.kind.has_network() {
+        let ctx = Ctx { model: &model, data: &data_f, k, gamma: cfg.gamma, loss: &loss };
+        let train_loss = loss_over(&ctx, &train_w, &mut states, chunk, threads);
+        let p = Progress {
+            epoch: 1,
+            epochs: 1,
+            train_loss,
+            validation_loss: val0,
+            best_validation_loss: val0,
+            samples: train_w.len() as u64,
+        };
+        progress(&p);
+        curve.push(p);
+        return Ok(TrainOutcome {
+            model,
+            curve,
+            best_epoch: 1,
+            best_validation_loss: val0,
+            final_train_loss: train_loss,
+            baseline_validation_loss: baseline,
+            windows: (train_w.len(), val_w.len()),
+            validation_segments: val_segments,
+            physics_fit,
+        });
+    }
+    let n_params = model.network().map(|n| n.mlp.n_params()).unwrap_or(0);
+    let mut adam = Adam::new(
+        n_params,
+        AdamConfig {
+            lr: cfg.lr as f32,
+            ..Default::default()
+        },
+    )?;
+    let mut grads: Vec<Vec<f32>> = (0..slots).map(|_| vec![0.0; n_params]).collect();
+    let mut total_grad = vec![0.0f32; n_params];
+    let mut best_params = model.network().map(|n| n.mlp.params().to_vec()).unwrap_or_default();
+    let mut best_val = val0;
+    let mut best_epoch = 0;
+    let mut samples: u64 = 0;
+    let mut order = train_w.clone();
+    let mut losses = vec![0.0; slots];
+    'epochs: for epoch in 1..=cfg.epochs.max(1) {
+        SplitMix64::new(cfg.seed ^ (epoch as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)).shuffle(&mut order);
+        let mut epoch_loss = 0.0;
+        let mut epoch_n = 0usize;
+        for batch in order.chunks(cfg.batch) {
+            let chunks: Vec<&[Window]> = batch.chunks(chunk).collect();
+            let m = chunks.len();
+            {
+                let ctx = Ctx { model: &model, data: &data_f, k, gamma: cfg.gamma, loss: &loss };
+                run_chunks(
+                    &ctx,
+                    &chunks,
+                    &mut states[..m],
+                    Some(&mut grads[..m]),
+                    &mut losses[..m],
+                    batch.len() as f64,
+                    threads,
+                );
+            }
+            total_grad.copy_from_slice(&grads[0]);
+            for g in &grads[1..m] {
+                for (a, b) in total_grad.iter_mut().zip(g) {
+                    *a += b;
+                }
+            }
+            let bl: f64 = losses[..m].iter().sum();
+            if !bl.is_finite() {
+                return Err(LearnError::Diverged { epoch, loss: bl });
+            }
+            epoch_loss += bl * batch.len() as f64;
+            epoch_n += batch.len();
+            if let Some(net) = model.network_mut() {
+                adam.step(net.mlp.params_mut(), &total_grad)?;
+            }
+            samples += batch.len() as u64;
+            if cfg.max_samples.is_some_and(|m| samples >= m) {
+                let val = {
+                    let ctx = Ctx { model: &model, data: &data_f, k, gamma: cfg.gamma, loss: &loss };
+                    loss_over(&ctx, &val_w, &mut states, chunk, threads)
+                };
+                record(&mut curve, progress, epoch, cfg.epochs, epoch_loss / epoch_n as f64, val, &mut best_val, &mut best_epoch, &mut best_params, &model, samples);
+                break 'epochs;
+            }
+        }
+        let val = {
+            let ctx = Ctx { model: &model, data: &data_f, k, gamma: cfg.gamma, loss: &loss };
+            loss_over(&ctx, &val_w, &mut states, chunk, threads)
+        };
+        if !val.is_finite() {
+            return Err(LearnError::Diverged { epoch, loss: val });
+        }
+        record(&mut curve, progress, epoch, cfg.epochs, epoch_loss / epoch_n.max(1) as f64, val, &mut best_val, &mut best_epoch, &mut best_params, &model, samples);
+    }
+    if let Some(net) = model.network_mut() {
+        net.mlp.params_mut().copy_from_slice(&best_params);
+    }
+    let final_train_loss = {
+        let ctx = Ctx { model: &model, data: &data_f, k, gamma: cfg.gamma, loss: &loss };
+        loss_over(&ctx, &train_w, &mut states, chunk, threads)
+    };
+    Ok(TrainOutcome {
+        model,
+        curve,
+        best_epoch,
+        best_validation_loss: best_val,
+        final_train_loss,
+        baseline_validation_loss: baseline,
+        windows: (train_w.len(), val_w.len()),
+        validation_segments: val_segments,
+        physics_fit,
+    })
+}
+
+#[allow(clippy::too_many_arguments)]
+fn record(
+    curve: &mut Vec<Progress>,
+    progress: &mut dyn FnMut(&Progress),
+    epoch: usize,
+    epochs: usize,
+    train_loss: f64,
+    val: f64,
+    best_val: &mut f64,
+    best_epoch: &mut usize,
+    best_params: &mut [f32],
+    model: &Model,
+    samples: u64,
+) {
+    if val < *best_val {
+        *best_val = val;
+        *best_epoch = epoch;
+        if let Some(net) = model.network() {
+            best_params.copy_from_slice(net.mlp.params());
+        }
+    }
+    let p = Progress {
+        epoch,
+        epochs,
+        train_loss,
+        validation_loss: val,
+        best_validation_loss: *best_val,
+        samples,
+    };
+    progress(&p);
+    curve.push(p);
+}
+
+/// Input and output statistics of the network on the training windows' transitions.
+fn normalization(
+    world: World,
+    physics: Option<&PhysicsModel>,
+    solver: &Solver,
+    dt: f64,
+    trajs: &[StateTrajectory],
+    train_w: &[Window],
+) -> Result<Normalization, LearnError> {
+    let lr = world.learned_dims();
+    let (dz, du, ds) = (lr.len(), world.action_dim(), world.state_dim());
+    let mut inputs = Vec::new();
+    let mut outputs = Vec::new();
+    let mut seen = std::collections::HashSet::new();
+    let t_phys = if world == World::Push { 1.0 } else { dt };
+    let mut pn = vec![0.0; ds];
+    for w in train_w {
+        if !seen.insert((w.trajectory, w.start)) {
+            continue;
+        }
+        let t = &trajs[w.trajectory];
+        let a = w.start;
+        let s0 = &t.s[a * ds..(a + 1) * ds];
+        let s1 = &t.s[(a + 1) * ds..(a + 2) * ds];
+        let u = &t.u[a * du..(a + 1) * du];
+        inputs.extend_from_slice(&s0[lr.clone()]);
+        inputs.extend_from_slice(u);
+        match physics {
+            Some(p) => {
+                ode::integrate(p, solver, 1, s0, u, t_phys, &mut pn);
+                for d in lr.clone() {
+                    outputs.push(s1[d] - pn[d]);
+                }
+            }
+            None => {
+                for d in lr.clone() {
+                    outputs.push(s1[d] - s0[d]);
+                }
+            }
+        }
+    }
+    let ni = dynlab_dynamics::data::Normalizer::fit(&inputs, dz + du, 1e-8)?;
+    let no = dynlab_dynamics::data::Normalizer::fit(&outputs, dz, 1e-12)?;
+    if ni.mean.iter().chain(&ni.std).chain(&no.mean).chain(&no.std).any(|x| !x.is_finite()) {
+        return Err(LearnError::setting(
+            "data",
+            "non-finite statistics",
+            "the training data contains NaN or infinite values (a diverging physics step?)",
+        ));
+    }
+    Ok(Normalization {
+        input_mean: ni.mean,
+        input_std: ni.std,
+        output_mean: no.mean,
+        output_std: no.std,
+    })
+}
+
+/// Fits all parameters of `p` (nominal and effects, within their bounds) by Levenberg–Marquardt
+/// on the k-step open-loop residual of the learned dimensions, weighted like the training loss
+/// (pushing: `√w_d`, car: `1/σ_d` of the velocities, discount `√γ^(j−1)`), and sets the
+/// parameter standard errors from `σ²(JᵀJ)⁻¹`.
+#[allow(clippy::too_many_arguments)]
+fn fit_physics(
+    p: &mut PhysicsModel,
+    solver: &Solver,
+    world: World,
+    dt: f64,
+    trajs: &[StateTrajectory],
+    train_w: &[Window],
+    k: usize,
+    cfg: &TrainConfig,
+    loss: &Loss,
+) -> Result<PhysicsFit, LearnError> {
+    let lr = world.learned_dims();
+    let ds = world.state_dim();
+    let t_phys = if world == World::Push { 1.0 } else { dt };
+    let weights: Vec<f64> = match loss {
+        Loss::PoseMse { weights } => weights.iter().map(|w| w.sqrt()).collect(),
+        Loss::LRel { .. } => {
+            let mut rows = Vec::new();
+            for t in trajs {
+                for i in 0..t.len() {
+                    rows.extend_from_slice(&t.s[i * ds + lr.start..i * ds + lr.end]);
+                }
+            }
+            let nz = dynlab_dynamics::data::Normalizer::fit(&rows, lr.len(), 1e-9)?;
+            nz.std.iter().map(|s| 1.0 / s).collect()
+        }
+    };
+    let mut ws: Vec<Window> = train_w.to_vec();
+    SplitMix64::new(cfg.seed ^ 0x5851_F42D_4C95_7F2D).shuffle(&mut ws);
+    ws.truncate(cfg.physics_max_windows.max(1));
+    ws.sort_by_key(|w| (w.trajectory, w.start));
+    let specs = p.param_specs();
+    let np = specs.len();
+    let eval = |p: &PhysicsModel, with_j: bool| -> (Vec<f64>, Vec<f64>) {
+        let mut r = Vec::new();
+        let mut jac = Vec::new();
+        let mut tape = SolverTape::default();
+        let mut s = vec![0.0; ds];
+        let mut sn = vec![0.0; ds];
+        let mut sens = vec![0.0; ds * np];
+        let mut phis = vec![0.0; ds * ds];
+        let mut phit = vec![0.0; ds * np];
+        let mut ybar = vec![0.0; ds];
+        let mut sbar0 = vec![0.0; ds];
+        let du = world.action_dim();
+        let mut ubar = vec![0.0; du];
+        let mut pbar = vec![0.0; np];
+        for w in &ws {
+            let t = &trajs[w.trajectory];
+            s.copy_from_slice(&t.s[w.start * ds..(w.start + 1) * ds]);
+            sens.iter_mut().for_each(|x| *x = 0.0);
+            let mut g: f64 = 1.0;
+            for j in 0..k {
+                let a = w.start + j;
+                let u = &t.u[a * du..(a + 1) * du];
+                let rep = if with_j {
+                    ode::integrate_taped(p, solver, 1, &s, u, t_phys, &mut sn, &mut tape)
+                } else {
+                    ode::integrate(p, solver, 1, &s, u, t_phys, &mut sn)
+                };
+                let bad = rep.status != OdeStatus::Success;
+                if with_j {
+                    for d in 0..ds {
+                        ybar.iter_mut().for_each(|x| *x = 0.0);
+                        ybar[d] = 1.0;
+                        pbar.iter_mut().for_each(|x| *x = 0.0);
+                        ode::integrate_vjp(p, &tape, &ybar, &mut sbar0, &mut ubar, &mut pbar);
+                        phis[d * ds..(d + 1) * ds].copy_from_slice(&sbar0);
+                        phit[d * np..(d + 1) * np].copy_from_slice(&pbar);
+                    }
+                    let mut new = phit.clone();
+                    for r_ in 0..ds {
+                        for m in 0..ds {
+                            let a_ = phis[r_ * ds + m];
+                            if a_ != 0.0 {
+                                for c in 0..np {
+                                    new[r_ * np + c] += a_ * sens[m * np + c];
+                                }
+                            }
+                        }
+                    }
+                    sens = new;
+                }
+                let meas = &t.s[(a + 1) * ds..(a + 2) * ds];
+                let sg = g.sqrt();
+                for (q, d) in lr.clone().enumerate() {
+                    let e = sn[d] - meas[d];
+                    let e = if d == world.angle_dim() { wrap_angle(e) } else { e };
+                    let e = if bad || !e.is_finite() { 1e3 } else { e };
+                    r.push(sg * weights[q] * e);
+                    if with_j {
+                        jac.extend(sens[d * np..(d + 1) * np].iter().map(|x| {
+                            let v = sg * weights[q] * x;
+                            if v.is_finite() { v } else { 0.0 }
+                        }));
+                    }
+                }
+                s.copy_from_slice(&sn);
+                g *= cfg.gamma;
+            }
+        }
+        (r, jac)
+    };
+    let cost = |r: &[f64]| r.iter().map(|x| x * x).sum::<f64>();
+    let mut theta = p.params().to_vec();
+    let (mut r, mut jac) = eval(p, true);
+    let initial_cost = cost(&r);
+    let mut c = initial_cost;
+    let mut lambda = 1e-3;
+    let m = r.len();
+    let mut iterations = 0;
+    for _ in 0..cfg.physics_iterations {
+        iterations += 1;
+        let (jtj, jtr) = normal_equations(&jac, &r, np);
+        let mut improved = false;
+        for _ in 0..10 {
+            let mut a = jtj.clone();
+            for i in 0..np {
+                a[i * np + i] += lambda * jtj[i * np + i].max(1e-12) + 1e-15;
+            }
+            let neg: Vec<f64> = jtr.iter().map(|x| -x).collect();
+            let Some(delta) = solve(&a, &neg, np) else {
+                lambda *= 10.0;
+                continue;
+            };
+            let cand: Vec<f64> = theta
+                .iter()
+                .zip(&delta)
+                .zip(&specs)
+                .map(|((t, d), (_, s))| (t + d).clamp(s.lower, s.upper))
+                .collect();
+            let mut trial = p.clone();
+            if trial.set_params(&cand).is_err() {
+                lambda *= 10.0;
+                continue;
+            }
+            let (rt, _) = eval(&trial, false);
+            let ct = cost(&rt);
+            if ct.is_finite() && ct < c {
+                *p = trial;
+                theta = cand;
+                let rel = (c - ct) / c.max(f64::MIN_POSITIVE);
+                c = ct;
+                lambda = (lambda / 3.0).max(1e-12);
+                improved = rel > 1e-10;
+                break;
+            }
+            lambda *= 4.0;
+        }
+        if !improved {
+            break;
+        }
+        let (r2, j2) = eval(p, true);
+        r = r2;
+        jac = j2;
+    }
+    // standard errors
+    let (jtj, _) = normal_equations(&jac, &r, np);
+    let dof = (m as f64 - np as f64).max(1.0);
+    let sigma2 = cost(&r) / dof;
+    let trace: f64 = (0..np).map(|i| jtj[i * np + i]).sum::<f64>().max(1e-300);
+    let mut a = jtj.clone();
+    for i in 0..np {
+        a[i * np + i] += 1e-12 * trace / np as f64;
+    }
+    let mut std = vec![f64::NAN; np];
+    for i in 0..np {
+        let mut e = vec![0.0; np];
+        e[i] = 1.0;
+        if let Some(col) = solve(&a, &e, np) {
+            std[i] = (sigma2 * col[i]).max(0.0).sqrt();
+        }
+    }
+    p.set_std_errors(Some(std))?;
+    Ok(PhysicsFit {
+        initial_cost,
+        final_cost: c,
+        iterations,
+        residuals: m,
+    })
+}
+
+fn normal_equations(jac: &[f64], r: &[f64], np: usize) -> (Vec<f64>, Vec<f64>) {
+    let mut jtj = vec![0.0; np * np];
+    let mut jtr = vec![0.0; np];
+    for (row, ri) in jac.chunks_exact(np).zip(r) {
+        for a in 0..np {
+            if row[a] == 0.0 {
+                continue;
+            }
+            jtr[a] += row[a] * ri;
+            for b in 0..np {
+                jtj[a * np + b] += row[a] * row[b];
+            }
+        }
+    }
+    (jtj, jtr)
+}
+
+/// Solves `A x = b` (n × n) by Gaussian elimination with partial pivoting.
+fn solve(a: &[f64], b: &[f64], n: usize) -> Option<Vec<f64>> {
+    let mut m = a.to_vec();
+    let mut x = b.to_vec();
+    for col in 0..n {
+        let piv = (col..n).max_by(|&i, &j| m[i * n + col].abs().total_cmp(&m[j * n + col].abs()))?;
+        if m[piv * n + col].abs() < 1e-300 || !m[piv * n + col].is_finite() {
+            return None;
+        }
+        if piv != col {
+            for c in 0..n {
+                m.swap(piv * n + c, col * n + c);
+            }
+            x.swap(piv, col);
+        }
+        for r in col + 1..n {
+            let f = m[r * n + col] / m[col * n + col];
+            if f != 0.0 {
+                for c in col..n {
+                    m[r * n + c] -= f * m[col * n + c];
+                }
+                x[r] -= f * x[col];
+            }
+        }
+    }
+    for col in (0..n).rev() {
+        let mut s = x[col];
+        for c in col + 1..n {
+            s -= m[col * n + c] * x[c];
+        }
+        x[col] = s / m[col * n + col];
+    }
+    x.iter().all(|v| v.is_finite()).then_some(x)
+}
