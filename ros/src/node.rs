@@ -404,7 +404,7 @@ impl Node {
             .map_err(dds_create_err(format!("raw publisher on {resolved}")))?;
         Ok(RawPublisher {
             writer,
-            peers: Peers::new(participant, &resolved),
+            peers: Peers::new(participant, resolved),
         })
     }
 
@@ -449,7 +449,7 @@ impl Node {
             .map_err(dds_create_err(format!("raw subscription on {resolved}")))?;
         Ok(RawSubscription {
             reader,
-            peers: Peers::new(participant, &resolved),
+            peers: Peers::new(participant, resolved),
         })
     }
 
