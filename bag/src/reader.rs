@@ -387,10 +387,8 @@ fn resolve_files(path: &Path) -> Result<ResolvedFiles, BagError> {
     Ok((found, notes, None))
 }
 
-/// The largest uncompressed chunk this reader will inflate, and the largest plausible
-/// compression ratio: a damaged chunk header must not make the reader allocate gigabytes.
+/// The largest uncompressed chunk this reader will inflate (rosbag2 chunks are 1–4 MiB).
 const MAX_CHUNK_BYTES: u64 = 2 << 30;
-const MAX_CHUNK_RATIO: u64 = 1000;
 
 /// Schemas and channels of one file, and the messages read.
 struct FileReader<'b> {
@@ -530,31 +528,81 @@ impl FileReader<'_> {
         let Record::Chunk { header, data } = record else {
             return Err("bad chunk record".into());
         };
-        let limit =
-            MAX_CHUNK_BYTES.min(header.compressed_size.saturating_mul(MAX_CHUNK_RATIO) + (1 << 20));
-        if header.uncompressed_size > limit {
+        if header.uncompressed_size > MAX_CHUNK_BYTES {
             return Err(format!(
-                "chunk claims {} uncompressed bytes from {} compressed (implausible)",
-                header.uncompressed_size, header.compressed_size
+                "chunk claims {} uncompressed bytes (more than this reader accepts)",
+                header.uncompressed_size
             ));
         }
         if header.compression.is_empty() && header.uncompressed_size != header.compressed_size {
             return Err("uncompressed chunk whose sizes disagree".into());
         }
-        let reader = mcap::read::ChunkReader::new(header, &data).map_err(|e| format!("{e}"))?;
+        let records = decompress_chunk(&header.compression, &data, header.uncompressed_size)?;
+        if header.uncompressed_crc != 0 {
+            let computed = crc32fast::hash(&records);
+            if computed != header.uncompressed_crc {
+                return Err(format!(
+                    "chunk CRC mismatch (stored {:08x}, computed {computed:08x}): the chunk's \
+                     bytes were changed",
+                    header.uncompressed_crc
+                ));
+            }
+        }
         let mut batch = Vec::new();
-        for record in reader {
-            let record = record.map_err(|e| match e {
-                mcap::McapError::BadChunkCrc { saved, calculated } => format!(
-                    "chunk CRC mismatch (stored {saved:08x}, computed {calculated:08x}): the \
-                     chunk's bytes were changed"
-                ),
-                other => format!("chunk content unreadable: {other}"),
-            })?;
-            batch.extend(Self::to_pending(record));
+        let mut pos = 0usize;
+        while pos < records.len() {
+            let Some(head) = records.get(pos..pos + 9) else {
+                return Err("chunk content ends inside a record header".into());
+            };
+            let mut len_bytes = [0u8; 8];
+            len_bytes.copy_from_slice(&head[1..9]);
+            let len = u64::from_le_bytes(len_bytes);
+            if len > (records.len() - pos - 9) as u64 {
+                return Err(format!(
+                    "a {} record in the chunk claims {len} bytes, more than the chunk holds",
+                    op_name(head[0])
+                ));
+            }
+            let body = &records[pos + 9..pos + 9 + len as usize];
+            if matches!(head[0], op::SCHEMA | op::CHANNEL | op::MESSAGE) {
+                let record = mcap::parse_record(head[0], body)
+                    .map_err(|e| format!("damaged {} record in chunk: {e}", op_name(head[0])))?;
+                batch.extend(Self::to_pending(record));
+            }
+            pos += 9 + len as usize;
         }
         Ok(batch)
     }
+}
+
+/// The records of a chunk: decompressed with output bounded by the size the chunk header states
+/// (a damaged header must not make the reader allocate more than the data yields).
+fn decompress_chunk(compression: &str, data: &[u8], size: u64) -> Result<Vec<u8>, String> {
+    use std::io::Read;
+    let mut out = Vec::new();
+    let result = match compression {
+        "" => {
+            out.extend_from_slice(data);
+            Ok(0)
+        }
+        "zstd" => zstd::stream::read::Decoder::new(data)
+            .and_then(|d| d.take(size.saturating_add(1)).read_to_end(&mut out)),
+        "lz4" => lz4::Decoder::new(data)
+            .and_then(|d| d.take(size.saturating_add(1)).read_to_end(&mut out)),
+        other => {
+            return Err(format!(
+                "chunk compression `{other}` is not supported (only zstd, lz4 or none)"
+            ));
+        }
+    };
+    result.map_err(|e| format!("{compression} chunk does not decompress: {e}"))?;
+    if out.len() as u64 != size {
+        return Err(format!(
+            "chunk decompresses to {} bytes, its header says {size}",
+            out.len()
+        ));
+    }
+    Ok(out)
 }
 
 /// Whether a record that starts at `pos` looks plausible (for resuming after a damaged chunk).

@@ -16,7 +16,7 @@ use crate::type_hash::rihs01;
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Compression {
     /// zstd, as rosbag2's `zstd_fast` / `zstd_small` presets write (the default here: a
-    /// PoseStamped bag is 2.2× smaller than uncompressed and writes at half the speed; see
+    /// PoseStamped bag is 2.2× smaller than uncompressed and writes at about half the speed; see
     /// `bag/benches/bag_write.rs`).
     #[default]
     Zstd,
