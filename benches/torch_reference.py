@@ -53,18 +53,21 @@ def rk4_step(f, s, u):
     return s + DT / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
 
 
-def timed(fn, min_seconds=0.4, min_iters=5):
-    """Seconds per call: warm up, then run until min_seconds have passed."""
+def timed(fn, min_seconds=0.4):
+    """Seconds per call: 3 warm-up calls, then blocks of at least 30 ms (and 3 calls) for at least
+    min_seconds; the fastest block counts (as in nn_speed.rs: other processes only slow blocks)."""
     for _ in range(3):
         fn()
-    n = 0
-    t0 = time.perf_counter()
-    while True:
-        fn()
-        n += 1
-        el = time.perf_counter() - t0
-        if el >= min_seconds and n >= min_iters:
-            return el / n
+    start = time.perf_counter()
+    best = float("inf")
+    while time.perf_counter() - start < min_seconds or best == float("inf"):
+        t0 = time.perf_counter()
+        n = 0
+        while n < 3 or time.perf_counter() - t0 < 0.03:
+            fn()
+            n += 1
+        best = min(best, (time.perf_counter() - t0) / n)
+    return best
 
 
 def bench_train(kind, steps):
