@@ -136,7 +136,8 @@ def take_until(reader: DataReader, count: int, timeout: float, idle: float | Non
     deadline = time.monotonic() + timeout
     last = None
     while len(got) < count and time.monotonic() < deadline:
-        batch = reader.take(N=1000)
+        # Drop InvalidSamples (instance state changes when a writer leaves).
+        batch = [s for s in reader.take(N=1000) if type(s).__name__ != "InvalidSample"]
         if batch:
             got.extend(batch)
             last = time.monotonic()
