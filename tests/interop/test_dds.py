@@ -25,7 +25,7 @@ from rosbags.rosbag2 import Writer as Rosbag2Writer
 from rosbags.typesys import Stores, get_typestore
 
 from conftest import binary
-from peers.ros_types import (RELIABLE, RELIABLE_KEEP_ALL, SENSOR_DATA, Clock, Peer, pose,
+from peers.ros_types import (RELIABLE, RELIABLE_KEEP_ALL, SENSOR_DATA, Clock, Peer, Time, pose,
                              pose_tuple, take_until, wait_matched)
 
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
@@ -284,3 +284,30 @@ def test_recorder_killed_with_sigkill_leaves_a_bag_holding_all_but_the_last_seco
     must_have = sum(1 for t in sent_at if t <= killed_at - 1.25)  # flushed every second
     assert must_have > 100
     assert len(indices) >= must_have, f"{len(indices)} messages in the bag, {must_have} sent > 1 s before the kill"
+
+
+def test_recorder_with_use_sim_time_logs_messages_at_clock_time(tmp_path):
+    domain, topic = 16, unique("/push/block_pose")
+    params = tmp_path / "params.yaml"
+    params.write_text("/**:\n  ros__parameters:\n    use_sim_time: true\n")
+    bag = tmp_path / "simtime"
+    rec = start("recorder", "-o", bag, topic, "--ros-args", "--params-file", params, domain=domain)
+    peer = Peer(domain)
+    clock = peer.writer("/clock", Clock, qos=SENSOR_DATA)
+    writer = peer.writer(topic, qos=RELIABLE_KEEP_ALL)
+    wait_for_recorder_subscription(writer, rec)
+    assert wait_matched(clock, 15), "the recorder never subscribed to /clock"
+    sim_ns = 42_000_000_000
+    for i in range(50):
+        sim_ns += 10_000_000
+        clock.write(Clock(clock=Time(sec=sim_ns // 10**9, nanosec=sim_ns % 10**9)))
+        time.sleep(0.005)
+        writer.write(pose(i))
+        time.sleep(0.005)
+    assert writer.wait_for_acks(int(5e9))
+    stop(rec)
+    got = rosbags_messages(bag, topic)
+    assert [pose_tuple(m) for m, _ in got] == [pose_tuple(pose(i)) for i in range(50)]
+    log_times = [t for _, t in got]
+    assert all(42_000_000_000 <= t <= sim_ns for t in log_times), log_times[:5]
+    assert log_times == sorted(log_times) and log_times[-1] > log_times[0]
