@@ -15,6 +15,7 @@ import time
 import uuid
 
 import pytest
+from cyclonedds.core import Policy, Qos
 from mcap.reader import make_reader
 from mcap.stream_reader import StreamReader
 from mcap_ros2.decoder import DecoderFactory
@@ -140,15 +141,17 @@ def test_player_to_cyclone_subscriber_every_message_identical_and_in_order(tmp_p
     write_pose_bag(bag, topic, n, period_ns=5_000_000)  # 200 Hz, 0.6 s
     peer = Peer(domain)
     reader = peer.reader(topic, qos=RELIABLE_KEEP_ALL)
-    clock_reader = peer.reader("/clock", Clock, qos=SENSOR_DATA)
+    # best effort like ROS 2's clock QoS, keeping every sample until the test takes them
+    clock_reader = peer.reader("/clock", Clock, qos=Qos(Policy.Reliability.BestEffort, Policy.History.KeepAll))
     play = start("player", bag, "--wait-for-subscribers", 15, domain=domain)
     got = take_until(reader, n, timeout=30)
     stop(play, timeout=30)
     assert [pose_tuple(p) for p in got] == [pose_tuple(pose(i)) for i in range(n)]
-    # /clock carried bag time
-    clocks = [c.clock.sec * 10**9 + c.clock.nanosec for c in clock_reader.take(N=10000)]
-    if clocks:  # best effort: may all be lost only if discovery was slower than playback
-        assert all(1_700_000_000_000_000_000 <= c <= 1_700_000_000_000_000_000 + n * 5_000_000 for c in clocks)
+    # /clock carried bag time, never going backwards (100 Hz over 0.6 s of playback)
+    clocks = [c.clock.sec * 10**9 + c.clock.nanosec for c in clock_reader.take(N=10000) if isinstance(c, Clock)]
+    assert len(clocks) > 10, clocks
+    assert clocks == sorted(clocks)
+    assert all(1_700_000_000_000_000_000 <= c <= 1_700_000_000_000_000_000 + (n - 1) * 5_000_000 for c in clocks)
 
 
 def test_player_plays_a_bare_mcap_at_double_rate_with_topic_filter(tmp_path):
