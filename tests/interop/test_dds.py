@@ -314,3 +314,17 @@ def test_recorder_with_use_sim_time_logs_messages_at_clock_time(tmp_path):
     log_times = [t for _, t in got]
     assert all(42_000_000_000 <= t <= sim_ns for t in log_times), log_times[:5]
     assert log_times == sorted(log_times) and log_times[-1] > log_times[0]
+
+
+def test_player_loops_until_interrupted(tmp_path):
+    domain, topic = 17, unique("/car/pose")
+    bag = tmp_path / "short"
+    write_pose_bag(bag, topic, 10, period_ns=20_000_000)  # 0.18 s of bag
+    peer = Peer(domain)
+    reader = peer.reader(topic, qos=RELIABLE_KEEP_ALL)
+    play = start("player", bag, "--loop", "--rate", 2.0, "--wait-for-subscribers", 15, domain=domain)
+    got = take_until(reader, 25, timeout=30)
+    stop(play, signal.SIGINT)
+    frames = [p.header.frame_id for p in got]
+    assert len(frames) >= 25
+    assert frames == [f"world_{i % 10}" for i in range(len(frames))], "passes repeat the bag in order"
