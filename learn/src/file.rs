@@ -200,7 +200,7 @@ pub fn save_model(
     let weights = dir.join(WEIGHTS);
     match model.network() {
         Some(n) => {
-            let bytes = n.mlp.to_safetensors()?;
+            let bytes = weights_bytes(&n.mlp)?;
             std::fs::write(&weights, bytes).map_err(io(&weights))?;
         }
         None => {
@@ -212,6 +212,34 @@ pub fn save_model(
     let path = dir.join(MODEL_JSON);
     std::fs::write(&path, json + "\n").map_err(io(&path))?;
     Ok(())
+}
+
+/// The network's weights as safetensors with the tensor names of `dynlab-nn`
+/// (`layers.{l}.weight`, `layers.{l}.bias`) and one metadata entry, so the bytes are the same on
+/// every run (the architecture is in `model.json`).
+pub fn weights_bytes(mlp: &Mlp) -> Result<Vec<u8>, LearnError> {
+    use safetensors::tensor::{Dtype, TensorView};
+    let tensors: Vec<(String, Vec<usize>, Vec<u8>)> = mlp
+        .named_tensors("")
+        .into_iter()
+        .map(|(name, shape, v)| (name, shape, v.iter().flat_map(|x| x.to_le_bytes()).collect()))
+        .collect();
+    let mut views = Vec::with_capacity(tensors.len());
+    for (name, shape, bytes) in &tensors {
+        let view = TensorView::new(Dtype::F32, shape.clone(), bytes).map_err(|e| {
+            LearnError::CorruptModel {
+                path: PathBuf::from(WEIGHTS),
+                reason: e.to_string(),
+            }
+        })?;
+        views.push((name.as_str(), view));
+    }
+    let mut meta = std::collections::HashMap::new();
+    meta.insert("format".to_string(), "dynlab-model weights; see model.json".to_string());
+    safetensors::serialize(views, Some(meta)).map_err(|e| LearnError::CorruptModel {
+        path: PathBuf::from(WEIGHTS),
+        reason: e.to_string(),
+    })
 }
 
 /// Reads and validates `model.json` only.
@@ -289,20 +317,22 @@ pub fn load_model(
         (Some(nm), true) => {
             let wpath: PathBuf = dir.join(WEIGHTS);
             let bytes = std::fs::read(&wpath).map_err(io(&wpath))?;
-            let mlp = Mlp::from_safetensors(&bytes).map_err(|e| LearnError::CorruptModel {
+            let acts = nm
+                .activations
+                .iter()
+                .map(|a| a.parse::<dynlab_nn::Activation>())
+                .collect::<Result<Vec<_>, _>>()
+                .map_err(|e| corrupt(format!("network.activations: {e}")))?;
+            let spec = dynlab_nn::MlpSpec::new(&nm.sizes, &acts)
+                .map_err(|e| corrupt(format!("network: {e}")))?;
+            let mut mlp = Mlp::zeros(spec);
+            mlp.load_safetensors(&bytes).map_err(|e| LearnError::CorruptModel {
                 path: wpath.clone(),
-                reason: e.to_string(),
+                reason: format!(
+                    "{e} (model.json says the network is {:?} {:?})",
+                    nm.sizes, nm.activations
+                ),
             })?;
-            let acts: Vec<String> = mlp.spec().activations().iter().map(|a| a.to_string()).collect();
-            if mlp.sizes() != nm.sizes.as_slice() || acts != nm.activations {
-                return Err(corrupt(format!(
-                    "{WEIGHTS} holds a network {:?} {:?}, model.json says {:?} {:?}",
-                    mlp.sizes(),
-                    acts,
-                    nm.sizes,
-                    nm.activations
-                )));
-            }
             let norm = meta
                 .normalization
                 .clone()

@@ -159,6 +159,7 @@ pub struct NetTape(RefCell<NetTapeInner>);
 #[derive(Debug, Default)]
 struct NetTapeInner {
     ws: Option<Workspace>,
+    sizes: Vec<usize>,
     x: Vec<f32>,
     dy: Vec<f32>,
     dx: Vec<f32>,
@@ -202,6 +203,11 @@ impl VectorField<f32> for NetField<'_> {
     }
     fn eval_taped(&self, n: usize, s: &[f32], u: &[f32], out: &mut [f32], tape: &mut NetTape) {
         let t = tape.0.get_mut();
+        if t.sizes != self.net.mlp.sizes() {
+            // a tape reused with another network (buffers are per architecture)
+            t.ws = None;
+            t.sizes = self.net.mlp.sizes().to_vec();
+        }
         let ws = t.ws.get_or_insert_with(|| self.net.mlp.workspace());
         t.n = n;
         self.net.eval_with(n, s, u, out, ws, &mut t.x);

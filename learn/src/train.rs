@@ -357,7 +357,7 @@ impl Ctx<'_> {
         resize(&mut st.z, k + 1, n * dz);
         resize(&mut st.u, k, n * du);
         resize(&mut st.tgt, k, n * dz);
-        let hybrid = model.kind() == ModelKind::Hybrid;
+        let hybrid = model.kind().has_physics();
         if hybrid {
             resize(&mut st.pose, k, n * 3);
         }
@@ -400,7 +400,7 @@ impl Ctx<'_> {
                         *a += b;
                     }
                 }
-                ModelKind::Hybrid => {
+                ModelKind::Hybrid | ModelKind::Physics => {
                     self.phys_forward(n, j, st);
                     let zn = &mut st.z[j + 1];
                     for i in 0..n {
