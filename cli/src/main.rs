@@ -4,6 +4,8 @@
 //! adapter over a library crate.
 
 mod bag_cmd;
+mod eval_cmd;
+mod train_cmd;
 
 use std::process::ExitCode;
 
@@ -21,12 +23,18 @@ struct Cli {
 enum Command {
     /// Inspect, export and import rosbag2 (MCAP) bags.
     Bag(bag_cmd::BagArgs),
+    /// Train a dynamics model (residual, NeuralODE, physics, hybrid) from bags.
+    Train(train_cmd::TrainArgs),
+    /// Evaluate a model on a bag: one-step and k-step errors per dimension, TVE for the car.
+    EvalModel(eval_cmd::EvalArgs),
 }
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Bag(args) => bag_cmd::run(args),
+        Command::Train(args) => train_cmd::run(args),
+        Command::EvalModel(args) => eval_cmd::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -145,7 +145,11 @@ pub enum LearnError {
 }
 
 impl LearnError {
-    pub(crate) fn setting(name: &'static str, value: impl ToString, hint: impl Into<String>) -> Self {
+    pub(crate) fn setting(
+        name: &'static str,
+        value: impl ToString,
+        hint: impl Into<String>,
+    ) -> Self {
         LearnError::InvalidSetting {
             name,
             value: value.to_string(),

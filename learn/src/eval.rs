@@ -71,7 +71,12 @@ fn dim_errors(world: World, sq: &[f64], abs: &[f64], n: usize) -> Vec<DimError> 
 
 /// Evaluates `model` on every k-step window of `data` (and, for the car, TVE over segments of
 /// `segment_s` seconds).
-pub fn evaluate(model: &Model, data: &Dataset, k: usize, segment_s: f64) -> Result<EvalReport, LearnError> {
+pub fn evaluate(
+    model: &Model,
+    data: &Dataset,
+    k: usize,
+    segment_s: f64,
+) -> Result<EvalReport, LearnError> {
     let world = model.world();
     if data.world != world {
         return Err(LearnError::WorldMismatch {
@@ -109,7 +114,11 @@ pub fn evaluate(model: &Model, data: &Dataset, k: usize, segment_s: f64) -> Resu
                 let e: Vec<f64> = (0..ds)
                     .map(|d| {
                         let x = p[d] - t[d];
-                        if d == world.angle_dim() { wrap_angle(x) } else { x }
+                        if d == world.angle_dim() {
+                            wrap_angle(x)
+                        } else {
+                            x
+                        }
                     })
                     .collect();
                 if j == 0 {

@@ -120,7 +120,10 @@ impl ModelFile {
         let world = model.world();
         let names = |v: &[&str]| v.iter().map(|s| s.to_string()).collect::<Vec<_>>();
         let lr = world.learned_dims();
-        let learned: Vec<String> = world.state_names()[lr].iter().map(|s| s.to_string()).collect();
+        let learned: Vec<String> = world.state_names()[lr]
+            .iter()
+            .map(|s| s.to_string())
+            .collect();
         let network = model.network().map(|n| NetworkMeta {
             sizes: n.mlp.sizes().to_vec(),
             activations: n.mlp.spec().activations().iter().map(|a| a.to_string()).collect(),
@@ -150,7 +153,10 @@ impl ModelFile {
                 .map(|(i, ((name, &value), (_, spec)))| ParamEntry {
                     name,
                     value,
-                    std: p.std_errors().and_then(|s| s.get(i).copied()).filter(|v| v.is_finite()),
+                    std: p
+                        .std_errors()
+                        .and_then(|s| s.get(i).copied())
+                        .filter(|v| v.is_finite()),
                     unit: spec.unit.to_string(),
                 })
                 .collect(),
@@ -222,7 +228,13 @@ pub fn weights_bytes(mlp: &Mlp) -> Result<Vec<u8>, LearnError> {
     let tensors: Vec<(String, Vec<usize>, Vec<u8>)> = mlp
         .named_tensors("")
         .into_iter()
-        .map(|(name, shape, v)| (name, shape, v.iter().flat_map(|x| x.to_le_bytes()).collect()))
+        .map(|(name, shape, v)| {
+            (
+                name,
+                shape,
+                v.iter().flat_map(|x| x.to_le_bytes()).collect(),
+            )
+        })
         .collect();
     let mut views = Vec::with_capacity(tensors.len());
     for (name, shape, bytes) in &tensors {
@@ -235,7 +247,10 @@ pub fn weights_bytes(mlp: &Mlp) -> Result<Vec<u8>, LearnError> {
         views.push((name.as_str(), view));
     }
     let mut meta = std::collections::HashMap::new();
-    meta.insert("format".to_string(), "dynlab-model weights; see model.json".to_string());
+    meta.insert(
+        "format".to_string(),
+        "dynlab-model weights; see model.json".to_string(),
+    );
     safetensors::serialize(views, Some(meta)).map_err(|e| LearnError::CorruptModel {
         path: PathBuf::from(WEIGHTS),
         reason: e.to_string(),
@@ -326,13 +341,14 @@ pub fn load_model(
             let spec = dynlab_nn::MlpSpec::new(&nm.sizes, &acts)
                 .map_err(|e| corrupt(format!("network: {e}")))?;
             let mut mlp = Mlp::zeros(spec);
-            mlp.load_safetensors(&bytes).map_err(|e| LearnError::CorruptModel {
-                path: wpath.clone(),
-                reason: format!(
-                    "{e} (model.json says the network is {:?} {:?})",
-                    nm.sizes, nm.activations
-                ),
-            })?;
+            mlp.load_safetensors(&bytes)
+                .map_err(|e| LearnError::CorruptModel {
+                    path: wpath.clone(),
+                    reason: format!(
+                        "{e} (model.json says the network is {:?} {:?})",
+                        nm.sizes, nm.activations
+                    ),
+                })?;
             let norm = meta
                 .normalization
                 .clone()
@@ -345,7 +361,8 @@ pub fn load_model(
     let (physics, physics_solver) = match (&meta.physics, meta.kind.has_physics()) {
         (Some(pm), true) => {
             let names: Vec<&str> = pm.effects.iter().map(|s| s.as_str()).collect();
-            let effects = PhysicsModel::parse_effects(&names).map_err(|e| corrupt(e.to_string()))?;
+            let effects =
+                PhysicsModel::parse_effects(&names).map_err(|e| corrupt(e.to_string()))?;
             let mut p = PhysicsModel::new(meta.world.robot(), &effects)
                 .map_err(|e| corrupt(e.to_string()))?;
             let expected = p.param_names();
@@ -357,8 +374,13 @@ pub fn load_model(
             }
             let values: Vec<f64> = pm.params.iter().map(|e| e.value).collect();
             p.set_params(&values).map_err(|e| corrupt(e.to_string()))?;
-            let std: Vec<f64> = pm.params.iter().map(|e| e.std.unwrap_or(f64::NAN)).collect();
-            p.set_std_errors(Some(std)).map_err(|e| corrupt(e.to_string()))?;
+            let std: Vec<f64> = pm
+                .params
+                .iter()
+                .map(|e| e.std.unwrap_or(f64::NAN))
+                .collect();
+            p.set_std_errors(Some(std))
+                .map_err(|e| corrupt(e.to_string()))?;
             (Some(p), pm.solver)
         }
         (None, true) => return Err(corrupt(format!("a {} model needs \"physics\"", meta.kind))),

@@ -26,12 +26,13 @@ pub mod train;
 pub mod world;
 
 pub use dataset::{BagSource, Dataset, Topics, load_bags};
+pub use dynlab_dynamics as dynamics;
 pub use error::LearnError;
 
 pub use model::{Model, ModelKind, RolloutWorkspace, StepJacobians};
 pub use net::{Network, Normalization};
 
-pub use world::World;
 pub use eval::{EvalReport, evaluate};
 pub use file::{ModelFile, load_model, save_model};
 pub use train::{Loss, Progress, Split, TrainConfig, TrainOutcome, train};
+pub use world::World;

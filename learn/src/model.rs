@@ -139,14 +139,32 @@ impl Model {
             return Err(LearnError::setting(
                 "network",
                 if net.is_some() { "present" } else { "missing" },
-                format!("a {kind} model {} a network", if kind.has_network() { "needs" } else { "has no" }),
+                format!(
+                    "a {kind} model {} a network",
+                    if kind.has_network() {
+                        "needs"
+                    } else {
+                        "has no"
+                    }
+                ),
             ));
         }
         if kind.has_physics() != physics.is_some() {
             return Err(LearnError::setting(
                 "physics",
-                if physics.is_some() { "present" } else { "missing" },
-                format!("a {kind} model {} a physics model", if kind.has_physics() { "needs" } else { "has no" }),
+                if physics.is_some() {
+                    "present"
+                } else {
+                    "missing"
+                },
+                format!(
+                    "a {kind} model {} a physics model",
+                    if kind.has_physics() {
+                        "needs"
+                    } else {
+                        "has no"
+                    }
+                ),
             ));
         }
         let is_node = matches!(
@@ -196,8 +214,14 @@ impl Model {
                     format!("needs {} input and {dz} output statistics", net.mlp.n_in()),
                 ));
             }
-            if n.input_std.iter().chain(&n.output_std).any(|s| !(s.is_finite() && *s > 0.0))
-                || n.input_mean.iter().chain(&n.output_mean).any(|m| !m.is_finite())
+            if n.input_std
+                .iter()
+                .chain(&n.output_std)
+                .any(|s| !(s.is_finite() && *s > 0.0))
+                || n.input_mean
+                    .iter()
+                    .chain(&n.output_mean)
+                    .any(|m| !m.is_finite())
             {
                 return Err(LearnError::setting(
                     "normalization",
@@ -325,7 +349,13 @@ impl Model {
         Ok(self.step_unchecked(n, s, u, out))
     }
 
-    pub(crate) fn step_unchecked(&self, n: usize, s: &[f64], u: &[f64], out: &mut [f64]) -> OdeStatus {
+    pub(crate) fn step_unchecked(
+        &self,
+        n: usize,
+        s: &[f64],
+        u: &[f64],
+        out: &mut [f64],
+    ) -> OdeStatus {
         let ds = self.dim_s();
         let lr = self.world.learned_dims();
         let dz = lr.len();
@@ -339,7 +369,11 @@ impl Model {
             return status;
         };
         let z: Vec<f32> = (0..n)
-            .flat_map(|i| s[i * ds + lr.start..i * ds + lr.end].iter().map(|&x| x as f32))
+            .flat_map(|i| {
+                s[i * ds + lr.start..i * ds + lr.end]
+                    .iter()
+                    .map(|&x| x as f32)
+            })
             .collect();
         let uf: Vec<f32> = u.iter().map(|&x| x as f32).collect();
         let mut zn = vec![0.0f32; n * dz];
@@ -385,12 +419,8 @@ impl Model {
                         f64::from(zn[i * 3 + 1]),
                         f64::from(zn[i * 3 + 2]),
                     ];
-                    let p = car_pose_update(
-                        self.dt,
-                        [si[0], si[1], si[2]],
-                        [si[3], si[4], si[5]],
-                        vn,
-                    );
+                    let p =
+                        car_pose_update(self.dt, [si[0], si[1], si[2]], [si[3], si[4], si[5]], vn);
                     out[i * 6..i * 6 + 3].copy_from_slice(&p);
                     out[i * 6 + 3..i * 6 + 6].copy_from_slice(&vn);
                 }
@@ -477,10 +507,18 @@ impl Model {
             );
         }
         let Some(net) = &self.net else {
-            return Ok(StepJacobians { next, ds: js, du: ju });
+            return Ok(StepJacobians {
+                next,
+                ds: js,
+                du: ju,
+            });
         };
         let z: Vec<f32> = (0..n)
-            .flat_map(|i| s[i * ds + lr.start..i * ds + lr.end].iter().map(|&x| x as f32))
+            .flat_map(|i| {
+                s[i * ds + lr.start..i * ds + lr.end]
+                    .iter()
+                    .map(|&x| x as f32)
+            })
             .collect();
         let uf: Vec<f32> = u.iter().map(|&x| x as f32).collect();
         // core: z⁺ (or the residual for hybrid) and its Jacobians wrt z and u
@@ -498,8 +536,12 @@ impl Model {
                 let residual = self.kind == ModelKind::Residual;
                 for b in 0..n {
                     for o in 0..dz {
-                        zn[b * dz + o] =
-                            f64::from(y[b * dz + o]) + if residual { f64::from(z[b * dz + o]) } else { 0.0 };
+                        zn[b * dz + o] = f64::from(y[b * dz + o])
+                            + if residual {
+                                f64::from(z[b * dz + o])
+                            } else {
+                                0.0
+                            };
                         for i in 0..dz {
                             jz[b * dz * dz + o * dz + i] = jn[b * dz * ni + o * ni + i]
                                 + if residual && i == o { 1.0 } else { 0.0 };
@@ -543,7 +585,11 @@ impl Model {
                     }
                 }
             }
-            return Ok(StepJacobians { next, ds: js, du: ju });
+            return Ok(StepJacobians {
+                next,
+                ds: js,
+                du: ju,
+            });
         }
         match self.world {
             World::Push => {
@@ -588,7 +634,11 @@ impl Model {
                 }
             }
         }
-        Ok(StepJacobians { next, ds: js, du: ju })
+        Ok(StepJacobians {
+            next,
+            ds: js,
+            du: ju,
+        })
     }
 
     /// Whether [`Model::rollout_f32`] runs the allocation-free batched path for this kind

@@ -212,7 +212,14 @@ impl VectorField<f32> for NetField<'_> {
         t.n = n;
         self.net.eval_with(n, s, u, out, ws, &mut t.x);
     }
-    fn vjp(&self, tape: &NetTape, ybar: &[f32], sbar: &mut [f32], ubar: &mut [f32], pbar: &mut [f32]) {
+    fn vjp(
+        &self,
+        tape: &NetTape,
+        ybar: &[f32],
+        sbar: &mut [f32],
+        ubar: &mut [f32],
+        pbar: &mut [f32],
+    ) {
         let mut t = tape.0.borrow_mut();
         let t = &mut *t;
         let (n, dz, du) = (t.n, self.net.dz, self.net.du());

@@ -8,7 +8,9 @@
 //! does not depend on [`TrainConfig::threads`]: the same seed and data give bit-identical weights.
 
 use dynlab_dynamics::conventions::{LossNorm, wrap_angle};
-use dynlab_dynamics::data::{SplitMix64, StateTrajectory, Window, split_trajectories, split_windows_overlapping, windows};
+use dynlab_dynamics::data::{
+    SplitMix64, StateTrajectory, Window, split_trajectories, split_windows_overlapping, windows,
+};
 use dynlab_dynamics::ode::{self, InputTape, OdeStatus, Solver, SolverTape, VectorField};
 use dynlab_dynamics::physics::{Effect, PhysicsModel};
 use dynlab_nn::{Activation, Adam, AdamConfig, Init, Mlp, MlpSpec};
@@ -183,7 +185,11 @@ impl TrainConfig {
         if let Some(h) = &self.hidden
             && (h.is_empty() || h.contains(&0))
         {
-            return Err(s("hidden", format!("{h:?}"), "give at least one non-zero layer width"));
+            return Err(s(
+                "hidden",
+                format!("{h:?}"),
+                "give at least one non-zero layer width",
+            ));
         }
         if !(self.segment_s > 0.0) {
             return Err(s("segment_s", self.segment_s, "must be > 0 seconds"));
@@ -193,7 +199,9 @@ impl TrainConfig {
 
     /// The loss for `world`.
     pub fn loss_for(&self, world: World) -> Loss {
-        self.loss.clone().unwrap_or_else(|| Loss::default_for(world))
+        self.loss
+            .clone()
+            .unwrap_or_else(|| Loss::default_for(world))
     }
 }
 
@@ -293,7 +301,11 @@ impl Data {
             .iter()
             .map(|t| {
                 (0..t.len())
-                    .flat_map(|i| t.s[i * t.dim_s + lr.start..i * t.dim_s + lr.end].iter().map(|&x| x as f32))
+                    .flat_map(|i| {
+                        t.s[i * t.dim_s + lr.start..i * t.dim_s + lr.end]
+                            .iter()
+                            .map(|&x| x as f32)
+                    })
                     .collect()
             })
             .collect();
@@ -346,7 +358,13 @@ fn resize<T: Clone + Default>(v: &mut Vec<Vec<T>>, n: usize, len: usize) {
 impl Ctx<'_> {
     /// Loss (sum over windows, scaled by `1/norm_n`) and, if `grad` is given, its gradient wrt
     /// the network parameters (added to `grad`).
-    fn chunk(&self, ws: &[Window], st: &mut ChunkState, grad: Option<&mut [f32]>, norm_n: f64) -> f64 {
+    fn chunk(
+        &self,
+        ws: &[Window],
+        st: &mut ChunkState,
+        grad: Option<&mut [f32]>,
+        norm_n: f64,
+    ) -> f64 {
         let model = self.model;
         let world = model.world();
         let net = model.network();
@@ -418,7 +436,16 @@ impl Ctx<'_> {
                 }
                 _ => {
                     if let Some(f) = &field {
-                        ode::integrate_taped(f, &solver, n, zj, &st.u[j], 1.0, zn, &mut st.node_tapes[j]);
+                        ode::integrate_taped(
+                            f,
+                            &solver,
+                            n,
+                            zj,
+                            &st.u[j],
+                            1.0,
+                            zn,
+                            &mut st.node_tapes[j],
+                        );
                     }
                 }
             }
@@ -433,7 +460,11 @@ impl Ctx<'_> {
             resize(&mut dl, k, n * dz);
         }
         let mut g = 1.0;
-        let angle = if world == World::Push { Some(world.angle_dim()) } else { None };
+        let angle = if world == World::Push {
+            Some(world.angle_dim())
+        } else {
+            None
+        };
         for j in 0..k {
             let pred = &st.z[j + 1];
             let tgt = &st.tgt[j];
@@ -613,7 +644,13 @@ impl Ctx<'_> {
 }
 
 /// Loss of the model over `ws` (mean over windows), on `threads` threads in fixed chunks.
-fn loss_over(ctx: &Ctx, ws: &[Window], states: &mut [ChunkState], chunk: usize, threads: usize) -> f64 {
+fn loss_over(
+    ctx: &Ctx,
+    ws: &[Window],
+    states: &mut [ChunkState],
+    chunk: usize,
+    threads: usize,
+) -> f64 {
     if ws.is_empty() {
         return 0.0;
     }
@@ -745,7 +782,10 @@ pub fn train(
     }
     // split
     let trajs = match (world, cfg.split) {
-        (World::Car, _) => segment(&data.trajectories, (cfg.segment_s / dt).round().max(2.0) as usize + 1),
+        (World::Car, _) => segment(
+            &data.trajectories,
+            (cfg.segment_s / dt).round().max(2.0) as usize + 1,
+        ),
         _ => data.trajectories.clone(),
     };
     let lengths: Vec<usize> = trajs.iter().map(|t| t.len()).collect();
@@ -753,7 +793,9 @@ pub fn train(
     let (train_w, val_w, val_segments) = match cfg.split {
         Split::Trajectories => {
             let sp = split_trajectories(trajs.len(), cfg.validation_fraction, cfg.seed)?;
-            let is_val: Vec<bool> = (0..trajs.len()).map(|i| sp.validation.binary_search(&i).is_ok()).collect();
+            let is_val: Vec<bool> = (0..trajs.len())
+                .map(|i| sp.validation.binary_search(&i).is_ok())
+                .collect();
             let (v, t): (Vec<Window>, Vec<Window>) = all.iter().partition(|w| is_val[w.trajectory]);
             let segs = sp.validation.iter().map(|&i| trajs[i].clone()).collect();
             (t, v, segs)
@@ -764,12 +806,14 @@ pub fn train(
         }
     };
     if train_w.is_empty() || val_w.is_empty() {
-        return Err(LearnError::Data(dynlab_dynamics::data::DataError::TooLittleData {
-            needed: k + 1,
-            k,
-            longest: lengths.iter().copied().max().unwrap_or(0),
-            trajectories: trajs.len(),
-        }));
+        return Err(LearnError::Data(
+            dynlab_dynamics::data::DataError::TooLittleData {
+                needed: k + 1,
+                k,
+                longest: lengths.iter().copied().max().unwrap_or(0),
+                trajectories: trajs.len(),
+            },
+        ));
     }
     let data_f = Data::new(trajs, world);
     let loss = cfg.loss_for(world);
@@ -779,7 +823,10 @@ pub fn train(
         return Err(LearnError::setting(
             "loss.weights",
             format!("{weights:?}"),
-            format!("give one weight per learned dimension ({})", world.learned_dims().len()),
+            format!(
+                "give one weight per learned dimension ({})",
+                world.learned_dims().len()
+            ),
         ));
     }
     // physics
@@ -788,7 +835,17 @@ pub fn train(
     let mut curve = Vec::new();
     let physics = if cfg.kind.has_physics() {
         let mut p = physics_model(world, &cfg.effects)?;
-        let fit = fit_physics(&mut p, &phys_solver, world, dt, &data_f.trajs, &train_w, k, cfg, &loss)?;
+        let fit = fit_physics(
+            &mut p,
+            &phys_solver,
+            world,
+            dt,
+            &data_f.trajs,
+            &train_w,
+            k,
+            cfg,
+            &loss,
+        )?;
         physics_fit = Some(fit);
         Some(p)
     } else {
@@ -811,7 +868,14 @@ pub fn train(
         };
         let spec = MlpSpec::uniform(dz + du, &hidden, dz, act)?;
         let mlp = Mlp::new(spec, Init::Auto, cfg.seed);
-        let norm = normalization(world, physics.as_ref(), &phys_solver, dt, &data_f.trajs, &train_w)?;
+        let norm = normalization(
+            world,
+            physics.as_ref(),
+            &phys_solver,
+            dt,
+            &data_f.trajs,
+            &train_w,
+        )?;
         Some(Network::new(mlp, norm))
     } else {
         None
@@ -840,15 +904,33 @@ pub fn train(
             None,
             phys_solver,
         )?;
-        let ctx = Ctx { model: &m, data: &data_f, k, gamma: cfg.gamma, loss: &loss };
+        let ctx = Ctx {
+            model: &m,
+            data: &data_f,
+            k,
+            gamma: cfg.gamma,
+            loss: &loss,
+        };
         loss_over(&ctx, &val_w, &mut states, chunk, threads)
     };
     let val0 = {
-        let ctx = Ctx { model: &model, data: &data_f, k, gamma: cfg.gamma, loss: &loss };
+        let ctx = Ctx {
+            model: &model,
+            data: &data_f,
+            k,
+            gamma: cfg.gamma,
+            loss: &loss,
+        };
         loss_over(&ctx, &val_w, &mut states, chunk, threads)
     };
     if !cfg.kind.has_network() {
-        let ctx = Ctx { model: &model, data: &data_f, k, gamma: cfg.gamma, loss: &loss };
+        let ctx = Ctx {
+            model: &model,
+            data: &data_f,
+            k,
+            gamma: cfg.gamma,
+            loss: &loss,
+        };
         let train_loss = loss_over(&ctx, &train_w, &mut states, chunk, threads);
         let p = Progress {
             epoch: 1,
@@ -882,21 +964,31 @@ pub fn train(
     )?;
     let mut grads: Vec<Vec<f32>> = (0..slots).map(|_| vec![0.0; n_params]).collect();
     let mut total_grad = vec![0.0f32; n_params];
-    let mut best_params = model.network().map(|n| n.mlp.params().to_vec()).unwrap_or_default();
+    let mut best_params = model
+        .network()
+        .map(|n| n.mlp.params().to_vec())
+        .unwrap_or_default();
     let mut best_val = val0;
     let mut best_epoch = 0;
     let mut samples: u64 = 0;
     let mut order = train_w.clone();
     let mut losses = vec![0.0; slots];
     'epochs: for epoch in 1..=cfg.epochs.max(1) {
-        SplitMix64::new(cfg.seed ^ (epoch as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)).shuffle(&mut order);
+        SplitMix64::new(cfg.seed ^ (epoch as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15))
+            .shuffle(&mut order);
         let mut epoch_loss = 0.0;
         let mut epoch_n = 0usize;
         for batch in order.chunks(cfg.batch) {
             let chunks: Vec<&[Window]> = batch.chunks(chunk).collect();
             let m = chunks.len();
             {
-                let ctx = Ctx { model: &model, data: &data_f, k, gamma: cfg.gamma, loss: &loss };
+                let ctx = Ctx {
+                    model: &model,
+                    data: &data_f,
+                    k,
+                    gamma: cfg.gamma,
+                    loss: &loss,
+                };
                 run_chunks(
                     &ctx,
                     &chunks,
@@ -925,27 +1017,69 @@ pub fn train(
             samples += batch.len() as u64;
             if cfg.max_samples.is_some_and(|m| samples >= m) {
                 let val = {
-                    let ctx = Ctx { model: &model, data: &data_f, k, gamma: cfg.gamma, loss: &loss };
+                    let ctx = Ctx {
+                        model: &model,
+                        data: &data_f,
+                        k,
+                        gamma: cfg.gamma,
+                        loss: &loss,
+                    };
                     loss_over(&ctx, &val_w, &mut states, chunk, threads)
                 };
-                record(&mut curve, progress, epoch, cfg.epochs, epoch_loss / epoch_n as f64, val, &mut best_val, &mut best_epoch, &mut best_params, &model, samples);
+                record(
+                    &mut curve,
+                    progress,
+                    epoch,
+                    cfg.epochs,
+                    epoch_loss / epoch_n as f64,
+                    val,
+                    &mut best_val,
+                    &mut best_epoch,
+                    &mut best_params,
+                    &model,
+                    samples,
+                );
                 break 'epochs;
             }
         }
         let val = {
-            let ctx = Ctx { model: &model, data: &data_f, k, gamma: cfg.gamma, loss: &loss };
+            let ctx = Ctx {
+                model: &model,
+                data: &data_f,
+                k,
+                gamma: cfg.gamma,
+                loss: &loss,
+            };
             loss_over(&ctx, &val_w, &mut states, chunk, threads)
         };
         if !val.is_finite() {
             return Err(LearnError::Diverged { epoch, loss: val });
         }
-        record(&mut curve, progress, epoch, cfg.epochs, epoch_loss / epoch_n.max(1) as f64, val, &mut best_val, &mut best_epoch, &mut best_params, &model, samples);
+        record(
+            &mut curve,
+            progress,
+            epoch,
+            cfg.epochs,
+            epoch_loss / epoch_n.max(1) as f64,
+            val,
+            &mut best_val,
+            &mut best_epoch,
+            &mut best_params,
+            &model,
+            samples,
+        );
     }
     if let Some(net) = model.network_mut() {
         net.mlp.params_mut().copy_from_slice(&best_params);
     }
     let final_train_loss = {
-        let ctx = Ctx { model: &model, data: &data_f, k, gamma: cfg.gamma, loss: &loss };
+        let ctx = Ctx {
+            model: &model,
+            data: &data_f,
+            k,
+            gamma: cfg.gamma,
+            loss: &loss,
+        };
         loss_over(&ctx, &train_w, &mut states, chunk, threads)
     };
     Ok(TrainOutcome {
@@ -1037,7 +1171,14 @@ fn normalization(
     }
     let ni = dynlab_dynamics::data::Normalizer::fit(&inputs, dz + du, 1e-8)?;
     let no = dynlab_dynamics::data::Normalizer::fit(&outputs, dz, 1e-12)?;
-    if ni.mean.iter().chain(&ni.std).chain(&no.mean).chain(&no.std).any(|x| !x.is_finite()) {
+    if ni
+        .mean
+        .iter()
+        .chain(&ni.std)
+        .chain(&no.mean)
+        .chain(&no.std)
+        .any(|x| !x.is_finite())
+    {
         return Err(LearnError::setting(
             "data",
             "non-finite statistics",
@@ -1144,7 +1285,11 @@ fn fit_physics(
                 let sg = g.sqrt();
                 for (q, d) in lr.clone().enumerate() {
                     let e = sn[d] - meas[d];
-                    let e = if d == world.angle_dim() { wrap_angle(e) } else { e };
+                    let e = if d == world.angle_dim() {
+                        wrap_angle(e)
+                    } else {
+                        e
+                    };
                     let e = if bad || !e.is_finite() { 1e3 } else { e };
                     r.push(sg * weights[q] * e);
                     if with_j {
@@ -1261,7 +1406,8 @@ fn solve(a: &[f64], b: &[f64], n: usize) -> Option<Vec<f64>> {
     let mut m = a.to_vec();
     let mut x = b.to_vec();
     for col in 0..n {
-        let piv = (col..n).max_by(|&i, &j| m[i * n + col].abs().total_cmp(&m[j * n + col].abs()))?;
+        let piv =
+            (col..n).max_by(|&i, &j| m[i * n + col].abs().total_cmp(&m[j * n + col].abs()))?;
         if m[piv * n + col].abs() < 1e-300 || !m[piv * n + col].is_finite() {
             return None;
         }

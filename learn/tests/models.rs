@@ -27,7 +27,11 @@ fn small(kind: ModelKind, world: World) -> TrainConfig {
         kind,
         steps: 2,
         epochs: if world == World::Push { 60 } else { 8 },
-        hidden: Some(if world == World::Push { vec![32, 32] } else { vec![24, 24] }),
+        hidden: Some(if world == World::Push {
+            vec![32, 32]
+        } else {
+            vec![24, 24]
+        }),
         physics_iterations: 8,
         physics_max_windows: 300,
         batch: 64,
@@ -113,7 +117,11 @@ fn check_jacobians(model: &Model, s: &[f64], u: &[f64], h: f64, tol: f64) {
     let mut next = vec![0.0; s.len()];
     model.step(s, u, &mut next).unwrap();
     for (a, b) in j.next.iter().zip(&next) {
-        assert!((a - b).abs() < 1e-5, "{}: next {a} vs step {b}", model.kind());
+        assert!(
+            (a - b).abs() < 1e-5,
+            "{}: next {a} vs step {b}",
+            model.kind()
+        );
     }
     let (fs, fu) = fd_jacobians(model, s, u, h);
     let scale = fs.iter().chain(&fu).fold(1e-3f64, |m, x| m.max(x.abs()));
@@ -142,7 +150,13 @@ fn input_jacobians_of_every_kind_match_finite_differences() {
         let mut cfg = small(kind, World::Car);
         cfg.epochs = 2;
         let m = train(&car, &cfg, &mut |_| {}).unwrap().model;
-        check_jacobians(&m, &[0.5, -0.2, 0.9, 1.2, 0.05, 0.4], &[0.1, 0.4], 2e-3, 2e-3);
+        check_jacobians(
+            &m,
+            &[0.5, -0.2, 0.9, 1.2, 0.05, 0.4],
+            &[0.1, 0.4],
+            2e-3,
+            2e-3,
+        );
     }
 }
 
@@ -152,23 +166,36 @@ fn fast_rollout_matches_step_and_does_not_depend_on_threads() {
     let push = push_data(tmp.path());
     let car = car_data(tmp.path());
     for (data, world) in [(&push, World::Push), (&car, World::Car)] {
-        for kind in [ModelKind::Residual, ModelKind::NodeEuler, ModelKind::NodeRk4] {
+        for kind in [
+            ModelKind::Residual,
+            ModelKind::NodeEuler,
+            ModelKind::NodeRk4,
+        ] {
             let mut cfg = small(kind, world);
             cfg.epochs = 2;
             let m = train(data, &cfg, &mut |_| {}).unwrap().model;
             assert!(m.has_fast_rollout());
             let (ds, du, n, horizon) = (m.dim_s(), m.dim_u(), 37, 5);
             let mut rng = dynlab_dynamics::data::SplitMix64::new(5);
-            let s0: Vec<f32> = (0..n * ds).map(|_| common::uniform(&mut rng, -0.5, 0.5) as f32).collect();
-            let acts: Vec<f32> = (0..n * horizon * du).map(|_| common::uniform(&mut rng, -0.5, 0.5) as f32).collect();
+            let s0: Vec<f32> = (0..n * ds)
+                .map(|_| common::uniform(&mut rng, -0.5, 0.5) as f32)
+                .collect();
+            let acts: Vec<f32> = (0..n * horizon * du)
+                .map(|_| common::uniform(&mut rng, -0.5, 0.5) as f32)
+                .collect();
             let mut one = vec![0.0f32; n * horizon * ds];
             let mut two = vec![0.0f32; n * horizon * ds];
-            m.rollout_f32(&s0, &acts, &mut one, &mut RolloutWorkspace::new(1)).unwrap();
-            m.rollout_f32(&s0, &acts, &mut two, &mut RolloutWorkspace::new(3)).unwrap();
+            m.rollout_f32(&s0, &acts, &mut one, &mut RolloutWorkspace::new(1))
+                .unwrap();
+            m.rollout_f32(&s0, &acts, &mut two, &mut RolloutWorkspace::new(3))
+                .unwrap();
             assert_eq!(one, two, "{world} {kind}: thread count changed the rollout");
             // against the f64 step path, sample by sample
             for i in [0, 17, 36] {
-                let mut s: Vec<f64> = s0[i * ds..(i + 1) * ds].iter().map(|&x| f64::from(x)).collect();
+                let mut s: Vec<f64> = s0[i * ds..(i + 1) * ds]
+                    .iter()
+                    .map(|&x| f64::from(x))
+                    .collect();
                 for t in 0..horizon {
                     let u: Vec<f64> = acts[(i * horizon + t) * du..(i * horizon + t + 1) * du]
                         .iter()
@@ -178,7 +205,11 @@ fn fast_rollout_matches_step_and_does_not_depend_on_threads() {
                     m.step(&s, &u, &mut next).unwrap();
                     for d in 0..ds {
                         let fast = f64::from(one[(i * horizon + t) * ds + d]);
-                        assert!((fast - next[d]).abs() < 1e-4 * (1.0 + next[d].abs()), "{world} {kind} sample {i} step {t} dim {d}: {fast} vs {}", next[d]);
+                        assert!(
+                            (fast - next[d]).abs() < 1e-4 * (1.0 + next[d].abs()),
+                            "{world} {kind} sample {i} step {t} dim {d}: {fast} vs {}",
+                            next[d]
+                        );
                     }
                     s = next;
                 }
@@ -193,8 +224,18 @@ fn model_file_round_trip_gives_identical_predictions() {
     let push = push_data(tmp.path());
     let car = car_data(tmp.path());
     for (data, world, s, u) in [
-        (&push, World::Push, vec![0.4, 0.02, -0.3], vec![0.1, 0.2, 0.8]),
-        (&car, World::Car, vec![0.1, 0.2, 0.3, 1.1, 0.0, 0.2], vec![0.05, 0.4]),
+        (
+            &push,
+            World::Push,
+            vec![0.4, 0.02, -0.3],
+            vec![0.1, 0.2, 0.8],
+        ),
+        (
+            &car,
+            World::Car,
+            vec![0.1, 0.2, 0.3, 1.1, 0.0, 0.2],
+            vec![0.05, 0.4],
+        ),
     ] {
         for kind in ModelKind::ALL {
             let mut cfg = small(kind, world);
@@ -237,21 +278,39 @@ fn corrupt_and_mismatched_model_files_are_rejected_with_clear_errors() {
     // wrong kind, wrong world
     let e = load_model(&dir, Some(ModelKind::Residual), None).unwrap_err();
     assert!(matches!(e, LearnError::KindMismatch { .. }), "{e}");
-    assert!(e.to_string().contains("holds a node-rk4 model, not a residual model"), "{e}");
+    assert!(
+        e.to_string()
+            .contains("holds a node-rk4 model, not a residual model"),
+        "{e}"
+    );
     let e = load_model(&dir, None, Some(World::Car)).unwrap_err();
     assert!(matches!(e, LearnError::WorldMismatch { .. }), "{e}");
     // newer format
-    std::fs::write(dir.join(MODEL_JSON), json.replace("\"format_version\": 1", "\"format_version\": 7")).unwrap();
+    std::fs::write(
+        dir.join(MODEL_JSON),
+        json.replace("\"format_version\": 1", "\"format_version\": 7"),
+    )
+    .unwrap();
     let e = load_model(&dir, None, None).unwrap_err();
-    assert!(e.to_string().contains("format version 7") && e.to_string().contains("update dynlab"), "{e}");
+    assert!(
+        e.to_string().contains("format version 7") && e.to_string().contains("update dynlab"),
+        "{e}"
+    );
     restore();
     // not JSON
     std::fs::write(dir.join(MODEL_JSON), &json[..json.len() / 2]).unwrap();
     let e = load_model(&dir, None, None).unwrap_err();
-    assert!(matches!(e, LearnError::CorruptModel { .. }) && e.to_string().contains("not valid JSON"), "{e}");
+    assert!(
+        matches!(e, LearnError::CorruptModel { .. }) && e.to_string().contains("not valid JSON"),
+        "{e}"
+    );
     restore();
     // unknown kind
-    std::fs::write(dir.join(MODEL_JSON), json.replace("\"kind\": \"node-rk4\"", "\"kind\": \"node-rk7\"")).unwrap();
+    std::fs::write(
+        dir.join(MODEL_JSON),
+        json.replace("\"kind\": \"node-rk4\"", "\"kind\": \"node-rk7\""),
+    )
+    .unwrap();
     let e = load_model(&dir, None, None).unwrap_err();
     assert!(matches!(e, LearnError::CorruptModel { .. }), "{e}");
     restore();
@@ -267,7 +326,11 @@ fn corrupt_and_mismatched_model_files_are_rejected_with_clear_errors() {
     v["network"]["sizes"][1] = serde_json::json!(33);
     std::fs::write(dir.join(MODEL_JSON), serde_json::to_string(&v).unwrap()).unwrap();
     let e = load_model(&dir, None, None).unwrap_err();
-    assert!(e.to_string().contains("model.json says the network is [6, 33"), "{e}");
+    assert!(
+        e.to_string()
+            .contains("model.json says the network is [6, 33"),
+        "{e}"
+    );
     restore();
     // truncated weights
     std::fs::write(dir.join(WEIGHTS), &weights[..weights.len() / 3]).unwrap();
@@ -285,7 +348,8 @@ fn corrupt_and_mismatched_model_files_are_rejected_with_clear_errors() {
     let p = train(&push, &pcfg, &mut |_| {}).unwrap().model;
     let pdir = tmp.path().join("p");
     save_model(&p, &pdir, None, Default::default()).unwrap();
-    let mut v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(pdir.join(MODEL_JSON)).unwrap()).unwrap();
+    let mut v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(pdir.join(MODEL_JSON)).unwrap()).unwrap();
     v["physics"]["params"][0]["value"] = serde_json::json!(-5.0);
     std::fs::write(pdir.join(MODEL_JSON), serde_json::to_string(&v).unwrap()).unwrap();
     let e = load_model(&pdir, None, None).unwrap_err();
@@ -317,8 +381,14 @@ fn training_is_bit_identical_for_a_seed_and_any_thread_count() {
                 std::fs::read(dir.join(WEIGHTS)).unwrap(),
             ));
         }
-        assert!(files[0] == files[1], "{kind}: same seed, different model files");
-        assert!(files[0] == files[2], "{kind}: 2 threads changed the model file");
+        assert!(
+            files[0] == files[1],
+            "{kind}: same seed, different model files"
+        );
+        assert!(
+            files[0] == files[2],
+            "{kind}: 2 threads changed the model file"
+        );
         let mut cfg = small(kind, World::Push);
         cfg.epochs = 4;
         cfg.batch = 200;
@@ -327,7 +397,10 @@ fn training_is_bit_identical_for_a_seed_and_any_thread_count() {
         let other = train(&push, &cfg, &mut |_| {}).unwrap();
         let dir = tmp.path().join(format!("{kind}-seed1"));
         save_model(&other.model, &dir, None, Default::default()).unwrap();
-        assert!(std::fs::read(dir.join(WEIGHTS)).unwrap() != files[0].1, "{kind}: the seed changed nothing");
+        assert!(
+            std::fs::read(dir.join(WEIGHTS)).unwrap() != files[0].1,
+            "{kind}: the seed changed nothing"
+        );
     }
 }
 
@@ -344,7 +417,11 @@ fn overlapping_split_has_more_validation_windows_from_training_trajectories() {
     // 24 trajectories × 9 windows of 2 steps = 216; 20 % either way
     assert_eq!(a.windows.0 + a.windows.1, 216);
     assert_eq!(b.windows.0 + b.windows.1, 216);
-    assert_eq!(b.windows.1 % 9, 0, "a trajectory split takes whole trajectories");
+    assert_eq!(
+        b.windows.1 % 9,
+        0,
+        "a trajectory split takes whole trajectories"
+    );
     assert_eq!(b.validation_segments.len() * 9, b.windows.1);
     assert!(a.validation_segments.is_empty());
 }
@@ -354,29 +431,62 @@ fn bad_input_gives_clear_errors() {
     let tmp = tempfile::tempdir().unwrap();
     let push = push_data(tmp.path());
     // effects on a network-only kind
-    let cfg = TrainConfig { kind: ModelKind::NodeRk4, effects: vec!["com_offset".into()], ..Default::default() };
+    let cfg = TrainConfig {
+        kind: ModelKind::NodeRk4,
+        effects: vec!["com_offset".into()],
+        ..Default::default()
+    };
     let e = train(&push, &cfg, &mut |_| {}).unwrap_err();
-    assert!(e.to_string().contains("use --kind physics or hybrid"), "{e}");
+    assert!(
+        e.to_string().contains("use --kind physics or hybrid"),
+        "{e}"
+    );
     // an effect of the other robot
-    let cfg = TrainConfig { kind: ModelKind::Physics, effects: vec!["aero_drag".into()], ..Default::default() };
+    let cfg = TrainConfig {
+        kind: ModelKind::Physics,
+        effects: vec!["aero_drag".into()],
+        ..Default::default()
+    };
     let e = train(&push, &cfg, &mut |_| {}).unwrap_err();
     assert!(e.to_string().contains("aero_drag"), "{e}");
     // too many steps for 11-pose trajectories
-    let cfg = TrainConfig { steps: 11, ..Default::default() };
+    let cfg = TrainConfig {
+        steps: 11,
+        ..Default::default()
+    };
     let e = train(&push, &cfg, &mut |_| {}).unwrap_err();
     assert!(e.to_string().contains("too little data"), "{e}");
     // NaN in a model input
-    let m = train(&push, &TrainConfig { epochs: 1, ..small(ModelKind::Residual, World::Push) }, &mut |_| {}).unwrap().model;
+    let m = train(
+        &push,
+        &TrainConfig {
+            epochs: 1,
+            ..small(ModelKind::Residual, World::Push)
+        },
+        &mut |_| {},
+    )
+    .unwrap()
+    .model;
     let mut out = vec![0.0; 3];
-    let e = m.step(&[0.0, f64::NAN, 0.0], &[0.0; 3], &mut out).unwrap_err();
-    assert!(e.to_string().contains("non-finite value in states at index 1"), "{e}");
+    let e = m
+        .step(&[0.0, f64::NAN, 0.0], &[0.0; 3], &mut out)
+        .unwrap_err();
+    assert!(
+        e.to_string()
+            .contains("non-finite value in states at index 1"),
+        "{e}"
+    );
     // a bag without commands
     let dir = tmp.path().join("poses_only");
     let mut w = dynlab_bag::BagWriter::create(&dir, Default::default()).unwrap();
     let t = w
-        .add_typed_topic::<dynlab_msgs::geometry_msgs::PoseStamped>("/push/block_pose", &[dynlab_bag::QosProfile::default_profile()])
+        .add_typed_topic::<dynlab_msgs::geometry_msgs::PoseStamped>(
+            "/push/block_pose",
+            &[dynlab_bag::QosProfile::default_profile()],
+        )
         .unwrap();
-    w.write(t, 1, &dynlab_msgs::geometry_msgs::PoseStamped::default()).unwrap();
+    w.write(t, 1, &dynlab_msgs::geometry_msgs::PoseStamped::default())
+        .unwrap();
     w.finish().unwrap();
     let e = load_bags(&[dir], None, &Topics::default(), &SavGol::default()).unwrap_err();
     assert!(e.to_string().contains("/push/action"), "{e}");

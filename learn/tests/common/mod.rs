@@ -41,10 +41,15 @@ pub fn push_bag(dir: &Path, trajs: usize, pushes: usize, seed: u64) -> PathBuf {
     let solver = Solver::Rk4 { substeps: 4 };
     for tr in 0..trajs {
         let t0 = 1_000_000_000i64 + tr as i64 * 60_000_000_000;
-        let mut s = [uniform(&mut rng, 0.3, 0.5), uniform(&mut rng, -0.1, 0.1), uniform(&mut rng, -1.0, 1.0)];
+        let mut s = [
+            uniform(&mut rng, 0.3, 0.5),
+            uniform(&mut rng, -0.1, 0.1),
+            uniform(&mut rng, -1.0, 1.0),
+        ];
         for i in 0..=pushes {
             let t = t0 + i as i64 * 2_000_000_000;
-            w.write(tp, t as u64, &pose_msg(t, "table", s[0], s[1], s[2])).unwrap();
+            w.write(tp, t as u64, &pose_msg(t, "table", s[0], s[1], s[2]))
+                .unwrap();
             if i == pushes {
                 break;
             }
@@ -95,7 +100,8 @@ pub fn car_bag(dir: &Path, runs: usize, seconds: f64, rate_hz: f64, seed: u64) -
             if i % ((0.4 * rate_hz) as usize).max(1) == 0 {
                 u = [uniform(&mut rng, -0.3, 0.3), uniform(&mut rng, 0.1, 0.6)];
             }
-            w.write(tp, t as u64, &pose_msg(t, "world", s[0], s[1], s[2])).unwrap();
+            w.write(tp, t as u64, &pose_msg(t, "world", s[0], s[1], s[2]))
+                .unwrap();
             let cmd = AckermannDriveStamped {
                 header: Header::new(Time::from_nanos(t), "base_link"),
                 drive: AckermannDrive {

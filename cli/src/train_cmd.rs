@@ -1,0 +1,298 @@
+//! `dynlab train`: trains a dynamics model of any kind from bags and writes the model directory
+//! (`model.json`, `weights.safetensors`), the training curve `curve.csv` and `curve.png`.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{Context, bail};
+use clap::{Args, ValueEnum};
+use dynlab_learn::dynamics::conventions::LossNorm;
+use dynlab_learn::dynamics::data::SavGol;
+use dynlab_learn::dynamics::ode::Solver;
+use dynlab_learn::file::TrainingMeta;
+use dynlab_learn::{
+    Loss, ModelKind, Progress, Split, Topics, TrainConfig, World, load_bags, save_model, train,
+};
+use indicatif::{ProgressBar, ProgressStyle};
+
+/// `dynlab train …`
+#[derive(Debug, Args)]
+pub struct TrainArgs {
+    /// Bag(s) to train on (directories or .mcap files), all of the same robot.
+    #[arg(long = "bag", required = true, num_args = 1.., value_name = "BAG")]
+    bags: Vec<PathBuf>,
+    /// Model kind: residual, node-euler, node-rk4, node-dopri5, physics, hybrid.
+    #[arg(long)]
+    kind: String,
+    /// push or car (default: inferred from the bag's topics).
+    #[arg(long)]
+    world: Option<String>,
+    /// Rollout steps k of the discounted multi-step loss.
+    #[arg(long, default_value_t = 1)]
+    steps: usize,
+    /// Physics effects, comma-separated (physics and hybrid only), e.g. aero_drag,steering_offset.
+    #[arg(long, value_delimiter = ',')]
+    effects: Vec<String>,
+    /// Epochs (default 300).
+    #[arg(long)]
+    epochs: Option<usize>,
+    /// Stop after this many training windows in total.
+    #[arg(long)]
+    max_samples: Option<u64>,
+    /// Seed of the split, shuffles and initial weights.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Adam learning rate (default 1e-3).
+    #[arg(long)]
+    lr: Option<f64>,
+    /// Batch size (default 500).
+    #[arg(long)]
+    batch: Option<usize>,
+    /// Validation split.
+    #[arg(long, value_enum, default_value_t = SplitArg::Trajectories)]
+    split: SplitArg,
+    /// Threads (results do not depend on it).
+    #[arg(long, default_value_t = 2)]
+    threads: usize,
+    /// Car loss norm of L_rel.
+    #[arg(long, value_enum)]
+    loss_norm: Option<NormArg>,
+    /// Dopri5 relative tolerance (node-dopri5).
+    #[arg(long)]
+    rtol: Option<f64>,
+    /// Dopri5 absolute tolerance (node-dopri5).
+    #[arg(long)]
+    atol: Option<f64>,
+    /// Pose topic (default /push/block_pose or /car/pose).
+    #[arg(long)]
+    pose_topic: Option<String>,
+    /// Command topic (default /push/action or /car/cmd).
+    #[arg(long, alias = "action-topic")]
+    cmd_topic: Option<String>,
+    /// Output model directory.
+    #[arg(long)]
+    out: PathBuf,
+    /// No progress bar.
+    #[arg(long)]
+    quiet: bool,
+}
+
+#[derive(Debug, Clone, Copy, ValueEnum)]
+enum SplitArg {
+    /// By whole trajectories (car: 3 s segments).
+    Trajectories,
+    /// Tu & Lin's overlapping windows (leaks; for comparison only).
+    Overlapping,
+}
+
+#[derive(Debug, Clone, Copy, ValueEnum)]
+enum NormArg {
+    L1,
+    L2,
+}
+
+pub fn run(args: TrainArgs) -> anyhow::Result<()> {
+    let kind = ModelKind::from_name(&args.kind)?;
+    let world = args.world.as_deref().map(World::from_name).transpose()?;
+    let topics = Topics {
+        pose: args.pose_topic.clone(),
+        cmd: args.cmd_topic.clone(),
+    };
+    let data = load_bags(&args.bags, world, &topics, &SavGol::default())?;
+    if data.transitions() < 10 {
+        bail!(
+            "too little data: {} transitions in {} trajectories; record more (at least 10 transitions, better thousands)",
+            data.transitions(),
+            data.trajectories.len()
+        );
+    }
+    let mut cfg = TrainConfig {
+        kind,
+        steps: args.steps,
+        seed: args.seed,
+        effects: args.effects.clone(),
+        threads: args.threads.max(1),
+        max_samples: args.max_samples,
+        split: match args.split {
+            SplitArg::Trajectories => Split::Trajectories,
+            SplitArg::Overlapping => Split::OverlappingWindows,
+        },
+        ..Default::default()
+    };
+    if let Some(e) = args.epochs {
+        cfg.epochs = e;
+    }
+    if let Some(lr) = args.lr {
+        cfg.lr = lr;
+    }
+    if let Some(b) = args.batch {
+        cfg.batch = b;
+    }
+    if let Some(n) = args.loss_norm {
+        if data.world != World::Car {
+            bail!(
+                "--loss-norm applies to the car's L_rel loss; the pushing loss is Tu & Lin's weighted pose MSE"
+            );
+        }
+        cfg.loss = Some(Loss::LRel {
+            norm: match n {
+                NormArg::L1 => LossNorm::L1,
+                NormArg::L2 => LossNorm::L2,
+            },
+            eps: 0.1,
+        });
+    }
+    if args.rtol.is_some() || args.atol.is_some() {
+        if kind != ModelKind::NodeDopri5 {
+            bail!("--rtol/--atol set the Dopri5 tolerances; use them with --kind node-dopri5");
+        }
+        let d = match kind.default_solver() {
+            Some(Solver::Dopri5(o)) => o,
+            _ => Default::default(),
+        };
+        cfg.solver = Some(Solver::dopri5(
+            args.rtol.unwrap_or(d.rtol),
+            args.atol.unwrap_or(d.atol),
+        ));
+    }
+    eprintln!(
+        "training a {kind} {} model on {} trajectories ({} transitions, step {:.4} s) from {} bag(s)",
+        data.world,
+        data.trajectories.len(),
+        data.transitions(),
+        data.pose_dt_s,
+        data.sources.len()
+    );
+    let bar = if args.quiet || !kind.has_network() {
+        ProgressBar::hidden()
+    } else {
+        ProgressBar::new(cfg.epochs as u64)
+    };
+    bar.set_style(
+        ProgressStyle::with_template("{bar:30} epoch {pos}/{len} {msg} [{elapsed} < {eta}]")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    let start = Instant::now();
+    let mut on_progress = |p: &Progress| {
+        let rate = p.samples as f64 / start.elapsed().as_secs_f64().max(1e-9);
+        bar.set_position(p.epoch as u64);
+        bar.set_message(format!(
+            "train {:.3e} val {:.3e} best {:.3e} {:.0} samples/s",
+            p.train_loss, p.validation_loss, p.best_validation_loss, rate
+        ));
+    };
+    let out = train(&data, &cfg, &mut on_progress)?;
+    bar.finish_and_clear();
+    let mut metrics = serde_json::Map::new();
+    metrics.insert(
+        "best_validation_loss".into(),
+        out.best_validation_loss.into(),
+    );
+    metrics.insert("final_train_loss".into(), out.final_train_loss.into());
+    metrics.insert(
+        "baseline_validation_loss".into(),
+        out.baseline_validation_loss.into(),
+    );
+    if let Some(f) = &out.physics_fit {
+        metrics.insert("physics_fit".into(), serde_json::to_value(f)?);
+    }
+    let training = TrainingMeta {
+        bags: data.sources.clone(),
+        config: cfg.clone(),
+        best_epoch: out.best_epoch,
+        epochs_run: out.curve.len(),
+        windows: out.windows,
+    };
+    save_model(&out.model, &args.out, Some(training), metrics)?;
+    write_curve_csv(&args.out.join("curve.csv"), &out.curve)?;
+    if let Err(e) = plot_curve(&args.out.join("curve.png"), &out.curve) {
+        eprintln!("warning: no curve.png ({e:#})");
+    }
+    if let Some(p) = out.model.physics() {
+        eprintln!("{p}");
+    }
+    println!(
+        "{}: {kind} model, best validation loss {:.4e} at epoch {} (constant model {:.4e}), {} train / {} validation windows, {:.1} s",
+        args.out.display(),
+        out.best_validation_loss,
+        out.best_epoch,
+        out.baseline_validation_loss,
+        out.windows.0,
+        out.windows.1,
+        start.elapsed().as_secs_f64()
+    );
+    Ok(())
+}
+
+fn write_curve_csv(path: &Path, curve: &[Progress]) -> anyhow::Result<()> {
+    let mut f = std::io::BufWriter::new(
+        std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?,
+    );
+    writeln!(
+        f,
+        "epoch,samples,train_loss,validation_loss,best_validation_loss"
+    )?;
+    for p in curve {
+        writeln!(
+            f,
+            "{},{},{:e},{:e},{:e}",
+            p.epoch, p.samples, p.train_loss, p.validation_loss, p.best_validation_loss
+        )?;
+    }
+    f.flush()?;
+    Ok(())
+}
+
+fn plot_curve(path: &Path, curve: &[Progress]) -> anyhow::Result<()> {
+    use plotters::prelude::*;
+    if curve.is_empty() {
+        bail!("empty curve");
+    }
+    let vals = curve
+        .iter()
+        .flat_map(|p| [p.train_loss, p.validation_loss])
+        .filter(|v| v.is_finite() && *v > 0.0);
+    let (lo, hi) = vals.fold((f64::MAX, f64::MIN), |(a, b), v| (a.min(v), b.max(v)));
+    if lo > hi {
+        bail!("no positive losses to plot");
+    }
+    let root = BitMapBackend::new(path, (800, 500)).into_drawing_area();
+    root.fill(&WHITE)?;
+    let n = curve.len() as f64;
+    let mut chart = ChartBuilder::on(&root)
+        .caption("training curve", ("sans-serif", 22))
+        .margin(10)
+        .x_label_area_size(40)
+        .y_label_area_size(70)
+        .build_cartesian_2d(1.0..n.max(2.0), (lo * 0.8..hi * 1.25).log_scale())?;
+    chart
+        .configure_mesh()
+        .x_desc("epoch")
+        .y_desc("loss")
+        .y_label_formatter(&|v| format!("{v:.1e}"))
+        .draw()?;
+    chart
+        .draw_series(LineSeries::new(
+            curve.iter().map(|p| (p.epoch as f64, p.train_loss.max(lo))),
+            &BLUE,
+        ))?
+        .label("train")
+        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLUE));
+    chart
+        .draw_series(LineSeries::new(
+            curve
+                .iter()
+                .map(|p| (p.epoch as f64, p.validation_loss.max(lo))),
+            &RED,
+        ))?
+        .label("validation")
+        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RED));
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()?;
+    root.present()?;
+    Ok(())
+}
