@@ -4,6 +4,7 @@
 //! adapter over a library crate.
 
 mod bag_cmd;
+mod collect_cmd;
 mod eval_cmd;
 mod train_cmd;
 
@@ -27,6 +28,8 @@ enum Command {
     Train(train_cmd::TrainArgs),
     /// Evaluate a model on a bag: one-step and k-step errors per dimension, TVE for the car.
     EvalModel(eval_cmd::EvalArgs),
+    /// Collect simulated data into a bag, headless and far faster than real time.
+    Collect(collect_cmd::CollectArgs),
 }
 
 fn main() -> ExitCode {
@@ -35,6 +38,7 @@ fn main() -> ExitCode {
         Command::Bag(args) => bag_cmd::run(args),
         Command::Train(args) => train_cmd::run(args),
         Command::EvalModel(args) => eval_cmd::run(args),
+        Command::Collect(args) => collect_cmd::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

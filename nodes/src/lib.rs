@@ -13,3 +13,4 @@
 pub mod play;
 pub mod probe;
 pub mod record;
+pub mod sim_node;

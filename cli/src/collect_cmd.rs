@@ -1,0 +1,348 @@
+//! `dynlab collect push|car`: headless data collection into bags, far faster than real time.
+//!
+//! Episodes come from the simulator's exploration policies (`dynlab_sim::PushExplorer`,
+//! `CarExplorer`), generated in parallel; episode `i` always uses the seed derived from
+//! `--seed` and `i`, so the bag is byte-identical for a given seed whatever `--threads` is.
+//! Episodes are laid end to end on one simulated time line starting at 0, one second apart
+//! (the gap splits them into separate trajectories for the offline tools). Messages are written
+//! by `dynlab_nodes::sim_node::SimBagWriter`, the same code that defines what `sim_node` and
+//! `explorer` publish, so a collected bag and a bag recorded over DDS hold the same topics,
+//! types, frames and offered QoS.
+//!
+//! With `--actions FILE` no explorer runs: the given actions (JSON lines, `{"location": p,
+//! "angle": φ, "length": ℓ}` or `{"steering": δ, "throttle": d}`) are replayed from the
+//! scenario's start exactly as `sim_node` executes them in lock-step mode, for comparing a run
+//! over DDS with a headless one.
+
+use std::io::BufRead;
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::Instant;
+
+use anyhow::{Context, bail};
+use clap::{Args, ValueEnum};
+use dynlab_bag::{BagSummary, Compression, WriterOptions};
+use dynlab_nodes::sim_node::engine::{Emit, EngineConfig, Mode, SimEngine};
+use dynlab_nodes::sim_node::messages::{
+    SimBagWriter, SimWorld, car_cmd_msg, car_input_from_msg, push_action_from_msg, push_action_msg,
+};
+use dynlab_sim::episode::Episode;
+use dynlab_sim::{
+    CarExplorer, CarInput, CarScenario, PushAction, PushExplorer, PushScenario, Record, Sample,
+    car_episode, concatenate, push_episode,
+};
+
+/// Gap between episodes on the bag's time line [ns].
+const EPISODE_GAP_NS: u64 = 1_000_000_000;
+
+/// Which world to collect.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum WorldArg {
+    /// Planar pushing: /push/block_pose, /push/action.
+    Push,
+    /// RC car: /car/pose, /car/cmd, /car/odom.
+    Car,
+}
+
+/// Chunk compression of the bag.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum CompressionArg {
+    /// zstd chunks (default; as rosbag2's zstd presets).
+    Zstd,
+    /// Uncompressed chunks.
+    None,
+}
+
+/// `dynlab collect …`
+#[derive(Debug, Args)]
+pub struct CollectArgs {
+    /// The world.
+    #[arg(value_enum)]
+    world: WorldArg,
+    /// Scenario file (TOML, see sim/README.md); default: Tu & Lin's free-space scene or the
+    /// nominal car on a 3 × 3 m floor.
+    #[arg(long, value_name = "FILE")]
+    scenario: Option<PathBuf>,
+    /// Number of episodes (push: 10 pushes each by default; car: 30 s each by default).
+    #[arg(long, value_name = "N", required_unless_present = "actions")]
+    episodes: Option<u64>,
+    /// Master seed: episode i uses a seed derived from it and i. With --actions: the noise seed.
+    #[arg(long, value_name = "S", default_value_t = 0)]
+    seed: u64,
+    /// The bag directory to create (must not exist or be empty).
+    #[arg(long, value_name = "BAG")]
+    out: PathBuf,
+    /// Worker threads (the output does not depend on it); default: all cores.
+    #[arg(long, value_name = "T")]
+    threads: Option<usize>,
+    /// Explorer settings (TOML with the fields of PushExplorer or CarExplorer, e.g.
+    /// `pushes_per_episode = 10` or `duration = 30.0`).
+    #[arg(long, value_name = "FILE")]
+    explore: Option<PathBuf>,
+    /// Also write /clock at every pose stamp (off: stamps and log times are simulation time
+    /// already, and `ros2 bag play --clock` publishes /clock from them).
+    #[arg(long)]
+    clock: bool,
+    /// Replay these actions (JSON lines) from the scenario start, as sim_node in lock-step mode,
+    /// instead of exploring.
+    #[arg(long, value_name = "FILE", conflicts_with_all = ["episodes", "explore"])]
+    actions: Option<PathBuf>,
+    /// With --actions: pose (and odometry) rate [Hz], as sim_node's `pose_rate`.
+    #[arg(long, default_value_t = 100.0)]
+    pose_rate: f64,
+    /// With --actions, car: simulation time each command is held [s], as sim_node's
+    /// `lockstep_period`.
+    #[arg(long, default_value_t = 0.02)]
+    lockstep_period: f64,
+    /// Chunk compression.
+    #[arg(long, value_enum, default_value_t = CompressionArg::Zstd)]
+    compression: CompressionArg,
+}
+
+enum Scenario {
+    Push(PushScenario),
+    Car(CarScenario),
+}
+
+fn load_scenario(world: WorldArg, path: Option<&Path>) -> anyhow::Result<Scenario> {
+    Ok(match (world, path) {
+        (WorldArg::Push, None) => Scenario::Push(PushScenario::free()),
+        (WorldArg::Car, None) => Scenario::Car(CarScenario::floor()),
+        (WorldArg::Push, Some(p)) => Scenario::Push(
+            PushScenario::from_file(p).context("bad scenario file: fix the key named above")?,
+        ),
+        (WorldArg::Car, Some(p)) => Scenario::Car(
+            CarScenario::from_file(p).context("bad scenario file: fix the key named above")?,
+        ),
+    })
+}
+
+fn load_explorer<T: serde::de::DeserializeOwned + Default>(
+    path: Option<&Path>,
+) -> anyhow::Result<T> {
+    let Some(path) = path else {
+        return Ok(T::default());
+    };
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("cannot read explorer file {}", path.display()))?;
+    toml::from_str(&text).map_err(|e| {
+        anyhow::anyhow!(
+            "explorer file {}: {} (every key is optional; see the PushExplorer / CarExplorer docs)",
+            path.display(),
+            e.to_string().trim()
+        )
+    })
+}
+
+/// Runs `dynlab collect`.
+pub fn run(args: CollectArgs) -> anyhow::Result<()> {
+    let scenario = load_scenario(args.world, args.scenario.as_deref())?;
+    let options = WriterOptions {
+        compression: match args.compression {
+            CompressionArg::Zstd => Compression::Zstd,
+            CompressionArg::None => Compression::None,
+        },
+        ..WriterOptions::default()
+    };
+    let world = match args.world {
+        WorldArg::Push => SimWorld::Push,
+        WorldArg::Car => SimWorld::Car,
+    };
+    let started = Instant::now();
+    if let Some(actions) = &args.actions {
+        let summary = replay(&args, &scenario, actions, world, options)?;
+        print_summary(&summary, None, started);
+        return Ok(());
+    }
+    let count = args.episodes.unwrap_or(0);
+    if count == 0 {
+        bail!("--episodes must be at least 1");
+    }
+    let threads = args
+        .threads
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
+        .max(1);
+    let done = AtomicU64::new(0);
+    let progress = Mutex::new(());
+    let tick = |i: u64| {
+        let n = done.fetch_add(1, Ordering::Relaxed) + 1;
+        if let Ok(_guard) = progress.lock() {
+            eprint!("\rcollect {}: episode {n}/{count} (#{i})    ", world.name());
+        }
+    };
+    let episodes: Vec<Episode> = match &scenario {
+        Scenario::Push(s) => {
+            let explorer: PushExplorer = load_explorer(args.explore.as_deref())?;
+            explorer
+                .validate(s)
+                .context("bad explorer settings (the key is named above)")?;
+            dynlab_sim::episode::generate(count, args.seed, threads, |i, seed| {
+                let e = push_episode(s, &explorer, seed, i);
+                tick(i);
+                e
+            })?
+        }
+        Scenario::Car(s) => {
+            let explorer: CarExplorer = load_explorer(args.explore.as_deref())?;
+            explorer
+                .validate()
+                .context("bad explorer settings (the key is named above)")?;
+            dynlab_sim::episode::generate(count, args.seed, threads, |i, seed| {
+                let e = car_episode(s, &explorer, seed, i);
+                tick(i);
+                e
+            })?
+        }
+    };
+    eprintln!();
+    let left_table = episodes
+        .iter()
+        .filter(|e| e.end == dynlab_sim::EpisodeEnd::LeftTable)
+        .count();
+    let samples = concatenate(&episodes, 0, EPISODE_GAP_NS);
+    let summary = write_bag(&args.out, world, args.clock, options, &samples)?;
+    print_summary(&summary, Some((count, left_table)), started);
+    Ok(())
+}
+
+fn write_bag(
+    out: &Path,
+    world: SimWorld,
+    clock: bool,
+    options: WriterOptions,
+    samples: &[Sample],
+) -> anyhow::Result<BagSummary> {
+    let mut w = SimBagWriter::create(out, world, clock, options)
+        .with_context(|| format!("creating bag {}", out.display()))?;
+    for s in samples {
+        w.write(s)?;
+    }
+    Ok(w.finish()?)
+}
+
+fn print_summary(summary: &BagSummary, episodes: Option<(u64, usize)>, started: Instant) {
+    let wall = started.elapsed().as_secs_f64();
+    let sim = (summary.end_ns.saturating_sub(summary.start_ns)) as f64 * 1e-9;
+    if let Some((n, left)) = episodes {
+        eprint!("collected {n} episodes");
+        if left > 0 {
+            eprint!(" ({left} ended early: the block left the table)");
+        }
+        eprintln!();
+    }
+    eprintln!(
+        "bag {}: {} messages, {:.1} s simulated in {:.2} s ({:.0}× real time), {:.2} MB",
+        summary.dir.display(),
+        summary.message_count,
+        sim,
+        wall,
+        sim / wall.max(1e-9),
+        summary.file_bytes as f64 / 1e6
+    );
+    for (name, ty, n) in &summary.topics {
+        eprintln!("  {name} [{ty}]: {n}");
+    }
+}
+
+/// Reads JSON lines of `T`; blank lines and lines starting with `#` are skipped.
+fn read_actions<T: serde::de::DeserializeOwned>(path: &Path) -> anyhow::Result<Vec<T>> {
+    let file = std::fs::File::open(path)
+        .with_context(|| format!("cannot open actions file {}", path.display()))?;
+    let mut out = Vec::new();
+    for (i, line) in std::io::BufReader::new(file).lines().enumerate() {
+        let line = line.with_context(|| format!("reading {}", path.display()))?;
+        let t = line.trim();
+        if t.is_empty() || t.starts_with('#') {
+            continue;
+        }
+        out.push(
+            serde_json::from_str(t)
+                .with_context(|| format!("{} line {}: not an action", path.display(), i + 1))?,
+        );
+    }
+    Ok(out)
+}
+
+fn replay(
+    args: &CollectArgs,
+    scenario: &Scenario,
+    actions: &Path,
+    world: SimWorld,
+    options: WriterOptions,
+) -> anyhow::Result<BagSummary> {
+    let cfg = EngineConfig {
+        mode: Mode::LockStep,
+        pose_rate: args.pose_rate,
+        lockstep_period: args.lockstep_period,
+        seed: args.seed,
+        ..EngineConfig::default()
+    };
+    let mut engine = match scenario {
+        Scenario::Push(s) => SimEngine::push(s, cfg)?,
+        Scenario::Car(s) => SimEngine::car(s, cfg)?,
+    };
+    let mut samples = Vec::new();
+    let mut emits = Vec::new();
+    engine.start(&mut emits);
+    let to_samples = |emits: &mut Vec<Emit>, samples: &mut Vec<Sample>| {
+        for e in emits.drain(..) {
+            match e {
+                Emit::Pose { t_ns, pose } => samples.push(Sample {
+                    t_ns,
+                    record: match world {
+                        SimWorld::Push => Record::BlockPose(pose),
+                        SimWorld::Car => Record::CarPose(pose),
+                    },
+                }),
+                Emit::Odom { t_ns, state } => samples.push(Sample {
+                    t_ns,
+                    record: Record::CarOdom(state),
+                }),
+                _ => {}
+            }
+        }
+    };
+    to_samples(&mut emits, &mut samples);
+    match world {
+        SimWorld::Push => {
+            for (i, given) in read_actions::<PushAction>(actions)?.into_iter().enumerate() {
+                let t = engine.time_ns();
+                let (a, issues) = push_action_from_msg(&push_action_msg(t, given))
+                    .map_err(|e| anyhow::anyhow!("action {}: {e}", i + 1))?;
+                for issue in issues {
+                    eprintln!("warning: action {}: {issue}", i + 1);
+                }
+                samples.push(Sample {
+                    t_ns: t,
+                    record: Record::PushAction(given),
+                });
+                engine.push_action(a, &mut emits);
+                engine.run_until_idle(&mut emits)?;
+                to_samples(&mut emits, &mut samples);
+            }
+        }
+        SimWorld::Car => {
+            let car = engine
+                .car_params()
+                .cloned()
+                .context("car engine without car parameters")?;
+            for (i, given) in read_actions::<CarInput>(actions)?.into_iter().enumerate() {
+                let t = engine.time_ns();
+                let (u, issues) = car_input_from_msg(&car_cmd_msg(t, given), &car)
+                    .map_err(|e| anyhow::anyhow!("command {}: {e}", i + 1))?;
+                for issue in issues {
+                    eprintln!("warning: command {}: {issue}", i + 1);
+                }
+                samples.push(Sample {
+                    t_ns: t,
+                    record: Record::CarCmd(given),
+                });
+                engine.car_command(u, &mut emits);
+                engine.run_until_idle(&mut emits)?;
+                to_samples(&mut emits, &mut samples);
+            }
+        }
+    }
+    write_bag(&args.out, world, args.clock, options, &samples)
+}

@@ -1,0 +1,156 @@
+//! `explorer [--ros-args -p world:=car -p scenario:=FILE -p use_sim_time:=true …]`: the
+//! exploration driver — the simulated operator that pushes the block or drives the car while
+//! data is recorded over DDS, with the same policies as `dynlab collect`.
+//!
+//! - `world:=push`: publishes one `/push/action` every `push_period` (uniform over the action
+//!   space, as Tu & Lin), `pushes` times (0: until stopped).
+//! - `world:=car`: reads the car's state from `/car/odom` (the simulator's ground truth) and
+//!   publishes `/car/cmd` at `control_rate`: smooth random steering and throttle with
+//!   aggressive phases that break traction, steering home near the floor edges.
+//!
+//! Parameters: `world` (`push`), `scenario` (the simulator's scenario file: floor, track and car
+//! limits), `explore` (TOML with PushExplorer / CarExplorer fields), `seed` (0), `pushes` (0),
+//! `use_sim_time` (follow `/clock`; recommended with `sim_node`). Messages come from
+//! `dynlab_nodes::sim_node::messages`, as in `dynlab collect`.
+
+use std::time::Duration;
+
+use anyhow::{Context, bail};
+use dynlab_msgs::nav_msgs::Odometry;
+use dynlab_nodes::sim_node::messages::{self as m, SimWorld};
+use dynlab_ros::{Node, NodeArgs, Shutdown, WaitSet, qos};
+use dynlab_sim::{CarExplorer, CarScenario, CarState, PushExplorer, PushScenario, SimRng};
+
+const POLL: Duration = Duration::from_millis(5);
+
+fn load_explorer<T: serde::de::DeserializeOwned + Default>(path: &str) -> anyhow::Result<T> {
+    if path.is_empty() {
+        return Ok(T::default());
+    }
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("parameter explore: cannot read {path}"))?;
+    toml::from_str(&text)
+        .map_err(|e| anyhow::anyhow!("parameter explore: {path}: {}", e.to_string().trim()))
+}
+
+fn main() -> anyhow::Result<()> {
+    let args = NodeArgs::from_env()?;
+    if let Some(extra) = args.program_args.first() {
+        bail!("explorer takes no arguments outside --ros-args (got `{extra}`)");
+    }
+    dynlab_ros::init_logging(args.log_level);
+    let shutdown = Shutdown::install()?;
+    let mut node = Node::new("explorer", &args)?;
+    let p = node.params();
+    let known = [
+        "world",
+        "scenario",
+        "explore",
+        "seed",
+        "pushes",
+        "use_sim_time",
+    ];
+    for key in p.unknown_keys(&known) {
+        tracing::warn!(
+            "unknown parameter `{key}` ignored (known: {})",
+            known.join(", ")
+        );
+    }
+    let world_name: String = p.get_or("world", "push".to_string())?;
+    let world = SimWorld::parse(&world_name).with_context(|| {
+        format!("parameter world: `{world_name}` is not a world; use push or car")
+    })?;
+    let scenario: String = p.get_or("scenario", String::new())?;
+    let explore: String = p.get_or("explore", String::new())?;
+    let seed: u64 = p.get_or("seed", 0)?;
+    let pushes: u64 = p.get_or("pushes", 0)?;
+    let mut rng = SimRng::new(seed);
+    let clock = node.clock()?;
+    if clock.is_sim() {
+        tracing::info!("waiting for /clock");
+        while !clock.is_valid()? {
+            if shutdown.requested() {
+                return Ok(());
+            }
+            std::thread::sleep(POLL);
+        }
+    }
+    let now = || -> anyhow::Result<u64> { Ok(clock.now_ns()?.max(0) as u64) };
+
+    match world {
+        SimWorld::Push => {
+            let s = if scenario.is_empty() {
+                PushScenario::free()
+            } else {
+                PushScenario::from_file(&scenario)
+                    .with_context(|| format!("parameter scenario: {scenario}"))?
+            };
+            let explorer: PushExplorer = load_explorer(&explore)?;
+            explorer.validate(&s)?;
+            let publisher = node.create_publisher(m::PUSH_ACTION_TOPIC, qos::default_profile())?;
+            let period = (explorer.push_period * 1e9).round() as u64;
+            let mut next = now()?;
+            let mut sent = 0u64;
+            while !shutdown.requested() && (pushes == 0 || sent < pushes) {
+                let t = now()?;
+                if t >= next {
+                    let a = explorer.sample_action(&mut rng);
+                    publisher.publish(m::push_action_msg(t, a))?;
+                    tracing::info!(
+                        "push {}: p = {:.3}, φ = {:.3}, ℓ = {:.3}",
+                        sent + 1,
+                        a.location,
+                        a.angle,
+                        a.length
+                    );
+                    sent += 1;
+                    next = t + period;
+                }
+                std::thread::sleep(POLL);
+            }
+        }
+        SimWorld::Car => {
+            let s = if scenario.is_empty() {
+                CarScenario::floor()
+            } else {
+                CarScenario::from_file(&scenario)
+                    .with_context(|| format!("parameter scenario: {scenario}"))?
+            };
+            let explorer: CarExplorer = load_explorer(&explore)?;
+            explorer.validate()?;
+            let mut driver = explorer.driver(&s);
+            let publisher = node.create_publisher(m::CAR_CMD_TOPIC, qos::default_profile())?;
+            let mut odom =
+                node.create_subscription::<Odometry>(m::CAR_ODOM_TOPIC, qos::sensor_data())?;
+            let mut waits = WaitSet::new()?;
+            waits.add(&mut odom)?;
+            let period = (1e9 / explorer.control_rate).round() as u64;
+            let dt = 1.0 / explorer.control_rate;
+            let mut state: Option<CarState> = None;
+            let mut next = now()?;
+            while !shutdown.requested() {
+                waits.wait(POLL)?;
+                if let Some(o) = odom.take_latest()? {
+                    let (x, y, psi) = o.pose.pose.planar_xy_yaw();
+                    state = Some(CarState {
+                        x,
+                        y,
+                        psi,
+                        vx: o.twist.twist.linear.x,
+                        vy: o.twist.twist.linear.y,
+                        omega: o.twist.twist.angular.z,
+                    });
+                }
+                let t = now()?;
+                if let Some(st) = &state
+                    && t >= next
+                {
+                    let u = driver.command(st, dt, &mut rng);
+                    publisher.publish(m::car_cmd_msg(t, u))?;
+                    next = (next + period).max(t);
+                }
+            }
+        }
+    }
+    Ok(())
+}
