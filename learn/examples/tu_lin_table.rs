@@ -21,6 +21,9 @@ const PUBLISHED: [(&str, [f64; 5]); 4] = [
     ("node-dopri5", [6.61e-5, 9.60e-5, 2.67e-4, 3.55e-4, 7.90e-4]),
 ];
 
+/// kind, split, best validation losses, constant-model losses, seconds.
+type Row = (String, String, Vec<f64>, Vec<f64>, f64);
+
 fn main() {
     if let Err(e) = run() {
         eprintln!("error: {e}");
@@ -66,7 +69,7 @@ fn run() -> Result<(), Box<dyn std::error::Error>> {
     let hybrid_epochs = hybrid_epochs.unwrap_or(if full { 3000 } else { 60 });
     let lr = lr.unwrap_or(if full { 1e-4 } else { 1e-3 });
     let data = load_bags(
-        &[bag.clone()],
+        std::slice::from_ref(&bag),
         Some(World::Push),
         &Topics::default(),
         &SavGol::default(),
@@ -77,7 +80,7 @@ fn run() -> Result<(), Box<dyn std::error::Error>> {
         data.trajectories.len(),
         data.transitions()
     );
-    let mut rows: Vec<(String, String, Vec<f64>, Vec<f64>, f64)> = Vec::new();
+    let mut rows: Vec<Row> = Vec::new();
     for split in [Split::OverlappingWindows, Split::Trajectories] {
         for &kind in &kinds {
             let t0 = Instant::now();

@@ -191,7 +191,7 @@ impl TrainConfig {
                 "give at least one non-zero layer width",
             ));
         }
-        if !(self.segment_s > 0.0) {
+        if self.segment_s.is_nan() || self.segment_s <= 0.0 {
             return Err(s("segment_s", self.segment_s, "must be > 0 seconds"));
         }
         Ok(())
@@ -674,6 +674,14 @@ fn loss_over(
     losses.iter().sum()
 }
 
+/// One chunk's work: its windows, buffers, gradient (if training) and loss.
+type Job<'a> = (
+    &'a [Window],
+    &'a mut ChunkState,
+    Option<&'a mut Vec<f32>>,
+    &'a mut f64,
+);
+
 fn run_chunks(
     ctx: &Ctx,
     chunks: &[&[Window]],
@@ -684,7 +692,7 @@ fn run_chunks(
     threads: usize,
 ) {
     let m = chunks.len();
-    let mut jobs: Vec<(&[Window], &mut ChunkState, Option<&mut Vec<f32>>, &mut f64)> = match grads {
+    let mut jobs: Vec<Job> = match grads {
         Some(g) => chunks
             .iter()
             .zip(states.iter_mut())
@@ -699,7 +707,7 @@ fn run_chunks(
             .map(|((c, s), l)| (*c, s, None, l))
             .collect(),
     };
-    let run = |job: &mut (&[Window], &mut ChunkState, Option<&mut Vec<f32>>, &mut f64)| {
+    let run = |job: &mut Job| {
         let (w, st, g, l) = job;
         if let Some(g) = g.as_deref_mut() {
             g.iter_mut().for_each(|x| *x = 0.0);
