@@ -147,15 +147,12 @@ fn run() -> Result<(), Box<dyn std::error::Error>> {
         } else {
             "ours: by trajectory 80/20"
         };
-        println!(
-            "| {name} (dynlab, {} epochs) | {split} | {} |",
-            if name == "hybrid" {
-                hybrid_epochs
-            } else {
-                epochs
-            },
-            fmt(l)
-        );
+        let budget = match name.as_str() {
+            "physics" => "Levenberg–Marquardt fit".to_string(),
+            "hybrid" => format!("LM fit + {hybrid_epochs} epochs"),
+            _ => format!("{epochs} epochs"),
+        };
+        println!("| {name} (dynlab, {budget}) | {split} | {} |", fmt(l));
     }
     if let Some((_, _, _, b, _)) = rows.iter().find(|r| r.1 == "OverlappingWindows") {
         println!(
