@@ -14,7 +14,7 @@
 //! scenario's start exactly as `sim_node` executes them in lock-step mode, for comparing a run
 //! over DDS with a headless one.
 
-use std::io::BufRead;
+use std::io::{BufRead, IsTerminal};
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -165,10 +165,16 @@ pub fn run(args: CollectArgs) -> anyhow::Result<()> {
         .max(1);
     let done = AtomicU64::new(0);
     let progress = Mutex::new(());
+    // A live line on a terminal; in a log, a line at every tenth of the episodes.
+    let terminal = std::io::stderr().is_terminal();
     let tick = |i: u64| {
         let n = done.fetch_add(1, Ordering::Relaxed) + 1;
         if let Ok(_guard) = progress.lock() {
-            eprint!("\rcollect {}: episode {n}/{count} (#{i})    ", world.name());
+            if terminal {
+                eprint!("\rcollect {}: episode {n}/{count} (#{i})    ", world.name());
+            } else if n == count || n % count.div_ceil(10) == 0 {
+                eprintln!("collect {}: {n}/{count} episodes", world.name());
+            }
         }
     };
     let episodes: Vec<Episode> = match &scenario {
@@ -195,7 +201,9 @@ pub fn run(args: CollectArgs) -> anyhow::Result<()> {
             })?
         }
     };
-    eprintln!();
+    if terminal {
+        eprintln!();
+    }
     let left_table = episodes
         .iter()
         .filter(|e| e.end == dynlab_sim::EpisodeEnd::LeftTable)
@@ -345,4 +353,164 @@ fn replay(
         }
     }
     write_bag(&args.out, world, args.clock, options, &samples)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        args: CollectArgs,
+    }
+
+    fn collect(args: &[&str]) -> anyhow::Result<()> {
+        let cli = Cli::try_parse_from(std::iter::once("collect").chain(args.iter().copied()))?;
+        run(cli.args)
+    }
+
+    fn bytes(dir: &Path) -> Vec<u8> {
+        let name = dir.file_name().and_then(|n| n.to_str()).unwrap_or_default();
+        std::fs::read(dir.join(format!("{name}_0.mcap"))).unwrap()
+    }
+
+    #[test]
+    fn same_seed_same_bytes_on_one_and_two_threads() {
+        let tmp = tempfile::tempdir().unwrap();
+        let explore = tmp.path().join("explore.toml");
+        std::fs::write(&explore, "duration = 2.0\n").unwrap();
+        for (world, extra) in [("push", None), ("car", Some(&explore))] {
+            let mut dirs = Vec::new();
+            for (threads, seed) in [("1", "4"), ("2", "4"), ("2", "5")] {
+                let out = tmp
+                    .path()
+                    .join(format!("{world}{threads}{seed}"))
+                    .join("bag");
+                let out_s = out.to_str().unwrap().to_string();
+                let mut args = vec![
+                    world,
+                    "--episodes",
+                    "3",
+                    "--seed",
+                    seed,
+                    "--threads",
+                    threads,
+                    "--out",
+                    &out_s,
+                ];
+                let e = extra.map(|p| p.to_str().unwrap().to_string());
+                if let Some(e) = &e {
+                    args.extend(["--explore", e.as_str()]);
+                }
+                collect(&args).unwrap();
+                dirs.push(out);
+            }
+            assert!(bytes(&dirs[0]).len() > 1000);
+            assert_eq!(
+                bytes(&dirs[0]),
+                bytes(&dirs[1]),
+                "{world}: threads changed the bag"
+            );
+            assert_ne!(
+                bytes(&dirs[0]),
+                bytes(&dirs[2]),
+                "{world}: the seed had no effect"
+            );
+        }
+    }
+
+    #[test]
+    fn bad_explorer_and_scenario_files_name_the_key() {
+        let tmp = tempfile::tempdir().unwrap();
+        let explore = tmp.path().join("explore.toml");
+        std::fs::write(&explore, "pushes_per_episod = 3\n").unwrap();
+        let out = tmp.path().join("bag");
+        let err = collect(&[
+            "push",
+            "--episodes",
+            "1",
+            "--explore",
+            explore.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ])
+        .unwrap_err();
+        assert!(format!("{err:#}").contains("pushes_per_episod"), "{err:#}");
+        std::fs::write(&explore, "push_period = 0.5\n").unwrap();
+        let err = collect(&[
+            "push",
+            "--episodes",
+            "1",
+            "--explore",
+            explore.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ])
+        .unwrap_err();
+        assert!(
+            format!("{err:#}").contains("explore.push_period"),
+            "{err:#}"
+        );
+        let scenario = tmp.path().join("car.toml");
+        std::fs::write(&scenario, "[effects.aero_drag]\nc = -1.0\n").unwrap();
+        let err = collect(&[
+            "car",
+            "--episodes",
+            "1",
+            "--scenario",
+            scenario.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ])
+        .unwrap_err();
+        assert!(
+            format!("{err:#}").contains("effects.aero_drag.c"),
+            "{err:#}"
+        );
+        assert!(!out.exists());
+    }
+
+    #[test]
+    fn replayed_actions_are_clamped_like_the_node_does() {
+        let tmp = tempfile::tempdir().unwrap();
+        let actions = tmp.path().join("a.jsonl");
+        std::fs::write(
+            &actions,
+            "# two pushes\n{\"location\": 2.0, \"angle\": 0.0, \"length\": 0.5}\n\n{\"location\": 0.0, \"angle\": 0.0, \"length\": 0.5}\n",
+        )
+        .unwrap();
+        let out = tmp.path().join("bag");
+        collect(&[
+            "push",
+            "--actions",
+            actions.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ])
+        .unwrap();
+        let bag = dynlab_bag::Bag::open(&out).unwrap();
+        let acts = bag
+            .read::<dynlab_msgs::dynlab_msgs::PushAction>("/push/action")
+            .unwrap();
+        // the bag keeps the action as sent; the simulator executed the clamped one
+        assert_eq!(acts.len(), 2);
+        assert_eq!(acts[0].msg.location, 2.0);
+        let poses = bag
+            .read::<dynlab_msgs::geometry_msgs::PoseStamped>("/push/block_pose")
+            .unwrap();
+        assert!(poses.len() > 100);
+        assert_eq!(poses[0].log_time_ns, 0);
+        std::fs::write(&actions, "{\"location\": 0.0}\n").unwrap();
+        let err = collect(&[
+            "push",
+            "--actions",
+            actions.to_str().unwrap(),
+            "--out",
+            tmp.path().join("bag2").to_str().unwrap(),
+        ])
+        .unwrap_err();
+        assert!(format!("{err:#}").contains("line 1"), "{err:#}");
+    }
 }

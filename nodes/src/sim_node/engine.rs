@@ -179,8 +179,8 @@ struct CarSim {
 }
 
 enum Sim {
-    Push(PushSim),
-    Car(CarSim),
+    Push(Box<PushSim>),
+    Car(Box<CarSim>),
 }
 
 /// The simulation loop of one world.
@@ -234,13 +234,13 @@ impl SimEngine {
         }
         Ok(SimEngine {
             noise: SimRng::new(cfg.seed),
-            sim: Sim::Push(PushSim {
+            sim: Sim::Push(Box::new(PushSim {
                 world,
                 queue: VecDeque::new(),
                 dt_ns: to_ns(dt),
                 pose_every: (ratio.round() as u64).max(1),
                 steps_in_push: 0,
-            }),
+            })),
             cfg,
             t_ns: 0,
         })
@@ -262,7 +262,7 @@ impl SimEngine {
         }
         Ok(SimEngine {
             noise: SimRng::new(cfg.seed),
-            sim: Sim::Car(CarSim {
+            sim: Sim::Car(Box::new(CarSim {
                 world: CarWorld::new(scenario)?,
                 tick,
                 tick_ns: to_ns(tick),
@@ -272,7 +272,7 @@ impl SimEngine {
                 queue: VecDeque::new(),
                 ticks_per_command: ticks.round() as u64,
                 ticks_left: 0,
-            }),
+            })),
             cfg,
             t_ns: 0,
         })

@@ -1,0 +1,36 @@
+#!/usr/bin/env bash
+# Regenerates the checked-in data sets in bags/ with fixed seeds (byte-identical on every run
+# and thread count):
+#
+#   launch_scripts/make_bags.sh [OUT_DIR]      # default: bags/ of this repository
+#
+# Each bag is `dynlab collect` on a scenario of launch_scripts/scenarios/ (see bags/README.md
+# for what each holds). The `dynlab` release binary comes from $DYNLAB_BIN_DIR (default:
+# target/release; build it with `cargo build --release -p dynlab`). Existing bags of the same
+# name are replaced.
+set -euo pipefail
+here="$(cd "$(dirname "$0")/.." && pwd)"
+bin="${DYNLAB_BIN_DIR:-${CARGO_TARGET_DIR:-$here/target}/release}"
+out="${1:-$here/bags}"
+scenarios="$here/launch_scripts/scenarios"
+[[ -x "$bin/dynlab" ]] || { echo "make_bags.sh: $bin/dynlab not found; run cargo build --release -p dynlab" >&2; exit 2; }
+mkdir -p "$out"
+
+# name        world  scenario                  episodes  seed
+bags=(
+  "push_nominal        push  push_nominal.toml         40  101"
+  "push_friction_patch push  push_friction_patch.toml  40  102"
+  "push_com_offset     push  push_com_offset.toml      40  103"
+  "car_nominal         car   car_nominal.toml           3  201"
+  "car_aero_drag       car   car_aero_drag.toml         3  202"
+  "car_steering_offset car   car_steering_offset.toml   3  203"
+)
+for line in "${bags[@]}"; do
+  read -r name world scenario episodes seed <<<"$line"
+  rm -rf "${out:?}/$name"
+  echo "== $name"
+  "$bin/dynlab" collect "$world" --scenario "$scenarios/$scenario" --episodes "$episodes" \
+    --seed "$seed" --out "$out/$name"
+  [[ -f "$out/$name/metadata.yaml" ]] || { echo "make_bags.sh: $name was not written" >&2; exit 1; }
+done
+du -sh "$out"/*/ | sed "s|$out/||"
