@@ -40,7 +40,9 @@ trap cleanup EXIT
 rec=$!; pids+=("$rec")
 "$bin/sim_node" --ros-args -p "world:=$world" "${scenario_args[@]}" "$@" &
 sim=$!; pids+=("$sim")
-"$bin/explorer" --ros-args -p "world:=$world" "${scenario_args[@]}" -p use_sim_time:=true &
+# the explorer sends its first command once sim_node and the recorder have both subscribed
+"$bin/explorer" --ros-args -p "world:=$world" "${scenario_args[@]}" -p use_sim_time:=true \
+  -p subscribers:=2 &
 exp=$!; pids+=("$exp")
 
 sleep "$seconds"

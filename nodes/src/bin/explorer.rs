@@ -10,7 +10,9 @@
 //!
 //! Parameters: `world` (`push`), `scenario` (the simulator's scenario file: floor, track and car
 //! limits), `explore` (TOML with PushExplorer / CarExplorer fields), `seed` (0), `pushes` (0),
-//! `use_sim_time` (follow `/clock`; recommended with `sim_node`). Messages come from
+//! `subscribers` (1: wait until this many subscriptions — `sim_node`, a recorder — have matched
+//! the command topic before the first command, so none is lost), `use_sim_time` (follow
+//! `/clock`; recommended with `sim_node`). Messages come from
 //! `dynlab_nodes::sim_node::messages`, as in `dynlab collect`.
 
 use std::time::Duration;
@@ -33,6 +35,20 @@ fn load_explorer<T: serde::de::DeserializeOwned + Default>(path: &str) -> anyhow
         .map_err(|e| anyhow::anyhow!("parameter explore: {path}: {}", e.to_string().trim()))
 }
 
+/// Waits until `ready` (discovery has matched the subscribers), then a little longer for the
+/// match to complete on both sides; `false` when shutdown was requested first.
+fn wait_for(shutdown: &Shutdown, ready: impl Fn() -> bool, topic: &str) -> bool {
+    tracing::info!("waiting for subscribers on {topic}");
+    while !ready() {
+        if shutdown.requested() {
+            return false;
+        }
+        std::thread::sleep(POLL);
+    }
+    std::thread::sleep(Duration::from_millis(200));
+    !shutdown.requested()
+}
+
 fn main() -> anyhow::Result<()> {
     let args = NodeArgs::from_env()?;
     if let Some(extra) = args.program_args.first() {
@@ -48,6 +64,7 @@ fn main() -> anyhow::Result<()> {
         "explore",
         "seed",
         "pushes",
+        "subscribers",
         "use_sim_time",
     ];
     for key in p.unknown_keys(&known) {
@@ -64,6 +81,7 @@ fn main() -> anyhow::Result<()> {
     let explore: String = p.get_or("explore", String::new())?;
     let seed: u64 = p.get_or("seed", 0)?;
     let pushes: u64 = p.get_or("pushes", 0)?;
+    let subscribers: usize = p.get_or("subscribers", 1)?;
     let mut rng = SimRng::new(seed);
     let clock = node.clock()?;
     if clock.is_sim() {
@@ -88,6 +106,13 @@ fn main() -> anyhow::Result<()> {
             let explorer: PushExplorer = load_explorer(&explore)?;
             explorer.validate(&s)?;
             let publisher = node.create_publisher(m::PUSH_ACTION_TOPIC, qos::default_profile())?;
+            if !wait_for(
+                &shutdown,
+                || publisher.subscription_count() >= subscribers,
+                publisher.topic(),
+            ) {
+                return Ok(());
+            }
             let period = (explorer.push_period * 1e9).round() as u64;
             let mut next = now()?;
             let mut sent = 0u64;
@@ -120,6 +145,13 @@ fn main() -> anyhow::Result<()> {
             explorer.validate()?;
             let mut driver = explorer.driver(&s);
             let publisher = node.create_publisher(m::CAR_CMD_TOPIC, qos::default_profile())?;
+            if !wait_for(
+                &shutdown,
+                || publisher.subscription_count() >= subscribers,
+                publisher.topic(),
+            ) {
+                return Ok(());
+            }
             let mut odom =
                 node.create_subscription::<Odometry>(m::CAR_ODOM_TOPIC, qos::sensor_data())?;
             let mut waits = WaitSet::new()?;
