@@ -172,7 +172,7 @@ pub fn run(args: CollectArgs) -> anyhow::Result<()> {
         if let Ok(_guard) = progress.lock() {
             if terminal {
                 eprint!("\rcollect {}: episode {n}/{count} (#{i})    ", world.name());
-            } else if n == count || n % count.div_ceil(10) == 0 {
+            } else if n == count || n.is_multiple_of(count.div_ceil(10)) {
                 eprintln!("collect {}: {n}/{count} episodes", world.name());
             }
         }
