@@ -89,6 +89,7 @@ fn push_rk4_model() -> Model {
     let cfg = TrainConfig {
         kind: ModelKind::NodeRk4,
         epochs: 1,
+        split: Split::OverlappingWindows,
         ..Default::default()
     };
     train(&data, &cfg, &mut |_| {})

@@ -491,3 +491,22 @@ fn bad_input_gives_clear_errors() {
     let e = load_bags(&[dir], None, &Topics::default(), &SavGol::default()).unwrap_err();
     assert!(e.to_string().contains("/push/action"), "{e}");
 }
+
+#[test]
+fn adjoint_gradients_train_like_backpropagation_through_the_solver() {
+    let tmp = tempfile::tempdir().unwrap();
+    let push = push_data(tmp.path());
+    for kind in [ModelKind::NodeRk4, ModelKind::NodeDopri5] {
+        let mut cfg = small(kind, World::Push);
+        cfg.epochs = 10;
+        let disc = train(&push, &cfg, &mut |_| {}).unwrap();
+        cfg.adjoint = true;
+        let adj = train(&push, &cfg, &mut |_| {}).unwrap();
+        let (a, b) = (disc.best_validation_loss, adj.best_validation_loss);
+        assert!(a != b, "{kind}: the adjoint option changed nothing");
+        assert!(
+            (a - b).abs() < 0.05 * a,
+            "{kind}: discrete {a:.4e} vs adjoint {b:.4e}"
+        );
+    }
+}
