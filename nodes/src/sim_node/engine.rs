@@ -15,6 +15,7 @@
 //! - Car: a command is applied from the next pose tick on and held; when no command has arrived
 //!   for longer than `cmd_timeout` (simulation time) the car gets the zero command (no steering,
 //!   no throttle) until the next command. Pose and odometry are published at every tick.
+//!   (Pushing needs no timeout: every push is finite and the pusher is lifted after it.)
 //!
 //! **Lock-step** ([`Mode::LockStep`]): time advances only while there is a command to execute,
 //! as fast as the CPU allows, then the engine waits.
