@@ -69,11 +69,11 @@ impl Mode {
 pub struct EngineConfig {
     /// Time mode. Default real time.
     pub mode: Mode,
-    /// Pose (and odometry, `/clock`) publication rate in simulation time [Hz]. Default 100.
+    /// Pose (and odometry, `/clock`) publication rate in simulation time \[Hz\]. Default 100.
     pub pose_rate: f64,
-    /// Car: zero command after this long without a command [s of simulation time]. Default 0.5.
+    /// Car: zero command after this long without a command \[s of simulation time\]. Default 0.5.
     pub cmd_timeout: f64,
-    /// Car, lock-step: simulation time one command is held for [s]. Default 0.02 (50 Hz).
+    /// Car, lock-step: simulation time one command is held for \[s\]. Default 0.02 (50 Hz).
     pub lockstep_period: f64,
     /// Seed of the measurement noise stream. Default 0.
     pub seed: u64,
@@ -119,28 +119,28 @@ fn param(name: &'static str, message: impl Into<String>) -> EngineError {
 pub enum Emit {
     /// A measured pose to publish (with `/clock` at the same time).
     Pose {
-        /// Simulation time [ns].
+        /// Simulation time \[ns\].
         t_ns: u64,
         /// Measured pose.
         pose: Pose2,
     },
     /// Ground-truth car state to publish on `/car/odom`.
     Odom {
-        /// Simulation time [ns].
+        /// Simulation time \[ns\].
         t_ns: u64,
         /// Ground truth.
         state: CarState,
     },
     /// A push began.
     PushStarted {
-        /// Simulation time [ns].
+        /// Simulation time \[ns\].
         t_ns: u64,
         /// The push.
         action: PushAction,
     },
     /// A push ended (after settling).
     PushDone {
-        /// Simulation time [ns].
+        /// Simulation time \[ns\].
         t_ns: u64,
         /// Ground-truth block pose.
         pose: Pose2,
@@ -149,12 +149,12 @@ pub enum Emit {
     },
     /// No command for longer than `cmd_timeout`: the car now holds the zero command.
     CommandTimedOut {
-        /// Simulation time [ns].
+        /// Simulation time \[ns\].
         t_ns: u64,
     },
     /// A command or action was dropped because the queue is full.
     Dropped {
-        /// Simulation time [ns].
+        /// Simulation time \[ns\].
         t_ns: u64,
     },
 }
@@ -292,12 +292,12 @@ impl SimEngine {
         &self.cfg
     }
 
-    /// Simulation time [ns].
+    /// Simulation time \[ns\].
     pub fn time_ns(&self) -> u64 {
         self.t_ns
     }
 
-    /// Simulation time of the next [`SimEngine::advance`] [ns] (one physics step or pose tick on).
+    /// Simulation time of the next [`SimEngine::advance`] \[ns\] (one physics step or pose tick on).
     pub fn next_time_ns(&self) -> u64 {
         self.t_ns
             + match &self.sim {
