@@ -297,7 +297,7 @@ def test_record_sim_script_leaves_a_bag_recorded_over_dds(tmp_path):
     """sim_node (5× real time), explorer and recorder as separate processes over DDS."""
     bag = tmp_path / "car_dds"
     env = dict(os.environ, DYNLAB_BIN_DIR=str(binary("sim_node").parent), ROS_DOMAIN_ID="43")
-    proc = subprocess.run(["bash", str(REPO / "launch_scripts" / "record_sim.sh"), "car", str(bag), "3",
+    proc = subprocess.run(["bash", str(REPO / "launch_scripts" / "record_sim.sh"), "car", str(bag), "4",
                            "-p", "rate:=5.0"], env=env, capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr
     with Rosbag2Reader(bag) as r:
@@ -305,9 +305,24 @@ def test_record_sim_script_leaves_a_bag_recorded_over_dds(tmp_path):
     assert counts["/car/pose"][0] == "geometry_msgs/msg/PoseStamped"
     assert counts["/car/cmd"][0] == "ackermann_msgs/msg/AckermannDriveStamped"
     assert counts["/car/odom"][0] == "nav_msgs/msg/Odometry"
-    # 3 s of wall time at 5× and 100 Hz is ≈ 1500 poses; discovery takes some of it
-    assert counts["/car/pose"][1] > 300, counts
-    assert counts["/car/cmd"][1] > 100, counts
-    # header stamps are simulation time: the car drove for several simulated seconds
-    poses = bag_poses(bag, "/car/pose")
-    assert (max(poses) - min(poses)) > 3e9
+    # 4 s of wall time at 5× and 100 Hz is ≈ 2000 poses; discovery takes some of it (the bounds
+    # are loose so that a loaded machine does not fail the test)
+    assert counts["/car/pose"][1] > 100, counts
+    assert counts["/car/cmd"][1] > 20, counts
+    # header stamps are simulation time, one pose per 10 ms of it
+    poses = sorted(bag_poses(bag, "/car/pose"))
+    assert all(t % 10_000_000 == 0 for t in poses)
+    assert (poses[-1] - poses[0]) > 1e9
+
+
+@pytest.mark.parametrize("params,needle", [
+    (["-p", "world:=boat"], "parameter world: `boat` is not a world"),
+    (["-p", "pose_rate:=300.0"], "parameter pose_rate"),
+    (["-p", "mode:=fast"], "parameter mode"),
+    (["-p", "world:=car", "-p", "scenario:=/nonexistent/car.toml"], "/nonexistent/car.toml"),
+])
+def test_sim_node_refuses_bad_parameters_naming_them(params, needle):
+    proc = subprocess.run([str(binary("sim_node")), "--ros-args", *params], capture_output=True, text=True,
+                          timeout=60, env=dict(os.environ, ROS_DOMAIN_ID="44"))
+    assert proc.returncode != 0
+    assert needle in proc.stderr, proc.stderr
