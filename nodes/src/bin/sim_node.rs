@@ -315,7 +315,9 @@ fn main() -> anyhow::Result<()> {
                     sim0 = engine.time_ns();
                     next = due(engine.next_time_ns(), wall0, sim0);
                 }
-                while next <= Instant::now() {
+                // Catch up, but check commands and shutdown at least every MAX_WAIT.
+                let work_until = Instant::now() + MAX_WAIT;
+                while next <= Instant::now() && Instant::now() < work_until {
                     engine.advance(&mut emits)?;
                     pubs.publish(&mut emits)?;
                     next = due(engine.next_time_ns(), wall0, sim0);
