@@ -257,6 +257,10 @@ fn plot_curve(path: &Path, curve: &[Progress]) -> anyhow::Result<()> {
     if lo > hi {
         bail!("no positive losses to plot");
     }
+    // log10 of the losses on a linear axis: readable tick labels over any range
+    let (lo, hi) = (lo.log10(), hi.log10());
+    let pad = ((hi - lo) * 0.1).max(0.05);
+    let l10 = |v: f64| v.max(10f64.powf(lo)).log10();
     let root = BitMapBackend::new(path, (800, 500)).into_drawing_area();
     root.fill(&WHITE)?;
     let n = curve.len() as f64;
@@ -264,17 +268,17 @@ fn plot_curve(path: &Path, curve: &[Progress]) -> anyhow::Result<()> {
         .caption("training curve", ("sans-serif", 22))
         .margin(10)
         .x_label_area_size(40)
-        .y_label_area_size(70)
-        .build_cartesian_2d(1.0..n.max(2.0), (lo * 0.8..hi * 1.25).log_scale())?;
+        .y_label_area_size(60)
+        .build_cartesian_2d(1.0..n.max(2.0), (lo - pad)..(hi + pad))?;
     chart
         .configure_mesh()
         .x_desc("epoch")
-        .y_desc("loss")
-        .y_label_formatter(&|v| format!("{v:.1e}"))
+        .y_desc("log10 loss")
+        .y_label_formatter(&|v| format!("{v:.2}"))
         .draw()?;
     chart
         .draw_series(LineSeries::new(
-            curve.iter().map(|p| (p.epoch as f64, p.train_loss.max(lo))),
+            curve.iter().map(|p| (p.epoch as f64, l10(p.train_loss))),
             &BLUE,
         ))?
         .label("train")
@@ -283,7 +287,7 @@ fn plot_curve(path: &Path, curve: &[Progress]) -> anyhow::Result<()> {
         .draw_series(LineSeries::new(
             curve
                 .iter()
-                .map(|p| (p.epoch as f64, p.validation_loss.max(lo))),
+                .map(|p| (p.epoch as f64, l10(p.validation_loss))),
             &RED,
         ))?
         .label("validation")

@@ -138,6 +138,8 @@ fn train_then_eval_model_writes_the_model_curve_and_a_json_report() {
     assert!(out.join("weights.safetensors").exists());
     let csv = std::fs::read_to_string(out.join("curve.csv")).unwrap();
     assert_eq!(csv.lines().count(), 6, "{csv}");
+    let png = std::fs::read(out.join("curve.png")).unwrap();
+    assert_eq!(&png[1..4], b"PNG");
     let o = dynlab(&[
         "eval-model",
         "--model",
