@@ -5,7 +5,7 @@
 //! `--seed` and `i`, so the bag is byte-identical for a given seed whatever `--threads` is.
 //! Episodes are laid end to end on one simulated time line starting at 0, one second apart
 //! (the gap splits them into separate trajectories for the offline tools). Messages are written
-//! by `dynlab_nodes::sim_node::SimBagWriter`, the same code that defines what `sim_node` and
+//! by `dynlab_simbridge::SimBagWriter`, the same code that defines what `sim_node` and
 //! `explorer` publish, so a collected bag and a bag recorded over DDS hold the same topics,
 //! types, frames and offered QoS.
 //!
@@ -23,8 +23,8 @@ use std::time::Instant;
 use anyhow::{Context, bail};
 use clap::{Args, ValueEnum};
 use dynlab_bag::{BagSummary, Compression, WriterOptions};
-use dynlab_nodes::sim_node::engine::{Emit, EngineConfig, Mode, SimEngine};
-use dynlab_nodes::sim_node::messages::{
+use dynlab_simbridge::engine::{Emit, EngineConfig, Mode, SimEngine};
+use dynlab_simbridge::messages::{
     SimBagWriter, SimWorld, car_cmd_msg, car_input_from_msg, push_action_from_msg, push_action_msg,
 };
 use dynlab_sim::episode::Episode;

@@ -13,4 +13,3 @@
 pub mod play;
 pub mod probe;
 pub mod record;
-pub mod sim_node;

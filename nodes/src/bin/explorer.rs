@@ -13,13 +13,13 @@
 //! `subscribers` (1: wait until this many subscriptions — `sim_node`, a recorder — have matched
 //! the command topic before the first command, so none is lost), `use_sim_time` (follow
 //! `/clock`; recommended with `sim_node`). Messages come from
-//! `dynlab_nodes::sim_node::messages`, as in `dynlab collect`.
+//! `dynlab_simbridge::messages`, as in `dynlab collect`.
 
 use std::time::Duration;
 
 use anyhow::{Context, bail};
 use dynlab_msgs::nav_msgs::Odometry;
-use dynlab_nodes::sim_node::messages::{self as m, SimWorld};
+use dynlab_simbridge::messages::{self as m, SimWorld};
 use dynlab_ros::{Node, NodeArgs, Shutdown, WaitSet, qos};
 use dynlab_sim::{CarExplorer, CarScenario, CarState, PushExplorer, PushScenario, SimRng};
 

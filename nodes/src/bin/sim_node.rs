@@ -15,7 +15,7 @@
 //! |---|---|---|
 //! | `world` | `push` | `push` or `car` |
 //! | `scenario` | built-in | scenario TOML file (see sim/README.md); default Tu & Lin's free scene / the nominal car on a 3 × 3 m floor |
-//! | `mode` | `realtime` | `realtime` (paced at `rate` × real time) or `lockstep` (advances only to execute commands; see `dynlab_nodes::sim_node::engine`) |
+//! | `mode` | `realtime` | `realtime` (paced at `rate` × real time) or `lockstep` (advances only to execute commands; see `dynlab_simbridge::engine`) |
 //! | `rate` | 1.0 | real-time factor in `realtime` mode (10 = ten times faster than real time) |
 //! | `pose_rate` | 100.0 | pose, odometry and `/clock` rate in simulation time [Hz] |
 //! | `cmd_timeout` | 0.5 | car: zero command after this long without `/car/cmd` [s, simulation time] |
@@ -34,8 +34,8 @@ use dynlab_msgs::dynlab_msgs::PushAction as PushActionMsg;
 use dynlab_msgs::geometry_msgs::PoseStamped;
 use dynlab_msgs::nav_msgs::Odometry;
 use dynlab_msgs::rosgraph_msgs::Clock as ClockMsg;
-use dynlab_nodes::sim_node::engine::{Emit, EngineConfig, Mode, SimEngine};
-use dynlab_nodes::sim_node::messages::{
+use dynlab_simbridge::engine::{Emit, EngineConfig, Mode, SimEngine};
+use dynlab_simbridge::messages::{
     self as m, InputIssue, SimWorld, car_input_from_msg, push_action_from_msg,
 };
 use dynlab_ros::qos::{self, History, QosProfile};

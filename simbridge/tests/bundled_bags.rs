@@ -8,7 +8,7 @@ use dynlab_msgs::ackermann_msgs::AckermannDriveStamped;
 use dynlab_msgs::dynlab_msgs::PushAction;
 use dynlab_msgs::geometry_msgs::PoseStamped;
 use dynlab_msgs::nav_msgs::Odometry;
-use dynlab_nodes::sim_node::messages::{OfferedQos, SimWorld, sim_topics};
+use dynlab_simbridge::messages::{OfferedQos, SimWorld, sim_topics};
 use dynlab_sim::{CarScenario, PushScenario};
 
 fn repo() -> PathBuf {

@@ -37,7 +37,7 @@ use dynlab_sim::{
     SimError, SimRng,
 };
 
-use super::messages::SimWorld;
+use crate::messages::SimWorld;
 
 /// Pushes that may wait while one is running; more are dropped with a warning.
 pub const MAX_QUEUED_PUSHES: usize = 64;
