@@ -223,7 +223,7 @@ pub struct PipelineReport {
 pub struct Trajectory {
     /// Stamps \[ns\] (equidistant if resampled).
     pub t_ns: Vec<i64>,
-    /// Poses `\[x, y, yaw\]` with yaw unwrapped (continuous).
+    /// Poses `[x, y, yaw]` with yaw unwrapped (continuous).
     pub pose: Vec<[f64; 3]>,
     /// Commands, `len × dim_u`, row `i` held over `[t_i, t_{i+1})`.
     pub u: Vec<f64>,

@@ -236,7 +236,7 @@ impl OdeReport {
 
 /// An explicit Runge–Kutta tableau.
 struct Tableau {
-    /// `a\[i\]` are the coefficients of stage `i` on stages `0..i`.
+    /// `a[i]` are the coefficients of stage `i` on stages `0..i`.
     a: &'static [&'static [f64]],
     /// Weights of the propagated solution.
     b: &'static [f64],
@@ -831,7 +831,7 @@ pub fn integrate_jvp<T: Scalar, F: VectorField<T> + ?Sized>(
 }
 
 /// Input Jacobians of one model step for `n` samples: `out = s(dt)`,
-/// `js\[i\] = ∂s(dt)/∂s(0)` (`dim_s × dim_s` per sample, row-major) and `ju\[i\] = ∂s(dt)/∂u`
+/// `js[i] = ∂s(dt)/∂s(0)` (`dim_s × dim_s` per sample, row-major) and `ju[i] = ∂s(dt)/∂u`
 /// (`dim_s × dim_u`), by forward mode along one taped integration (one batched JVP per input
 /// direction).
 #[allow(clippy::too_many_arguments)]

@@ -7,8 +7,8 @@
 //! | [`dataset`] | bags → model-state trajectories (topic contract, world inference, bag hashes) |
 //! | [`net`] | the MLP with its normalisation, as a vector field for the ODE solvers |
 //! | [`model`] | [`Model`]: `residual`, `node-euler`, `node-rk4`, `node-dopri5`, `physics`, `hybrid`; steps, rollouts, exact input Jacobians, the fast batched rollout for MPPI |
-//! | [`file`] | the model directory: `model.json` + `weights.safetensors`, validated on load |
-//! | [`train`] | discounted multi-step training (Adam, seeded, best-validation checkpoint), physics fitting (bounded Levenberg–Marquardt) |
+//! | [`file`](mod@file) | the model directory: `model.json` + `weights.safetensors`, validated on load |
+//! | [`train`](mod@train) | discounted multi-step training (Adam, seeded, best-validation checkpoint), physics fitting (bounded Levenberg–Marquardt) |
 //! | [`eval`] | one-step and k-step errors per dimension, TVE |
 //!
 //! No wall clock and no unseeded randomness: seeds are inputs, and the same seed on the same data

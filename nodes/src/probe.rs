@@ -7,13 +7,13 @@
 pub struct LatencyStats {
     /// Samples.
     pub count: usize,
-    /// Median [µs].
+    /// Median \[µs\].
     pub p50_us: f64,
-    /// 99th percentile [µs].
+    /// 99th percentile \[µs\].
     pub p99_us: f64,
-    /// Largest [µs].
+    /// Largest \[µs\].
     pub max_us: f64,
-    /// Mean [µs].
+    /// Mean \[µs\].
     pub mean_us: f64,
 }
 

@@ -2,13 +2,13 @@
 //! of simulated data against what the recorder stores.
 
 use dynlab_nodes::record::offered_qos;
-use dynlab_simbridge::engine::{Emit, EngineConfig, EngineError, Mode, SimEngine};
-use dynlab_simbridge::messages::{OfferedQos, SimBagWriter, SimWorld, sim_topics};
 use dynlab_ros::qos;
 use dynlab_sim::{
     CarInput, CarScenario, CarWorld, MeasurementNoise, Pose2, PushAction, PushScenario, PushWorld,
     Record, Sample,
 };
+use dynlab_simbridge::engine::{Emit, EngineConfig, EngineError, Mode, SimEngine};
+use dynlab_simbridge::messages::{OfferedQos, SimBagWriter, SimWorld, sim_topics};
 
 fn poses(emits: &[Emit]) -> Vec<(u64, Pose2)> {
     emits

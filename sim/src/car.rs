@@ -53,7 +53,7 @@ pub struct Pacejka {
     pub b: f64,
     /// Shape factor C.
     pub c: f64,
-    /// Peak force D [N] (for the ORCA car: a force, not a normalised μ).
+    /// Peak force D \[N\] (for the ORCA car: a force, not a normalised μ).
     pub d: f64,
 }
 
@@ -69,27 +69,27 @@ impl Pacejka {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct CarParams {
-    /// Mass [kg]. Default 0.041.
+    /// Mass \[kg\]. Default 0.041.
     pub mass: f64,
     /// Yaw inertia [kg m²]. Default 27.8e-6.
     pub inertia_z: f64,
-    /// Centre of mass to front axle [m]. Default 0.029.
+    /// Centre of mass to front axle \[m\]. Default 0.029.
     pub lf: f64,
-    /// Centre of mass to rear axle [m]. Default 0.033.
+    /// Centre of mass to rear axle \[m\]. Default 0.033.
     pub lr: f64,
     /// Front tire. Default B 2.579, C 1.2, D 0.192 N.
     pub front: Pacejka,
     /// Rear tire. Default B 3.3852, C 1.2691, D 0.1737 N.
     pub rear: Pacejka,
-    /// Motor gain Cm1 [N]. Default 0.287.
+    /// Motor gain Cm1 \[N\]. Default 0.287.
     pub cm1: f64,
     /// Motor back-EMF term Cm2 [N s/m]. Default 0.0545.
     pub cm2: f64,
-    /// Rolling resistance Cr0 [N]. Default 0.0518.
+    /// Rolling resistance Cr0 \[N\]. Default 0.0518.
     pub cr0: f64,
     /// Drag Cr2 [N s²/m²]. Default 0.00035.
     pub cr2: f64,
-    /// Steering limit |δ| [rad]. Default 0.35.
+    /// Steering limit |δ| \[rad\]. Default 0.35.
     pub steering_max: f64,
     /// Lowest throttle. Default −0.1.
     pub throttle_min: f64,
@@ -97,11 +97,11 @@ pub struct CarParams {
     pub throttle_max: f64,
     /// Friction ellipse on the rear axle (see the module docs). Default true.
     pub friction_ellipse: bool,
-    /// Longitudinal speed floor in slip angles [m/s]. Default 0.05.
+    /// Longitudinal speed floor in slip angles \[m/s\]. Default 0.05.
     pub slip_speed_floor: f64,
-    /// Speed below which rolling resistance is linear [m/s]. Default 0.001.
+    /// Speed below which rolling resistance is linear \[m/s\]. Default 0.001.
     pub rolling_speed_eps: f64,
-    /// Internal RK4 step [s]. Default 0.001.
+    /// Internal RK4 step \[s\]. Default 0.001.
     pub substep: f64,
 }
 
@@ -138,7 +138,7 @@ impl Default for CarParams {
 }
 
 impl CarParams {
-    /// Wheelbase `lf + lr` [m].
+    /// Wheelbase `lf + lr` \[m\].
     pub fn wheelbase(&self) -> f64 {
         self.lf + self.lr
     }
@@ -148,9 +148,9 @@ impl CarParams {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct Arena {
-    /// Floor lower corner `[x, y]` [m]. Default `[−1.5, −1.5]`.
+    /// Floor lower corner `[x, y]` \[m\]. Default `[−1.5, −1.5]`.
     pub min: [f64; 2],
-    /// Floor upper corner `[x, y]` [m]. Default `[1.5, 1.5]`.
+    /// Floor upper corner `[x, y]` \[m\]. Default `[1.5, 1.5]`.
     pub max: [f64; 2],
     /// Optional track file (MPCC `track.json` layout: `X, Y, X_i, Y_i, X_o, Y_o`), relative to
     /// the scenario file. When set, the explorer drives along the track. Default none.
@@ -207,7 +207,7 @@ impl Default for AeroDrag {
 pub struct MotorLag {
     /// Switch. Default true.
     pub enabled: bool,
-    /// Time constant τ [s]. Default 0.1.
+    /// Time constant τ \[s\]. Default 0.1.
     pub tau: f64,
 }
 
@@ -226,7 +226,7 @@ impl Default for MotorLag {
 pub struct SteeringOffset {
     /// Switch. Default true.
     pub enabled: bool,
-    /// Offset [rad]. Default 0.03.
+    /// Offset \[rad\]. Default 0.03.
     pub offset: f64,
 }
 
@@ -471,7 +471,7 @@ impl CarScenario {
 /// Car commands: front wheel angle and normalised throttle.
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 pub struct CarInput {
-    /// Steering δ [rad] (clamped to ±`steering_max`).
+    /// Steering δ \[rad\] (clamped to ±`steering_max`).
     pub steering: f64,
     /// Throttle d (clamped to `[throttle_min, throttle_max]`).
     pub throttle: f64,
@@ -487,17 +487,17 @@ impl CarInput {
 /// Ground-truth car state: pose and body-frame velocities.
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 pub struct CarState {
-    /// x [m].
+    /// x \[m\].
     pub x: f64,
-    /// y [m].
+    /// y \[m\].
     pub y: f64,
-    /// Heading ψ [rad].
+    /// Heading ψ \[rad\].
     pub psi: f64,
-    /// Longitudinal velocity [m/s] (body frame).
+    /// Longitudinal velocity \[m/s\] (body frame).
     pub vx: f64,
-    /// Lateral velocity [m/s] (body frame, left positive).
+    /// Lateral velocity \[m/s\] (body frame, left positive).
     pub vy: f64,
-    /// Yaw rate [rad/s].
+    /// Yaw rate \[rad/s\].
     pub omega: f64,
 }
 
@@ -507,12 +507,12 @@ impl CarState {
         Pose2::new(self.x, self.y, self.psi)
     }
 
-    /// Speed |v| [m/s].
+    /// Speed |v| \[m/s\].
     pub fn speed(&self) -> f64 {
         self.vx.hypot(self.vy)
     }
 
-    /// Sideslip angle β = atan2(vy, vx) [rad] (0 when at rest).
+    /// Sideslip angle β = atan2(vy, vx) \[rad\] (0 when at rest).
     pub fn sideslip(&self) -> f64 {
         if self.speed() < 1e-9 {
             0.0
@@ -589,7 +589,7 @@ impl CarWorld {
         }
     }
 
-    /// Simulated time since construction [s].
+    /// Simulated time since construction \[s\].
     pub fn time(&self) -> f64 {
         self.time
     }

@@ -59,7 +59,7 @@ pub struct Episode {
     pub seed: u64,
     /// Records in time order.
     pub samples: Vec<Sample>,
-    /// Time of the last sample [ns].
+    /// Time of the last sample \[ns\].
     pub duration_ns: u64,
     /// Why it ended.
     pub end: EpisodeEnd,

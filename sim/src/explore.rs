@@ -16,9 +16,9 @@ use crate::rng::SimRng;
 pub struct PushExplorer {
     /// Pushes per episode. Default 10 (Tu & Lin).
     pub pushes_per_episode: u32,
-    /// Time between push starts [s]; must cover the longest push plus settling. Default 2.
+    /// Time between push starts \[s\]; must cover the longest push plus settling. Default 2.
     pub push_period: f64,
-    /// Rate of recorded block poses [Hz]. Default 10.
+    /// Rate of recorded block poses \[Hz\]. Default 10.
     pub pose_rate: f64,
     /// Start jitter `[x, y, θ]` (uniform ±) around the scenario start. Default
     /// `[0.05, 0.05, π/4]`.
@@ -98,33 +98,33 @@ impl PushExplorer {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct CarExplorer {
-    /// Episode length [s]. Default 30.
+    /// Episode length \[s\]. Default 30.
     pub duration: f64,
-    /// Command rate [Hz]. Default 50.
+    /// Command rate \[Hz\]. Default 50.
     pub control_rate: f64,
-    /// Pose (and odometry) rate [Hz]; a multiple of `control_rate`. Default 100.
+    /// Pose (and odometry) rate \[Hz\]; a multiple of `control_rate`. Default 100.
     pub pose_rate: f64,
-    /// Stationary standard deviation of the steering process [rad]. Default 0.15.
+    /// Stationary standard deviation of the steering process \[rad\]. Default 0.15.
     pub steering_std: f64,
-    /// Correlation time of the steering process [s]. Default 0.6.
+    /// Correlation time of the steering process \[s\]. Default 0.6.
     pub steering_tau: f64,
     /// Mean cruise throttle. Default 0.25 (≈ 1.4 m/s).
     pub throttle_mean: f64,
     /// Stationary standard deviation of the throttle process. Default 0.05.
     pub throttle_std: f64,
-    /// Correlation time of the throttle process [s]. Default 1.5.
+    /// Correlation time of the throttle process \[s\]. Default 1.5.
     pub throttle_tau: f64,
     /// Mean number of aggressive phases per second. Default 0.15.
     pub aggressive_rate: f64,
-    /// Longest aggressive phase [s] (each lasts uniform in [0.3, this]). Default 1.0.
+    /// Longest aggressive phase \[s\] (each lasts uniform in [0.3, this]). Default 1.0.
     pub aggressive_duration: f64,
     /// Throttle during an aggressive phase. Default 1.
     pub aggressive_throttle: f64,
-    /// Steering flick during an aggressive phase [rad]. Default 0.35.
+    /// Steering flick during an aggressive phase \[rad\]. Default 0.35.
     pub aggressive_steering: f64,
-    /// Distance from the floor edge where steering home starts [m]. Default 0.8.
+    /// Distance from the floor edge where steering home starts \[m\]. Default 0.8.
     pub boundary_margin: f64,
-    /// Throttle is cut above this speed [m/s]. Default 2.5.
+    /// Throttle is cut above this speed \[m/s\]. Default 2.5.
     pub max_speed: f64,
 }
 

@@ -7,11 +7,11 @@ use crate::error::SimError;
 /// A planar pose: position `(x, y)` in metres and heading `theta` in radians, wrapped to (−π, π].
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 pub struct Pose2 {
-    /// x position [m].
+    /// x position \[m\].
     pub x: f64,
-    /// y position [m].
+    /// y position \[m\].
     pub y: f64,
-    /// Heading [rad].
+    /// Heading \[rad\].
     pub theta: f64,
 }
 
@@ -79,13 +79,13 @@ pub enum RegionShape {
 pub struct Region {
     /// `"rect"` (default) or `"disc"`.
     pub shape: RegionShape,
-    /// Centre [m].
+    /// Centre \[m\].
     pub centre: [f64; 2],
-    /// Rectangle side lengths [m] (rect only). Default 0.2 × 0.2 m.
+    /// Rectangle side lengths \[m\] (rect only). Default 0.2 × 0.2 m.
     pub size: [f64; 2],
-    /// Rectangle rotation [rad] (rect only). Default 0.
+    /// Rectangle rotation \[rad\] (rect only). Default 0.
     pub angle: f64,
-    /// Disc radius [m] (disc only). Default 0.1 m.
+    /// Disc radius \[m\] (disc only). Default 0.1 m.
     pub radius: f64,
 }
 
@@ -136,7 +136,7 @@ impl Region {
 pub struct OrientedBox {
     /// Centre pose (heading = rotation of the box).
     pub pose: Pose2,
-    /// Half side lengths [m].
+    /// Half side lengths \[m\].
     pub half: [f64; 2],
 }
 

@@ -13,17 +13,17 @@ use crate::rng::SimRng;
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct MeasurementNoise {
-    /// Gaussian standard deviation on x and y [m]. Default 0.0005 (0.5 mm, a good mocap system).
+    /// Gaussian standard deviation on x and y \[m\]. Default 0.0005 (0.5 mm, a good mocap system).
     pub position_std: f64,
-    /// Gaussian standard deviation on the heading [rad]. Default 0.002 (≈ 0.1°).
+    /// Gaussian standard deviation on the heading \[rad\]. Default 0.002 (≈ 0.1°).
     pub yaw_std: f64,
     /// Constant bias added to `[x, y, yaw]` (calibration error). Default zero.
     pub bias: [f64; 3],
     /// Probability that a measurement is an outlier. Default 0 (off).
     pub outlier_probability: f64,
-    /// Standard deviation of an outlier's extra position error [m]. Default 0.02.
+    /// Standard deviation of an outlier's extra position error \[m\]. Default 0.02.
     pub outlier_position_std: f64,
-    /// Standard deviation of an outlier's extra heading error [rad]. Default 0.2.
+    /// Standard deviation of an outlier's extra heading error \[rad\]. Default 0.2.
     pub outlier_yaw_std: f64,
 }
 

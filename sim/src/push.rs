@@ -35,7 +35,7 @@ use crate::noise::MeasurementNoise;
 use crate::rng::SimRng;
 use crate::scenario_file;
 
-/// Standard gravity [m/s²].
+/// Standard gravity \[m/s²\].
 pub const GRAVITY: f64 = 9.81;
 
 /// One push, in Tu & Lin's action space.
@@ -43,7 +43,7 @@ pub const GRAVITY: f64 = 9.81;
 pub struct PushAction {
     /// `p ∈ [−1, 1]`: where along the pushed edge (block frame +y is +1).
     pub location: f64,
-    /// `φ ∈ [−π/2, π/2]`: push direction relative to the block heading [rad].
+    /// `φ ∈ [−π/2, π/2]`: push direction relative to the block heading \[rad\].
     pub angle: f64,
     /// `ℓ ∈ [0, 1]`: push length as a fraction of `pusher.push_scale` (0.1 m).
     pub length: f64,
@@ -94,10 +94,10 @@ impl PushAction {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct BlockParams {
-    /// Footprint `[a, b]` [m]: `a` along the block heading (x), `b` across (y). Default 0.1 × 0.1
+    /// Footprint `[a, b]` \[m\]: `a` along the block heading (x), `b` across (y). Default 0.1 × 0.1
     /// (Tu & Lin).
     pub size: [f64; 2],
-    /// Mass [kg]. Default 10 (Tu & Lin's PyBullet block).
+    /// Mass \[kg\]. Default 10 (Tu & Lin's PyBullet block).
     pub mass: f64,
     /// Block–table Coulomb coefficient μ. Default 0.1 (Tu & Lin).
     pub table_friction: f64,
@@ -123,20 +123,20 @@ impl Default for BlockParams {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct PusherParams {
-    /// Disc radius [m]. Default 0.01 (a finger tip).
+    /// Disc radius \[m\]. Default 0.01 (a finger tip).
     pub radius: f64,
-    /// Cruise speed [m/s]. Default 0.1.
+    /// Cruise speed \[m/s\]. Default 0.1.
     pub speed: f64,
-    /// Acceleration and deceleration [m/s²]. Default 0.4 (below μ g ≈ 0.98, so the block stops
+    /// Acceleration and deceleration \[m/s²\]. Default 0.4 (below μ g ≈ 0.98, so the block stops
     /// with the pusher instead of sliding on).
     pub acceleration: f64,
-    /// Distance between pusher and face before the approach [m]. Default 0.002.
+    /// Distance between pusher and face before the approach \[m\]. Default 0.002.
     pub approach_gap: f64,
-    /// Push length for `ℓ = 1` [m]. Default 0.1 (Tu & Lin).
+    /// Push length for `ℓ = 1` \[m\]. Default 0.1 (Tu & Lin).
     pub push_scale: f64,
     /// Fraction of the half edge that `p = ±1` reaches. Default 0.95 (Tu & Lin's 5 % gap).
     pub location_margin: f64,
-    /// Time the block is left to settle after the pusher is lifted [s]. Default 0.2.
+    /// Time the block is left to settle after the pusher is lifted \[s\]. Default 0.2.
     pub settle_time: f64,
 }
 
@@ -158,9 +158,9 @@ impl Default for PusherParams {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct PushSimParams {
-    /// Physics step [s]. Default 0.002 (500 Hz).
+    /// Physics step \[s\]. Default 0.002 (500 Hz).
     pub dt: f64,
-    /// Rate at which [`PushOutcome::trajectory`] samples the block pose [Hz]. Default 100.
+    /// Rate at which [`PushOutcome::trajectory`] samples the block pose \[Hz\]. Default 100.
     pub sample_rate: f64,
 }
 
@@ -177,9 +177,9 @@ impl Default for PushSimParams {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct TableParams {
-    /// Lower corner `[x, y]` [m]. Default `[0.0, −0.5]`.
+    /// Lower corner `[x, y]` \[m\]. Default `[0.0, −0.5]`.
     pub min: [f64; 2],
-    /// Upper corner `[x, y]` [m]. Default `[1.0, 0.5]`.
+    /// Upper corner `[x, y]` \[m\]. Default `[1.0, 0.5]`.
     pub max: [f64; 2],
 }
 
@@ -203,11 +203,11 @@ impl TableParams {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct Obstacle {
-    /// Centre [m]. Default `[0.6, 0.2]` (Tu & Lin).
+    /// Centre \[m\]. Default `[0.6, 0.2]` (Tu & Lin).
     pub centre: [f64; 2],
-    /// Side lengths [m]. Default `[0.1, 0.5]` (Tu & Lin).
+    /// Side lengths \[m\]. Default `[0.1, 0.5]` (Tu & Lin).
     pub size: [f64; 2],
-    /// Rotation [rad]. Default 0.
+    /// Rotation \[rad\]. Default 0.
     pub angle: f64,
 }
 
@@ -237,7 +237,7 @@ impl Obstacle {
 pub struct ComOffset {
     /// Switch; a present table is on unless this is `false`. Default true.
     pub enabled: bool,
-    /// Offset `[x, y]` in the block frame [m]. Default `[0.02, 0.0]`.
+    /// Offset `[x, y]` in the block frame \[m\]. Default `[0.02, 0.0]`.
     pub offset: [f64; 2],
 }
 
@@ -256,9 +256,9 @@ impl Default for ComOffset {
 pub struct TableTilt {
     /// Switch. Default true.
     pub enabled: bool,
-    /// Downhill direction in the table frame [rad]. Default 0 (+x).
+    /// Downhill direction in the table frame \[rad\]. Default 0 (+x).
     pub direction: f64,
-    /// Slope angle [rad]. Default 0.02 (≈ 1.1°, below the friction angle atan 0.1 ≈ 5.7°).
+    /// Slope angle \[rad\]. Default 0.02 (≈ 1.1°, below the friction angle atan 0.1 ≈ 5.7°).
     pub angle: f64,
 }
 
@@ -541,13 +541,13 @@ impl PushScenario {
         self.noise.validate("noise")
     }
 
-    /// Duration of the pusher motion for `action` (approach plus push) [s].
+    /// Duration of the pusher motion for `action` (approach plus push) \[s\].
     pub fn push_motion_time(&self, action: &PushAction) -> f64 {
         let l = self.pusher.approach_gap + action.length.clamp(0.0, 1.0) * self.pusher.push_scale;
         Trapezoid::new(l, self.pusher.speed, self.pusher.acceleration).duration
     }
 
-    /// The longest time a push can take, motion plus settling [s].
+    /// The longest time a push can take, motion plus settling \[s\].
     pub fn max_push_time(&self) -> f64 {
         self.push_motion_time(&PushAction::new(0.0, 0.0, 1.0)) + self.pusher.settle_time
     }
@@ -604,7 +604,7 @@ impl Trapezoid {
 /// The block pose at a time since the push began.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct TimedPose {
-    /// Time since the push began [s].
+    /// Time since the push began \[s\].
     pub t: f64,
     /// Ground-truth block pose.
     pub pose: Pose2,
@@ -621,7 +621,7 @@ pub struct PushOutcome {
     pub trajectory: Vec<TimedPose>,
     /// Block pose after settling.
     pub final_pose: Pose2,
-    /// Push duration including settling [s].
+    /// Push duration including settling \[s\].
     pub duration: f64,
     /// Whether the pusher touched the block at all.
     pub contact_made: bool,
@@ -651,11 +651,11 @@ struct ActivePush {
 
 #[derive(Debug, Clone, Copy)]
 struct SupportPoint {
-    /// Position in the block frame (relative to the geometric centre) [m].
+    /// Position in the block frame (relative to the geometric centre) \[m\].
     local: [f64; 2],
-    /// Normal load [N].
+    /// Normal load \[N\].
     load: f64,
-    /// Share of the mass [kg].
+    /// Share of the mass \[kg\].
     mass: f64,
 }
 
@@ -670,7 +670,7 @@ pub struct PushWorld {
     pusher_collider: ColliderHandle,
     obstacle_colliders: Vec<ColliderHandle>,
     support: Vec<SupportPoint>,
-    /// Gravity along the table when tilted [N] (world frame).
+    /// Gravity along the table when tilted \[N\] (world frame).
     tilt_force: Option<[f64; 2]>,
     steps: u64,
     push: Option<ActivePush>,
@@ -836,7 +836,7 @@ impl PushWorld {
         self.scenario.noise.measure(self.block_pose(), rng)
     }
 
-    /// Simulated time since construction [s].
+    /// Simulated time since construction \[s\].
     pub fn time(&self) -> f64 {
         self.steps as f64 * self.scenario.sim.dt
     }
@@ -846,7 +846,7 @@ impl PushWorld {
         self.steps
     }
 
-    /// The physics step [s].
+    /// The physics step \[s\].
     pub fn dt(&self) -> f64 {
         self.scenario.sim.dt
     }

@@ -28,11 +28,11 @@ struct TrackFile {
 pub struct TrackProjection {
     /// Index of the centre-line segment the point projects onto.
     pub segment: usize,
-    /// Signed lateral offset from the centre line [m] (left positive).
+    /// Signed lateral offset from the centre line \[m\] (left positive).
     pub lateral: f64,
-    /// Heading of the centre line there [rad].
+    /// Heading of the centre line there \[rad\].
     pub heading: f64,
-    /// Half width of the track there [m].
+    /// Half width of the track there \[m\].
     pub half_width: f64,
 }
 

@@ -8,8 +8,8 @@ use dynlab_msgs::ackermann_msgs::AckermannDriveStamped;
 use dynlab_msgs::dynlab_msgs::PushAction;
 use dynlab_msgs::geometry_msgs::PoseStamped;
 use dynlab_msgs::nav_msgs::Odometry;
-use dynlab_simbridge::messages::{OfferedQos, SimWorld, sim_topics};
 use dynlab_sim::{CarScenario, PushScenario};
+use dynlab_simbridge::messages::{OfferedQos, SimWorld, sim_topics};
 
 fn repo() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")

@@ -466,7 +466,7 @@ impl PhysicsModel {
 
     /// The filtered throttle of the `motor_lag` effect along a command sequence held over steps
     /// of `dt`: the exact solution of `ḋ_f = (d − d_f)/τ` under zero-order hold,
-    /// `d_f[i+1] = d\[i\] + (d_f\[i\] − d\[i\])·e^(−dt/τ)`, from `d_f[0] = d_f0`. It depends only on the
+    /// `d_f[i+1] = d[i] + (d_f[i] − d[i])·e^(−dt/τ)`, from `d_f[0] = d_f0`. It depends only on the
     /// commands and `τ`, which is what makes the lag identifiable from pose data: the initial
     /// extra state of every training window is reconstructed from the command log.
     pub fn motor_lag_filter(throttle: &[f64], dt: f64, tau: f64, d_f0: f64) -> Vec<f64> {

@@ -19,9 +19,9 @@ use std::time::Duration;
 
 use anyhow::{Context, bail};
 use dynlab_msgs::nav_msgs::Odometry;
-use dynlab_simbridge::messages::{self as m, SimWorld};
 use dynlab_ros::{Node, NodeArgs, Shutdown, WaitSet, qos};
 use dynlab_sim::{CarExplorer, CarScenario, CarState, PushExplorer, PushScenario, SimRng};
+use dynlab_simbridge::messages::{self as m, SimWorld};
 
 const POLL: Duration = Duration::from_millis(5);
 

@@ -17,9 +17,9 @@
 //! | `scenario` | built-in | scenario TOML file (see sim/README.md); default Tu & Lin's free scene / the nominal car on a 3 × 3 m floor |
 //! | `mode` | `realtime` | `realtime` (paced at `rate` × real time) or `lockstep` (advances only to execute commands; see `dynlab_simbridge::engine`) |
 //! | `rate` | 1.0 | real-time factor in `realtime` mode (10 = ten times faster than real time) |
-//! | `pose_rate` | 100.0 | pose, odometry and `/clock` rate in simulation time [Hz] |
+//! | `pose_rate` | 100.0 | pose, odometry and `/clock` rate in simulation time \[Hz\] |
 //! | `cmd_timeout` | 0.5 | car: zero command after this long without `/car/cmd` [s, simulation time] |
-//! | `lockstep_period` | 0.02 | car, `lockstep`: simulation time each command is held [s] |
+//! | `lockstep_period` | 0.02 | car, `lockstep`: simulation time each command is held \[s\] |
 //! | `seed` | scenario's `seed` | measurement-noise seed |
 //! | `pose_qos` | `sensor_data` | QoS of pose and odometry: `sensor_data` (best effort, as a mocap driver) or `reliable` (every pose arrives: tests, lock-step control) |
 //!
@@ -34,13 +34,13 @@ use dynlab_msgs::dynlab_msgs::PushAction as PushActionMsg;
 use dynlab_msgs::geometry_msgs::PoseStamped;
 use dynlab_msgs::nav_msgs::Odometry;
 use dynlab_msgs::rosgraph_msgs::Clock as ClockMsg;
+use dynlab_ros::qos::{self, History, QosProfile};
+use dynlab_ros::{Node, NodeArgs, Publisher, Shutdown, Subscription, WaitSet};
+use dynlab_sim::{CarScenario, PushScenario};
 use dynlab_simbridge::engine::{Emit, EngineConfig, Mode, SimEngine};
 use dynlab_simbridge::messages::{
     self as m, InputIssue, SimWorld, car_input_from_msg, push_action_from_msg,
 };
-use dynlab_ros::qos::{self, History, QosProfile};
-use dynlab_ros::{Node, NodeArgs, Publisher, Shutdown, Subscription, WaitSet};
-use dynlab_sim::{CarScenario, PushScenario};
 
 /// Longest wait between checks of the shutdown flag and the command subscription.
 const MAX_WAIT: Duration = Duration::from_millis(50);
