@@ -33,6 +33,7 @@ enum Command {
 }
 
 fn main() -> ExitCode {
+    restore_default_sigpipe();
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Bag(args) => bag_cmd::run(args),
@@ -46,6 +47,16 @@ fn main() -> ExitCode {
             eprintln!("error: {}", error_chain(&err));
             ExitCode::FAILURE
         }
+    }
+}
+
+/// Lets a closed output pipe (`dynlab bag info B | head`) end the program quietly, as it ends
+/// other command-line tools, instead of a panic in `println!`: Rust ignores SIGPIPE by default.
+fn restore_default_sigpipe() {
+    #[cfg(unix)]
+    // SAFETY: called first thing in `main`, before any thread exists; SIG_DFL is a valid action.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
     }
 }
 
