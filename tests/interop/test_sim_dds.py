@@ -20,6 +20,7 @@ import os
 import pathlib
 import signal
 import subprocess
+import time
 import uuid
 from dataclasses import dataclass, field
 
@@ -157,6 +158,7 @@ def test_sim_node_lockstep_pushes_over_dds_equal_the_headless_replay(tmp_path):
         poses = peer.reader(pose_topic, PoseStamped, qos=RELIABLE_KEEP_ALL)
         actions = peer.writer(action_topic, PushAction, qos=RELIABLE)
         assert wait_matched(actions) and wait_matched(poses), "sim_node never matched the peer"
+        time.sleep(2.0)  # let sim_node's writer see our reader too (see the car test)
         for i, (p, phi, length) in enumerate(PUSH_ACTIONS):
             actions.write(PushAction(location=p, angle=phi, length=length))
             if i == 2:
@@ -199,6 +201,9 @@ def test_sim_node_lockstep_car_over_dds_equals_the_headless_replay(tmp_path):
         poses = peer.reader(pose_topic, PoseStamped, qos=RELIABLE_KEEP_ALL)
         cmds = peer.writer(cmd_topic, AckermannDriveStamped, qos=RELIABLE_KEEP_ALL)
         assert wait_matched(cmds) and wait_matched(poses), "sim_node never matched the peer"
+        # Our reader seeing sim_node's writer does not mean that writer has seen our reader yet
+        # (discovery is not symmetric); a volatile writer drops what it publishes before that.
+        time.sleep(2.0)
         for steer, throttle in CAR_COMMANDS:
             cmds.write(AckermannDriveStamped(drive=AckermannDrive(steering_angle=steer, acceleration=throttle)))
         lines = tmp_path / "commands.jsonl"
