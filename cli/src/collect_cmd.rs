@@ -33,7 +33,7 @@ use dynlab_simbridge::messages::{
     SimBagWriter, SimWorld, car_cmd_msg, car_input_from_msg, push_action_from_msg, push_action_msg,
 };
 
-/// Gap between episodes on the bag's time line \[ns\].
+/// Gap between episodes on the bag's time line (ns).
 const EPISODE_GAP_NS: u64 = 1_000_000_000;
 
 /// Which world to collect.
@@ -88,10 +88,10 @@ pub struct CollectArgs {
     /// instead of exploring.
     #[arg(long, value_name = "FILE", conflicts_with_all = ["episodes", "explore"])]
     actions: Option<PathBuf>,
-    /// With --actions: pose (and odometry) rate \[Hz\], as sim_node's `pose_rate`.
+    /// With --actions: pose (and odometry) rate (Hz), as sim_node's `pose_rate`.
     #[arg(long, default_value_t = 100.0)]
     pose_rate: f64,
-    /// With --actions, car: simulation time each command is held \[s\], as sim_node's
+    /// With --actions, car: simulation time each command is held (s), as sim_node's
     /// `lockstep_period`.
     #[arg(long, default_value_t = 0.02)]
     lockstep_period: f64,

@@ -19,7 +19,7 @@ pub struct EvalArgs {
     /// Open-loop steps of the k-step errors.
     #[arg(long, default_value_t = 5)]
     steps: usize,
-    /// Car: length of the TVE segments \[s\] (Kohler et al.: 3 s).
+    /// Car: length of the TVE segments (s) (Kohler et al.: 3 s).
     #[arg(long, default_value_t = 3.0)]
     segment: f64,
     /// Pose topic (default from the model's world).

@@ -26,7 +26,7 @@ struct Cli {
     /// Record every topic discovered, as it appears.
     #[arg(short = 'a', long)]
     all: bool,
-    /// Longest time between flushes to disk \[s\]; a killed recorder loses at most this much.
+    /// Longest time between flushes to disk (s); a killed recorder loses at most this much.
     #[arg(long, default_value_t = 1.0)]
     flush_period: f64,
     /// Chunk compression: zstd or none.
