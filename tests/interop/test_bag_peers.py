@@ -11,7 +11,6 @@ import re
 import shutil
 
 import numpy as np
-import pytest
 from mcap.reader import make_reader
 from mcap_ros2.reader import read_ros2_messages
 from mcap_ros2.writer import Writer as McapRos2Writer

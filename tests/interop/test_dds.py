@@ -26,7 +26,7 @@ from rosbags.rosbag2 import Writer as Rosbag2Writer
 from rosbags.typesys import Stores, get_typestore
 
 from conftest import binary
-from peers.ros_types import (RELIABLE, RELIABLE_KEEP_ALL, SENSOR_DATA, Clock, Peer, Time, pose,
+from peers.ros_types import (RELIABLE_KEEP_ALL, SENSOR_DATA, Clock, Peer, Time, pose,
                              pose_tuple, take_until, wait_matched)
 
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)

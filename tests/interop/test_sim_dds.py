@@ -22,47 +22,17 @@ import signal
 import subprocess
 import time
 import uuid
-from dataclasses import dataclass, field
 
-import cyclonedds.idl.annotations as annotate
 import pytest
-from cyclonedds.idl import IdlStruct
-from cyclonedds.idl.types import float32, float64
 from mcap_ros2.reader import read_ros2_messages
 from rosbags.rosbag2 import Reader as Rosbag2Reader
 from rosbags.typesys import Stores, get_typestore
 
 from conftest import REPO, binary, run
-from peers.ros_types import RELIABLE, RELIABLE_KEEP_ALL, Header, Peer, PoseStamped, take_until, wait_matched
+from peers.ros_types import (RELIABLE, RELIABLE_KEEP_ALL, AckermannDrive, AckermannDriveStamped, Peer, PoseStamped,
+                             PushAction, take_until, wait_matched)
 
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
-
-
-@dataclass
-@annotate.final
-class PushAction(IdlStruct, typename="dynlab_msgs::msg::dds_::PushAction_"):
-    """dynlab_msgs/msg/PushAction, written from its .msg definition."""
-    header: Header = field(default_factory=Header)
-    location: float64 = 0.0
-    angle: float64 = 0.0
-    length: float64 = 0.0
-
-
-@dataclass
-@annotate.final
-class AckermannDrive(IdlStruct, typename="ackermann_msgs::msg::dds_::AckermannDrive_"):
-    steering_angle: float32 = 0.0
-    steering_angle_velocity: float32 = 0.0
-    speed: float32 = 0.0
-    acceleration: float32 = 0.0
-    jerk: float32 = 0.0
-
-
-@dataclass
-@annotate.final
-class AckermannDriveStamped(IdlStruct, typename="ackermann_msgs::msg::dds_::AckermannDriveStamped_"):
-    header: Header = field(default_factory=Header)
-    drive: AckermannDrive = field(default_factory=AckermannDrive)
 
 
 def unique(prefix: str) -> str:

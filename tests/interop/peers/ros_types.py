@@ -12,7 +12,7 @@ import cyclonedds.idl.annotations as annotate
 from cyclonedds.core import Policy, Qos
 from cyclonedds.domain import DomainParticipant
 from cyclonedds.idl import IdlStruct
-from cyclonedds.idl.types import float64, int32, uint32
+from cyclonedds.idl.types import float32, float64, int32, uint32
 from cyclonedds.pub import DataWriter
 from cyclonedds.sub import DataReader
 from cyclonedds.topic import Topic
@@ -76,6 +76,33 @@ RELIABLE = Qos(Policy.Reliability.Reliable(duration(milliseconds=100)), Policy.H
 SENSOR_DATA = Qos(Policy.Reliability.BestEffort, Policy.History.KeepLast(5), Policy.Durability.Volatile)
 RELIABLE_KEEP_ALL = Qos(Policy.Reliability.Reliable(duration(seconds=1)), Policy.History.KeepAll,
                         Policy.Durability.Volatile)
+
+
+@dataclass
+@annotate.final
+class PushAction(IdlStruct, typename="dynlab_msgs::msg::dds_::PushAction_"):
+    """dynlab_msgs/msg/PushAction, written from its .msg definition."""
+    header: Header = field(default_factory=Header)
+    location: float64 = 0.0
+    angle: float64 = 0.0
+    length: float64 = 0.0
+
+
+@dataclass
+@annotate.final
+class AckermannDrive(IdlStruct, typename="ackermann_msgs::msg::dds_::AckermannDrive_"):
+    steering_angle: float32 = 0.0
+    steering_angle_velocity: float32 = 0.0
+    speed: float32 = 0.0
+    acceleration: float32 = 0.0
+    jerk: float32 = 0.0
+
+
+@dataclass
+@annotate.final
+class AckermannDriveStamped(IdlStruct, typename="ackermann_msgs::msg::dds_::AckermannDriveStamped_"):
+    header: Header = field(default_factory=Header)
+    drive: AckermannDrive = field(default_factory=AckermannDrive)
 
 
 def pose(i: int, frame: str = "world") -> PoseStamped:
