@@ -206,7 +206,14 @@ pub fn save_model(
     let weights = dir.join(WEIGHTS);
     match model.network() {
         Some(n) => {
-            let bytes = weights_bytes(&n.mlp)?;
+            // Byte-stable: the same network always gives the same file.
+            let bytes = n
+                .mlp
+                .to_safetensors()
+                .map_err(|e| LearnError::CorruptModel {
+                    path: weights.clone(),
+                    reason: e.to_string(),
+                })?;
             std::fs::write(&weights, bytes).map_err(io(&weights))?;
         }
         None => {
@@ -218,43 +225,6 @@ pub fn save_model(
     let path = dir.join(MODEL_JSON);
     std::fs::write(&path, json + "\n").map_err(io(&path))?;
     Ok(())
-}
-
-/// The network's weights as safetensors with the tensor names of `dynlab-nn`
-/// (`layers.{l}.weight`, `layers.{l}.bias`) and one metadata entry, so the bytes are the same on
-/// every run (the architecture is in `model.json`).
-pub fn weights_bytes(mlp: &Mlp) -> Result<Vec<u8>, LearnError> {
-    use safetensors::tensor::{Dtype, TensorView};
-    let tensors: Vec<(String, Vec<usize>, Vec<u8>)> = mlp
-        .named_tensors("")
-        .into_iter()
-        .map(|(name, shape, v)| {
-            (
-                name,
-                shape,
-                v.iter().flat_map(|x| x.to_le_bytes()).collect(),
-            )
-        })
-        .collect();
-    let mut views = Vec::with_capacity(tensors.len());
-    for (name, shape, bytes) in &tensors {
-        let view = TensorView::new(Dtype::F32, shape.clone(), bytes).map_err(|e| {
-            LearnError::CorruptModel {
-                path: PathBuf::from(WEIGHTS),
-                reason: e.to_string(),
-            }
-        })?;
-        views.push((name.as_str(), view));
-    }
-    let mut meta = std::collections::HashMap::new();
-    meta.insert(
-        "format".to_string(),
-        "dynlab-model weights; see model.json".to_string(),
-    );
-    safetensors::serialize(views, Some(meta)).map_err(|e| LearnError::CorruptModel {
-        path: PathBuf::from(WEIGHTS),
-        reason: e.to_string(),
-    })
 }
 
 /// Reads and validates `model.json` only.

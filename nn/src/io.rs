@@ -5,7 +5,7 @@
 //! `self.layers = nn.ModuleList([nn.Linear(…), …])`. Files written by [`Mlp::to_safetensors`] also
 //! carry the architecture in the header metadata ([`METADATA_SIZES`], [`METADATA_ACTIVATIONS`]).
 
-use std::collections::HashMap;
+use std::collections::{BTreeMap, HashMap};
 use std::ops::Range;
 use std::path::Path;
 
@@ -74,7 +74,7 @@ impl Mlp {
             METADATA_ACTIVATIONS.to_string(),
             join(self.spec().activations()),
         );
-        Ok(safetensors::serialize(views, Some(metadata))?)
+        sort_metadata(safetensors::serialize(views, Some(metadata))?)
     }
 
     /// Reads a network, architecture included, from bytes written by [`Mlp::to_safetensors`].
@@ -208,4 +208,32 @@ fn join<T: std::fmt::Display>(items: &[T]) -> String {
 
 fn split(s: &str) -> impl Iterator<Item = &str> {
     s.split(',').map(str::trim).filter(|s| !s.is_empty())
+}
+
+/// `safetensors::serialize` writes the metadata map in hash order, which differs from run to run;
+/// this rewrites the JSON header with the metadata keys sorted, so the same network always gives
+/// the same bytes. The header keeps its length (white space pads it), so data offsets stay valid.
+fn sort_metadata(mut bytes: Vec<u8>) -> Result<Vec<u8>, NnError> {
+    use safetensors::SafeTensorError;
+    let n = bytes
+        .get(..8)
+        .and_then(|b| <[u8; 8]>::try_from(b).ok())
+        .map(|b| u64::from_le_bytes(b) as usize)
+        .filter(|&n| bytes.len() >= 8 + n)
+        .ok_or(SafeTensorError::InvalidHeaderLength)?;
+    let header = &bytes[8..8 + n];
+    let mut value: serde_json::Value = serde_json::from_slice(header.trim_ascii_end())
+        .map_err(SafeTensorError::InvalidHeaderDeserialization)?;
+    if let Some(meta) = value.get_mut("__metadata__") {
+        let sorted: BTreeMap<String, serde_json::Value> =
+            serde_json::from_value(meta.take()).map_err(SafeTensorError::JsonError)?;
+        *meta = serde_json::to_value(sorted).map_err(SafeTensorError::JsonError)?;
+    }
+    let mut text = serde_json::to_vec(&value).map_err(SafeTensorError::JsonError)?;
+    if text.len() > n {
+        return Err(SafeTensorError::HeaderTooLarge.into());
+    }
+    text.resize(n, b' ');
+    bytes[8..8 + n].copy_from_slice(&text);
+    Ok(bytes)
 }

@@ -232,3 +232,18 @@ fn corrupt_and_mismatched_files_give_errors_naming_the_tensor() {
     dst.load_safetensors(&file(&as_refs(&good), None)).unwrap();
     assert_eq!(dst.params(), mlp.params());
 }
+
+/// Regression: the architecture metadata was written in hash-map order, so the same network gave
+/// different file bytes from call to call (and run to run).
+#[test]
+fn same_network_gives_the_same_bytes_every_time() {
+    let spec = MlpSpec::uniform(6, &[100, 100], 3, Activation::Tanh).unwrap();
+    let mlp = Mlp::new(spec, Init::Auto, 3);
+    let first = mlp.to_safetensors().unwrap();
+    for _ in 0..20 {
+        assert_eq!(mlp.to_safetensors().unwrap(), first);
+    }
+    let back = Mlp::from_safetensors(&first).unwrap();
+    assert_eq!(back.params(), mlp.params());
+    assert_eq!(back.sizes(), mlp.sizes());
+}
