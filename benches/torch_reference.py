@@ -13,9 +13,9 @@ Measures, with the same networks, batch sizes and definitions as nn/benches/nn_s
                    (best of torch.func vmap(jacrev) and vmap(jacfwd))
 
 Usage (torch is large; keep it out of the repository's .venv):
-    python3 -m venv /work/torchvenv && /work/torchvenv/bin/pip install torch
-    /work/torchvenv/bin/python benches/torch_reference.py            # table
-    /work/torchvenv/bin/python benches/torch_reference.py --json     # one JSON line (the Rust
+    python3 -m venv $HOME/torchvenv && $HOME/torchvenv/bin/pip install torch
+    $HOME/torchvenv/bin/python benches/torch_reference.py            # table
+    $HOME/torchvenv/bin/python benches/torch_reference.py --json     # one JSON line (the Rust
                                                                      # bench reads this)
 Threads: 2 (torch.set_num_threads), as the Rust benchmark's parallel parts.
 """

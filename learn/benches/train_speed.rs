@@ -3,7 +3,7 @@
 //!
 //! ```text
 //! cargo bench -p dynlab-learn --bench train_speed
-//! DYNLAB_TORCH_PYTHON=/work/torchvenv/bin/python cargo bench -p dynlab-learn --bench train_speed
+//! DYNLAB_TORCH_PYTHON=$HOME/torchvenv/bin/python cargo bench -p dynlab-learn --bench train_speed
 //! ```
 //!
 //! Rows (medians over rounds; with PyTorch each round runs ours, then `benches/torch_reference.py

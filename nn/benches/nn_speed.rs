@@ -2,7 +2,7 @@
 //!
 //! ```text
 //! cargo bench -p dynlab-nn                                   # ours only
-//! DYNLAB_TORCH_PYTHON=/work/torchvenv/bin/python cargo bench -p dynlab-nn   # + PyTorch, interleaved
+//! DYNLAB_TORCH_PYTHON=$HOME/torchvenv/bin/python cargo bench -p dynlab-nn   # + PyTorch, interleaved
 //! ```
 //!
 //! Rows (medians over rounds; with PyTorch each round runs ours, then `benches/torch_reference.py
