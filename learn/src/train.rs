@@ -1004,11 +1004,13 @@ pub fn train(
     let mut samples: u64 = 0;
     let mut order = train_w.clone();
     let mut losses = vec![0.0; slots];
-    'epochs: for epoch in 1..=cfg.epochs.max(1) {
+    for epoch in 1..=cfg.epochs.max(1) {
         SplitMix64::new(cfg.seed ^ (epoch as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15))
             .shuffle(&mut order);
         let mut epoch_loss = 0.0;
         let mut epoch_n = 0usize;
+        // The sample budget ends training mid-epoch, after this epoch's validation and record.
+        let mut budget_spent = false;
         for batch in order.chunks(cfg.batch) {
             let chunks: Vec<&[Window]> = batch.chunks(chunk).collect();
             let m = chunks.len();
@@ -1048,31 +1050,8 @@ pub fn train(
             }
             samples += batch.len() as u64;
             if cfg.max_samples.is_some_and(|m| samples >= m) {
-                let val = {
-                    let ctx = Ctx {
-                        model: &model,
-                        adjoint: cfg.adjoint,
-                        data: &data_f,
-                        k,
-                        gamma: cfg.gamma,
-                        loss: &loss,
-                    };
-                    loss_over(&ctx, &val_w, &mut states, chunk, threads)
-                };
-                record(
-                    &mut curve,
-                    progress,
-                    epoch,
-                    cfg.epochs,
-                    epoch_loss / epoch_n as f64,
-                    val,
-                    &mut best_val,
-                    &mut best_epoch,
-                    &mut best_params,
-                    &model,
-                    samples,
-                );
-                break 'epochs;
+                budget_spent = true;
+                break;
             }
         }
         let val = {
@@ -1102,6 +1081,9 @@ pub fn train(
             &model,
             samples,
         );
+        if budget_spent {
+            break;
+        }
     }
     if let Some(net) = model.network_mut() {
         net.mlp.params_mut().copy_from_slice(&best_params);

@@ -510,3 +510,21 @@ fn adjoint_gradients_train_like_backpropagation_through_the_solver() {
         );
     }
 }
+
+#[test]
+fn a_sample_budget_stops_training_mid_epoch_with_a_validated_record() {
+    let tmp = tempfile::tempdir().unwrap();
+    let data = push_data(tmp.path());
+    let cfg = TrainConfig {
+        max_samples: Some(100),
+        ..small(ModelKind::Residual, World::Push)
+    };
+    let out = train(&data, &cfg, &mut |_| {}).unwrap();
+    // 100 samples at batch 64 end inside the first epoch (~170 training windows): one record,
+    // validated, then stop.
+    assert_eq!(out.curve.len(), 1);
+    let last = &out.curve[0];
+    assert_eq!(last.epoch, 1);
+    assert_eq!(last.samples, 128);
+    assert!(out.best_validation_loss.is_finite());
+}
