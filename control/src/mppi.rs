@@ -1,0 +1,1 @@
+//! Model predictive path integral control of the pushed block.

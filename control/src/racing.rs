@@ -1,0 +1,1 @@
+//! Trajectory optimisation through the learned car model.

@@ -1,0 +1,1 @@
+//! The residual explained by the effect library.

@@ -1,0 +1,10 @@
+//! Where a dynamics model fails and which physical effect it is missing, without DDS.
+//!
+//! | module | what |
+//! |---|---|
+//! | [`compare`] | a model held against measurements: errors per dimension, over time, binned against their causes, residual correlations, worst segments, the report |
+//! | [`diagnosis`] | the residual explained by the effect library: fit each candidate effect, score it on held-out data, rank |
+#![warn(missing_docs)]
+
+pub mod compare;
+pub mod diagnosis;
