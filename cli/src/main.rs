@@ -5,6 +5,7 @@
 
 mod bag_cmd;
 mod collect_cmd;
+mod compare_cmd;
 mod eval_cmd;
 mod train_cmd;
 
@@ -28,6 +29,9 @@ enum Command {
     Train(train_cmd::TrainArgs),
     /// Evaluate a model on a bag: one-step and k-step errors per dimension, TVE for the car.
     EvalModel(eval_cmd::EvalArgs),
+    /// Hold a model against bags: errors per dimension, over time, against their causes,
+    /// residual correlations, worst segments; report.json and index.html (--baseline: side by side).
+    Compare(compare_cmd::CompareArgs),
     /// Collect simulated data into a bag, headless and far faster than real time.
     Collect(collect_cmd::CollectArgs),
 }
@@ -40,6 +44,7 @@ fn main() -> ExitCode {
         Command::Train(args) => train_cmd::run(args),
         Command::EvalModel(args) => eval_cmd::run(args),
         Command::Collect(args) => collect_cmd::run(args),
+        Command::Compare(args) => compare_cmd::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

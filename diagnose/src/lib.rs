@@ -3,8 +3,10 @@
 //! | module | what |
 //! |---|---|
 //! | [`compare`] | a model held against measurements: errors per dimension, over time, binned against their causes, residual correlations, worst segments, the report |
+//! | [`report`] | the offline HTML report builder (sections, tables, SVG figures) that `compare` and `diagnose` write |
 //! | [`diagnosis`] | the residual explained by the effect library: fit each candidate effect, score it on held-out data, rank |
 #![warn(missing_docs)]
 
 pub mod compare;
 pub mod diagnosis;
+pub mod report;

@@ -104,6 +104,16 @@ fn trajectories_of(
     commands: &[CommandSample],
     sg: &SavGol,
 ) -> Result<(Vec<StateTrajectory>, PipelineReport, f64), LearnError> {
+    trajectories_with_stamps(world, poses, commands, sg).map(|(s, r, dt, _)| (s, r, dt))
+}
+
+#[allow(clippy::type_complexity)]
+fn trajectories_with_stamps(
+    world: World,
+    poses: &[PoseSample],
+    commands: &[CommandSample],
+    sg: &SavGol,
+) -> Result<(Vec<StateTrajectory>, PipelineReport, f64, Vec<Vec<i64>>), LearnError> {
     sg.validate()?;
     let cfg = match world {
         // a push is published just after the pose it starts from, and held until the next pose
@@ -127,7 +137,8 @@ fn trajectories_of(
             .map(|t| StateTrajectory::car(t, sg))
             .collect::<Result<Vec<_>, _>>()?,
     };
-    Ok((states, report, dt))
+    let stamps = trajs.iter().map(|t| t.t_ns.clone()).collect();
+    Ok((states, report, dt, stamps))
 }
 
 /// Infers the world of a bag from its topics (`/push/block_pose` → push, `/car/pose` → car).
@@ -242,6 +253,51 @@ pub fn load_bags(
     topics: &Topics,
     sg: &SavGol,
 ) -> Result<Dataset, LearnError> {
+    load_bags_timed(paths, world, topics, sg).map(|t| t.data)
+}
+
+/// Where each state of a [`Dataset`] was measured: the bag stamps behind every trajectory, so
+/// that errors can be reported against bag time.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Stamps {
+    /// Per trajectory, the stamp of each state \[ns\] (header stamps, or log times where a
+    /// header stamp is zero; equidistant where the pipeline resampled).
+    pub t_ns: Vec<Vec<i64>>,
+    /// Per trajectory, the index of the bag (in [`Dataset::sources`]) it came from.
+    pub bag: Vec<usize>,
+    /// Per bag, the stamp of its first pose \[ns\]: the origin of "seconds from bag start".
+    pub bag_start_ns: Vec<i64>,
+}
+
+impl Stamps {
+    /// Seconds from the start of its bag of state `i` of trajectory `traj` (0 when out of range).
+    pub fn seconds_from_bag_start(&self, traj: usize, i: usize) -> f64 {
+        let (Some(t), Some(&b)) = (self.t_ns.get(traj).and_then(|t| t.get(i)), self.bag.get(traj))
+        else {
+            return 0.0;
+        };
+        let t0 = self.bag_start_ns.get(b).copied().unwrap_or(*t);
+        (*t - t0) as f64 * 1e-9
+    }
+}
+
+/// A [`Dataset`] with the bag stamps of its states.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TimedDataset {
+    /// The data set (as [`load_bags`] returns it).
+    pub data: Dataset,
+    /// Stamps of every state, parallel to `data.trajectories`.
+    pub stamps: Stamps,
+}
+
+/// [`load_bags`], keeping the bag stamp of every state (for error-over-time plots and for
+/// naming the worst segments of a bag by their time).
+pub fn load_bags_timed(
+    paths: &[PathBuf],
+    world: Option<World>,
+    topics: &Topics,
+    sg: &SavGol,
+) -> Result<TimedDataset, LearnError> {
     if paths.is_empty() {
         return Err(LearnError::setting(
             "bag",
@@ -251,7 +307,8 @@ pub fn load_bags(
     }
     let mut world = world;
     let mut ds: Option<Dataset> = None;
-    for path in paths {
+    let mut stamps = Stamps::default();
+    for (bi, path) in paths.iter().enumerate() {
         let bag = Bag::open(path).map_err(|source| LearnError::Bag {
             path: path.clone(),
             source,
@@ -265,7 +322,27 @@ pub fn load_bags(
             }
         };
         let (poses, commands) = read_samples(&bag, w, topics)?;
-        let (trajs, report, dt) = trajectories_of(w, &poses, &commands, sg)?;
+        let (trajs, report, dt, t_ns) = trajectories_with_stamps(w, &poses, &commands, sg)
+            .map_err(|e| in_bag(e, path, &topics.pose_topic(w), &topics.cmd_topic(w)))?;
+        if trajs.is_empty() {
+            return Err(LearnError::setting(
+                "bag",
+                path.display(),
+                format!(
+                    "no trajectory is long enough: {} poses on {} in {} pieces shorter than {} poses each; record longer uninterrupted runs",
+                    report.poses_in,
+                    topics.pose_topic(w),
+                    report.short_trajectories_dropped,
+                    match w {
+                        World::Car => sg.window,
+                        World::Push => 2,
+                    }
+                ),
+            ));
+        }
+        stamps.bag_start_ns.push(poses.iter().map(|p| p.t_ns).min().unwrap_or(0));
+        stamps.bag.extend(std::iter::repeat_n(bi, t_ns.len()));
+        stamps.t_ns.extend(t_ns);
         let source = BagSource {
             path: path.display().to_string(),
             sha256: bag_sha256(path)?,
@@ -297,5 +374,150 @@ pub fn load_bags(
             }
         }
     }
-    ds.ok_or_else(|| LearnError::setting("bag", "(none)", "give at least one bag"))
+    let data = ds.ok_or_else(|| LearnError::setting("bag", "(none)", "give at least one bag"))?;
+    Ok(TimedDataset { data, stamps })
+}
+
+/// Names the bag and topics in a pipeline error about missing poses or commands.
+fn in_bag(e: LearnError, path: &Path, pose_topic: &str, cmd_topic: &str) -> LearnError {
+    use dynlab_dynamics::data::DataError;
+    match e {
+        LearnError::Data(DataError::NoPoses) => LearnError::setting(
+            "bag",
+            path.display(),
+            format!("topic {pose_topic} has no messages; record the robot's poses on it or name the pose topic (--pose-topic)"),
+        ),
+        LearnError::Data(DataError::NoCommands { poses }) => LearnError::setting(
+            "bag",
+            path.display(),
+            format!("topic {cmd_topic} has no messages ({poses} poses on {pose_topic}); record the commands sent to the robot on it or name the command topic (--cmd-topic / --action-topic)"),
+        ),
+        other => other,
+    }
+}
+
+/// What the data pipeline did to one bag, in sentences for a person: commands held at pose
+/// stamps, gaps that split trajectories, resampling, dropped poses.
+pub fn pipeline_notes(report: &PipelineReport) -> Vec<String> {
+    let mut notes = Vec::new();
+    let rate = if report.median_dt_s > 0.0 {
+        1.0 / report.median_dt_s
+    } else {
+        0.0
+    };
+    notes.push(format!(
+        "{} poses (median interval {:.2} ms, {:.1} Hz) and {} commands; each pose gets the latest command at or before it (zero-order hold)",
+        report.poses_in,
+        report.median_dt_s * 1e3,
+        rate,
+        report.commands_in
+    ));
+    if report.sorted {
+        notes.push("poses were not in stamp order and were sorted".into());
+    }
+    if report.duplicate_stamps > 0 {
+        notes.push(format!(
+            "{} poses with a repeated stamp dropped",
+            report.duplicate_stamps
+        ));
+    }
+    if !report.gaps.is_empty() {
+        let list: Vec<String> = report
+            .gaps
+            .iter()
+            .take(5)
+            .map(|g| {
+                format!(
+                    "{:.3} s → {:.3} s ({:.3} s without poses)",
+                    g.from_ns as f64 * 1e-9,
+                    g.to_ns as f64 * 1e-9,
+                    (g.to_ns - g.from_ns) as f64 * 1e-9
+                )
+            })
+            .collect();
+        notes.push(format!(
+            "{} gap(s) longer than {:.3} s split the data into separate trajectories: {}{}",
+            report.gaps.len(),
+            report.max_gap_ns as f64 * 1e-9,
+            list.join(", "),
+            if report.gaps.len() > 5 { ", …" } else { "" }
+        ));
+    }
+    if report.resampled_trajectories > 0 {
+        notes.push(format!(
+            "{} trajectories resampled (linear interpolation) to their median step: stamps jittered by up to {:.0} %",
+            report.resampled_trajectories,
+            report.max_jitter * 100.0
+        ));
+    }
+    if report.poses_without_command > 0 {
+        notes.push(format!(
+            "{} poses before the first command (or without a recent one) dropped",
+            report.poses_without_command
+        ));
+    }
+    if report.short_trajectories_dropped > 0 {
+        notes.push(format!(
+            "{} pieces too short to use dropped ({} poses)",
+            report.short_trajectories_dropped, report.short_trajectory_poses
+        ));
+    }
+    notes.push(format!(
+        "{} trajectories, {} poses used",
+        report.trajectories, report.poses_out
+    ));
+    notes
+}
+
+/// Warnings about too little excitation: a command that never changes, or (car) a robot that
+/// hardly moves. Each names what to record. Empty when the data vary enough.
+pub fn excitation_warnings(data: &Dataset) -> Vec<String> {
+    let mut out = Vec::new();
+    let du = data.world.action_dim();
+    let names = data.world.action_names();
+    let mut n = 0usize;
+    let mut sum = vec![0.0; du];
+    let mut sq = vec![0.0; du];
+    for t in &data.trajectories {
+        for row in t.u.chunks_exact(t.dim_u.max(1)) {
+            if row.len() != du {
+                continue;
+            }
+            n += 1;
+            for d in 0..du {
+                sum[d] += row[d];
+                sq[d] += row[d] * row[d];
+            }
+        }
+    }
+    if n == 0 {
+        return vec!["no commands at all: record the command topic".into()];
+    }
+    for d in 0..du {
+        let mean = sum[d] / n as f64;
+        let var = (sq[d] / n as f64 - mean * mean).max(0.0);
+        if var.sqrt() < 1e-6 * mean.abs().max(1e-3) {
+            out.push(format!(
+                "command {} is constant ({mean:.4}) over all {n} samples: the data say nothing about its effect; record runs that vary it",
+                names.get(d).copied().unwrap_or("?")
+            ));
+        }
+    }
+    if data.world == World::Car {
+        let (mut moving, mut total) = (0usize, 0usize);
+        for t in &data.trajectories {
+            for s in t.s.chunks_exact(6) {
+                total += 1;
+                if s[3].hypot(s[4]) > 0.05 {
+                    moving += 1;
+                }
+            }
+        }
+        if total > 0 && (moving as f64) < 0.1 * total as f64 {
+            out.push(format!(
+                "the car moves faster than 0.05 m/s in only {moving} of {total} states: record driving, not standing still"
+            ));
+        }
+    }
+    out
 }

@@ -25,7 +25,10 @@ pub mod net;
 pub mod train;
 pub mod world;
 
-pub use dataset::{BagSource, Dataset, Topics, load_bags};
+pub use dataset::{
+    BagSource, Dataset, Stamps, TimedDataset, Topics, excitation_warnings, load_bags, load_bags_timed,
+    pipeline_notes,
+};
 pub use dynlab_dynamics as dynamics;
 pub use error::LearnError;
 

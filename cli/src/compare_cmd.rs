@@ -1,0 +1,112 @@
+//! `dynlab compare`: a model (and optionally a baseline) held against bags — errors per
+//! dimension, over time, against their causes, over position, residual correlations, worst
+//! segments — as a terminal summary, `DIR/report.json` and `DIR/index.html`.
+
+use std::path::PathBuf;
+
+use anyhow::{Context, bail};
+use clap::Args;
+use dynlab_diagnose::compare::{CompareConfig, compare_with_baseline, html};
+use dynlab_learn::dynamics::data::SavGol;
+use dynlab_learn::{Topics, load_bags_timed, load_model};
+
+/// `dynlab compare …`
+#[derive(Debug, Args)]
+pub struct CompareArgs {
+    /// Model directory (from `dynlab train`).
+    #[arg(long)]
+    model: PathBuf,
+    /// Bag(s) to compare on (of the model's robot; any recorder, any rates).
+    #[arg(long = "bag", required = true, num_args = 1.., value_name = "BAG")]
+    bags: Vec<PathBuf>,
+    /// Output directory for report.json and index.html.
+    #[arg(long)]
+    out: PathBuf,
+    /// A second model to compare against, side by side with the error change.
+    #[arg(long)]
+    baseline: Option<PathBuf>,
+    /// Open-loop steps of the k-step errors.
+    #[arg(long, default_value_t = 5)]
+    steps: usize,
+    /// Car: length of the TVE segments (s).
+    #[arg(long, default_value_t = 3.0)]
+    segment: f64,
+    /// Largest lag of the residual correlations (steps).
+    #[arg(long, default_value_t = 20)]
+    max_lag: usize,
+    /// Worst segments to list.
+    #[arg(long, default_value_t = 10)]
+    worst: usize,
+    /// Pose topic (default from the model's world: /car/pose or /push/block_pose).
+    #[arg(long)]
+    pose_topic: Option<String>,
+    /// Command topic (default /car/cmd or /push/action).
+    #[arg(long, alias = "action-topic")]
+    cmd_topic: Option<String>,
+}
+
+pub fn run(args: CompareArgs) -> anyhow::Result<()> {
+    let (model, _) = load_model(&args.model, None, None)
+        .with_context(|| format!("loading the model {}", args.model.display()))?;
+    let baseline = match &args.baseline {
+        Some(p) => Some(
+            load_model(p, None, None)
+                .with_context(|| format!("loading the baseline {}", p.display()))?
+                .0,
+        ),
+        None => None,
+    };
+    let world = model.world();
+    // a bag of the other robot: say so rather than "topic missing"
+    if args.pose_topic.is_none() {
+        for b in &args.bags {
+            if let Ok(bag) = dynlab_bag::Bag::open(b)
+                && let Ok(w) = dynlab_learn::dataset::infer_world(&bag)
+                && w != world
+                && bag.topic(world.default_pose_topic()).is_none()
+            {
+                bail!(
+                    "the model {} is a {} model but {} holds {} data ({}); compare it on a bag of the same robot, or name the pose topic with --pose-topic",
+                    args.model.display(),
+                    world,
+                    b.display(),
+                    w,
+                    w.default_pose_topic()
+                );
+            }
+        }
+    }
+    let topics = Topics {
+        pose: args.pose_topic.clone(),
+        cmd: args.cmd_topic.clone(),
+    };
+    let data = load_bags_timed(&args.bags, Some(world), &topics, &SavGol::default())?;
+    let cfg = CompareConfig {
+        steps: args.steps,
+        segment_s: args.segment,
+        max_lag: args.max_lag,
+        worst: args.worst,
+        ..Default::default()
+    };
+    let label = args.model.display().to_string();
+    let blabel = args
+        .baseline
+        .as_ref()
+        .map(|p| p.display().to_string())
+        .unwrap_or_default();
+    let report = compare_with_baseline(
+        (&label, &model),
+        baseline.as_ref().map(|b| (blabel.as_str(), b)),
+        &data,
+        &cfg,
+    )?;
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("creating {}", args.out.display()))?;
+    let json = args.out.join("report.json");
+    std::fs::write(&json, serde_json::to_string_pretty(&report)?)
+        .with_context(|| format!("writing {}", json.display()))?;
+    let page = html::report(&report).write(&args.out)?;
+    print!("{}", report.summary());
+    println!("report: {} and {}", page.display(), json.display());
+    Ok(())
+}
