@@ -919,7 +919,8 @@ pub fn compare_with_baseline(
 }
 
 fn fmt_pct(p: Option<f64>) -> String {
-    p.map(|p| format!("{p:+.1} %")).unwrap_or_else(|| "-".into())
+    p.map(|p| format!("{p:+.1} %"))
+        .unwrap_or_else(|| "-".into())
 }
 
 impl CompareReport {
@@ -998,7 +999,10 @@ impl CompareReport {
             }
         }
         for notes in &self.data.notes {
-            for n in notes.iter().filter(|n| n.contains("gap") || n.contains("resampled") || n.contains("dropped")) {
+            for n in notes
+                .iter()
+                .filter(|n| n.contains("gap") || n.contains("resampled") || n.contains("dropped"))
+            {
                 s += &format!("data: {n}\n");
             }
         }
@@ -1016,7 +1020,13 @@ impl CompareReport {
                     continue;
                 }
                 let v = (0..ds)
-                    .map(|d| if norm[d] > 0.0 { b.rmse[d][i] / norm[d] } else { 0.0 })
+                    .map(|d| {
+                        if norm[d] > 0.0 {
+                            b.rmse[d][i] / norm[d]
+                        } else {
+                            0.0
+                        }
+                    })
                     .sum::<f64>()
                     / ds as f64;
                 if v > best.1 {

@@ -272,8 +272,10 @@ pub struct Stamps {
 impl Stamps {
     /// Seconds from the start of its bag of state `i` of trajectory `traj` (0 when out of range).
     pub fn seconds_from_bag_start(&self, traj: usize, i: usize) -> f64 {
-        let (Some(t), Some(&b)) = (self.t_ns.get(traj).and_then(|t| t.get(i)), self.bag.get(traj))
-        else {
+        let (Some(t), Some(&b)) = (
+            self.t_ns.get(traj).and_then(|t| t.get(i)),
+            self.bag.get(traj),
+        ) else {
             return 0.0;
         };
         let t0 = self.bag_start_ns.get(b).copied().unwrap_or(*t);
@@ -340,7 +342,9 @@ pub fn load_bags_timed(
                 ),
             ));
         }
-        stamps.bag_start_ns.push(poses.iter().map(|p| p.t_ns).min().unwrap_or(0));
+        stamps
+            .bag_start_ns
+            .push(poses.iter().map(|p| p.t_ns).min().unwrap_or(0));
         stamps.bag.extend(std::iter::repeat_n(bi, t_ns.len()));
         stamps.t_ns.extend(t_ns);
         let source = BagSource {
@@ -385,12 +389,16 @@ fn in_bag(e: LearnError, path: &Path, pose_topic: &str, cmd_topic: &str) -> Lear
         LearnError::Data(DataError::NoPoses) => LearnError::setting(
             "bag",
             path.display(),
-            format!("topic {pose_topic} has no messages; record the robot's poses on it or name the pose topic (--pose-topic)"),
+            format!(
+                "topic {pose_topic} has no messages; record the robot's poses on it or name the pose topic (--pose-topic)"
+            ),
         ),
         LearnError::Data(DataError::NoCommands { poses }) => LearnError::setting(
             "bag",
             path.display(),
-            format!("topic {cmd_topic} has no messages ({poses} poses on {pose_topic}); record the commands sent to the robot on it or name the command topic (--cmd-topic / --action-topic)"),
+            format!(
+                "topic {cmd_topic} has no messages ({poses} poses on {pose_topic}); record the commands sent to the robot on it or name the command topic (--cmd-topic / --action-topic)"
+            ),
         ),
         other => other,
     }

@@ -26,8 +26,8 @@ pub mod train;
 pub mod world;
 
 pub use dataset::{
-    BagSource, Dataset, Stamps, TimedDataset, Topics, excitation_warnings, load_bags, load_bags_timed,
-    pipeline_notes,
+    BagSource, Dataset, Stamps, TimedDataset, Topics, excitation_warnings, load_bags,
+    load_bags_timed, pipeline_notes,
 };
 pub use dynlab_dynamics as dynamics;
 pub use error::LearnError;

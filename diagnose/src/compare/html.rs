@@ -19,7 +19,12 @@ fn thin(points: Vec<(f64, f64)>) -> Vec<(f64, f64)> {
 pub fn report(r: &CompareReport) -> Report {
     let m = &r.model;
     let title = match &r.baseline {
-        Some(b) => format!("{} against {} on {}", m.label, b.label, r.data.bags.join(", ")),
+        Some(b) => format!(
+            "{} against {} on {}",
+            m.label,
+            b.label,
+            r.data.bags.join(", ")
+        ),
         None => format!("{} on {}", m.label, r.data.bags.join(", ")),
     };
     let mut rep = Report::new(title);
@@ -243,13 +248,9 @@ pub fn report(r: &CompareReport) -> Report {
         }
         let mut charts = vec![ac];
         for inp in &r.inputs {
-            let mut cc = LineChart::new(
-                format!("residual × input {inp}"),
-                "lag (steps)",
-                "r",
-            )
-            .hline(c.band, "+95 %")
-            .hline(-c.band, "−95 %");
+            let mut cc = LineChart::new(format!("residual × input {inp}"), "lag (steps)", "r")
+                .hline(c.band, "+95 %")
+                .hline(-c.band, "−95 %");
             for x in c.cross.iter().filter(|x| &x.with == inp) {
                 cc = cc.series(Series::line(
                     x.state.clone(),
@@ -260,7 +261,14 @@ pub fn report(r: &CompareReport) -> Report {
         }
         let refs: Vec<&dyn Chart> = charts.iter().map(|c| c as &dyn Chart).collect();
         s.chart_row(&refs);
-        let mut t = Table::new(["residual", "with", "peak lag (steps)", "peak lag (s)", "peak r", "lags outside band"]);
+        let mut t = Table::new([
+            "residual",
+            "with",
+            "peak lag (steps)",
+            "peak lag (s)",
+            "peak r",
+            "lags outside band",
+        ]);
         for x in c.autocorrelation.iter().chain(&c.cross) {
             t.push([
                 x.state.clone(),

@@ -19,7 +19,11 @@ pub fn robust_edges(values: &[f64], n: usize) -> Option<Vec<f64>> {
     let hi = quantile(values, 0.99)?;
     let n = n.max(1);
     if hi > lo {
-        Some((0..=n).map(|i| lo + (hi - lo) * i as f64 / n as f64).collect())
+        Some(
+            (0..=n)
+                .map(|i| lo + (hi - lo) * i as f64 / n as f64)
+                .collect(),
+        )
     } else {
         Some(vec![lo - 0.5, lo + 0.5])
     }
