@@ -3,9 +3,10 @@
 //! [`compare`] rolls a [`Model`] open loop over every k-step window of a [`TimedDataset`] (bags
 //! loaded with their stamps) and measures, per state dimension:
 //!
-//! - one-step and k-step errors (RMSE, MAE; angles wrapped) and, for the car, the trajectory
-//!   validation error TVE — both from [`dynlab_learn::evaluate`], so the numbers are the ones
-//!   `dynlab eval-model` prints;
+//! - one-step and k-step errors (RMSE, MAE; angles wrapped), the training loss and, for the car,
+//!   the trajectory validation error TVE, as an [`EvalReport`] with the numbers
+//!   `dynlab eval-model` prints (the same windows, learn's segmenting and `conventions::tve`),
+//!   computed from one threaded pass over the windows that also feeds everything below;
 //! - the k-step error over time, per trajectory, against bag time;
 //! - the k-step error binned against the quantities that cause it (car: speed, yaw rate,
 //!   sideslip, steering, throttle, x, y; pushing: x, y, push location, angle and length), with
@@ -25,10 +26,12 @@
 pub mod html;
 pub mod stats;
 
-use dynlab_learn::dynamics::conventions::wrap_angle;
+use dynlab_learn::dynamics::conventions::{l_rel, tve, wrap_angle};
 use dynlab_learn::dynamics::data::{gather, windows};
-use dynlab_learn::eval::{DimError, EvalReport};
-use dynlab_learn::{LearnError, Model, TimedDataset, World, evaluate};
+use dynlab_learn::dynamics::ode::OdeStatus;
+use dynlab_learn::eval::{DimError, EvalReport, TveReport};
+use dynlab_learn::train::{Loss, segment};
+use dynlab_learn::{LearnError, Model, TimedDataset, World};
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
@@ -77,8 +80,11 @@ pub struct CompareConfig {
     /// Most points per trajectory in the error-over-time series (blocks of windows are reduced
     /// to their RMS; default 400).
     pub series_points: usize,
-    /// Windows per batched rollout (default 4096; only speed and memory depend on it).
+    /// Windows per batched rollout (default 2048, as `evaluate`; with an adaptive solver the
+    /// step size is shared by a batch, so keep it for numbers identical to `eval-model`).
     pub batch: usize,
+    /// Threads for the rollouts (default 2). Every window's numbers are independent of it.
+    pub threads: usize,
 }
 
 impl Default for CompareConfig {
@@ -91,7 +97,8 @@ impl Default for CompareConfig {
             max_lag: 20,
             worst: 10,
             series_points: 400,
-            batch: 4096,
+            batch: 2048,
+            threads: 2,
         }
     }
 }
@@ -350,6 +357,64 @@ struct WindowErrors {
     /// `n × ds` one-step errors and k-step errors.
     e1: Vec<f64>,
     ek: Vec<f64>,
+    /// Per window, the discounted k-step training loss.
+    loss: Vec<f64>,
+    /// Batches whose solver did not succeed.
+    failed: usize,
+}
+
+/// One batch of windows: errors after the first and the last step, the loss.
+fn batch_errors(
+    model: &Model,
+    data: &TimedDataset,
+    ws: &[dynlab_learn::dynamics::data::Window],
+    k: usize,
+    e1: &mut [f64],
+    ek: &mut [f64],
+    loss_w: &mut [f64],
+) -> Result<bool, LearnError> {
+    let world = model.world();
+    let ds = world.state_dim();
+    let lr = world.learned_dims();
+    let loss = Loss::default_for(world);
+    let b = gather(&data.data.trajectories, ws, k);
+    let m = b.n;
+    let mut out = vec![0.0; k * m * ds];
+    let ok = model.rollout(&b.s0, &b.u, &mut out)? == OdeStatus::Success;
+    let mut e = vec![0.0; ds];
+    for i in 0..m {
+        let mut g = 1.0;
+        let mut l = 0.0;
+        for j in 0..k {
+            let p = &out[(j * m + i) * ds..(j * m + i + 1) * ds];
+            let t = &b.target[(j * m + i) * ds..(j * m + i + 1) * ds];
+            for d in 0..ds {
+                let x = p[d] - t[d];
+                e[d] = if d == world.angle_dim() {
+                    wrap_angle(x)
+                } else {
+                    x
+                };
+            }
+            if j == 0 {
+                e1[i * ds..(i + 1) * ds].copy_from_slice(&e);
+            }
+            if j + 1 == k {
+                ek[i * ds..(i + 1) * ds].copy_from_slice(&e);
+            }
+            l += g * match &loss {
+                Loss::PoseMse { weights } => weights
+                    .iter()
+                    .enumerate()
+                    .map(|(q, w)| w * e[lr.start + q] * e[lr.start + q])
+                    .sum::<f64>(),
+                Loss::LRel { norm, eps } => l_rel(&p[lr.clone()], &t[lr.clone()], *eps, *norm),
+            };
+            g *= 0.9;
+        }
+        loss_w[i] = l;
+    }
+    Ok(ok)
 }
 
 fn window_errors(
@@ -357,41 +422,153 @@ fn window_errors(
     data: &TimedDataset,
     cfg: &CompareConfig,
 ) -> Result<WindowErrors, CompareError> {
-    let world = model.world();
-    let ds = world.state_dim();
+    let ds = model.world().state_dim();
     let k = cfg.steps;
-    let trajs = &data.data.trajectories;
     let all = windows(&data.data.lengths(), k).map_err(LearnError::from)?;
     let n = all.len();
     let mut e1 = vec![0.0; n * ds];
     let mut ek = vec![0.0; n * ds];
-    let mut out = Vec::new();
-    for (c, ws) in all.chunks(cfg.batch).enumerate() {
-        let b = gather(trajs, ws, k);
-        let m = b.n;
-        out.resize(k * m * ds, 0.0);
-        model.rollout(&b.s0, &b.u, &mut out)?;
-        for i in 0..m {
-            let row = c * cfg.batch + i;
-            for (j, dst) in [(0usize, &mut e1), (k - 1, &mut ek)] {
-                let p = &out[(j * m + i) * ds..(j * m + i + 1) * ds];
-                let t = &b.target[(j * m + i) * ds..(j * m + i + 1) * ds];
-                for d in 0..ds {
-                    let x = p[d] - t[d];
-                    dst[row * ds + d] = if d == world.angle_dim() {
-                        wrap_angle(x)
-                    } else {
-                        x
-                    };
-                }
-            }
+    let mut loss = vec![0.0; n];
+    let batches: Vec<_> = all
+        .chunks(cfg.batch)
+        .zip(e1.chunks_mut(cfg.batch * ds))
+        .zip(ek.chunks_mut(cfg.batch * ds))
+        .zip(loss.chunks_mut(cfg.batch))
+        .map(|(((w, a), b), c)| (w, a, b, c))
+        .collect();
+    // contiguous runs of batches per thread: each window's numbers do not depend on the split
+    let threads = cfg.threads.max(1).min(batches.len().max(1));
+    let per = batches.len().div_ceil(threads);
+    let mut groups: Vec<Vec<_>> = Vec::new();
+    let mut it = batches.into_iter();
+    loop {
+        let g: Vec<_> = it.by_ref().take(per).collect();
+        if g.is_empty() {
+            break;
         }
+        groups.push(g);
+    }
+    let results: Vec<Result<usize, LearnError>> = std::thread::scope(|sc| {
+        let handles: Vec<_> = groups
+            .into_iter()
+            .map(|g| {
+                sc.spawn(move || {
+                    let mut failed = 0;
+                    for (w, a, b, c) in g {
+                        if !batch_errors(model, data, w, k, a, b, c)? {
+                            failed += 1;
+                        }
+                    }
+                    Ok(failed)
+                })
+            })
+            .collect();
+        handles
+            .into_iter()
+            .map(|h| {
+                h.join().unwrap_or_else(|_| {
+                    Err(LearnError::InvalidSetting {
+                        name: "threads",
+                        value: "worker".into(),
+                        hint:
+                            "a rollout worker panicked; rerun with threads = 1 and report the bug"
+                                .into(),
+                    })
+                })
+            })
+            .collect()
+    });
+    let mut failed = 0;
+    for r in results {
+        failed += r?;
     }
     Ok(WindowErrors {
         trajectory: all.iter().map(|w| w.trajectory).collect(),
         start: all.iter().map(|w| w.start).collect(),
         e1,
         ek,
+        loss,
+        failed,
+    })
+}
+
+/// The errors, loss and TVE in the form `dynlab_learn::evaluate` reports them, from the
+/// per-window pass (no second rollout of the windows); TVE with learn's own segmenting and
+/// `conventions::tve`, all segments rolled out in one batch.
+fn eval_report(
+    model: &Model,
+    data: &TimedDataset,
+    we: &WindowErrors,
+    cfg: &CompareConfig,
+) -> Result<EvalReport, CompareError> {
+    let world = model.world();
+    let ds = world.state_dim();
+    let n = we.start.len();
+    let dims = |e: &[f64]| -> Vec<DimError> {
+        let mut sq = vec![0.0; ds];
+        let mut ab = vec![0.0; ds];
+        for row in e.chunks_exact(ds) {
+            for d in 0..ds {
+                sq[d] += row[d] * row[d];
+                ab[d] += row[d].abs();
+            }
+        }
+        world
+            .state_names()
+            .iter()
+            .enumerate()
+            .map(|(d, name)| DimError {
+                name: name.to_string(),
+                rmse: (sq[d] / n.max(1) as f64).sqrt(),
+                mae: ab[d] / n.max(1) as f64,
+            })
+            .collect()
+    };
+    let tve_report = if world == World::Car {
+        let seg_len = (cfg.segment_s / data.data.pose_dt_s).round().max(1.0) as usize + 1;
+        let segs: Vec<_> = segment(&data.data.trajectories, seg_len)
+            .into_iter()
+            .filter(|s| s.len() == seg_len)
+            .collect();
+        let steps = seg_len - 1;
+        let m = segs.len();
+        let mut finals = Vec::with_capacity(m);
+        if m > 0 {
+            let du = world.action_dim();
+            let s0: Vec<f64> = segs.iter().flat_map(|s| s.s[..ds].to_vec()).collect();
+            let mut u = vec![0.0; steps * m * du];
+            for j in 0..steps {
+                for (i, sg) in segs.iter().enumerate() {
+                    u[(j * m + i) * du..(j * m + i + 1) * du]
+                        .copy_from_slice(&sg.u[j * du..(j + 1) * du]);
+                }
+            }
+            let mut out = vec![0.0; steps * m * ds];
+            model.rollout(&s0, &u, &mut out)?;
+            for (i, sg) in segs.iter().enumerate() {
+                let p = &out[((steps - 1) * m + i) * ds..((steps - 1) * m + i + 1) * ds];
+                let q = &sg.s[steps * ds..(steps + 1) * ds];
+                finals.push(([p[0], p[1], p[2]], [q[0], q[1], q[2]]));
+            }
+        }
+        Some(TveReport {
+            tve: tve(&finals),
+            segments: finals.len(),
+            segment_s: cfg.segment_s,
+        })
+    } else {
+        None
+    };
+    Ok(EvalReport {
+        world,
+        kind: model.kind().name().to_string(),
+        steps: cfg.steps,
+        windows: n,
+        one_step: dims(&we.e1),
+        k_step: dims(&we.ek),
+        loss: we.loss.iter().sum::<f64>() / n.max(1) as f64,
+        tve: tve_report,
+        failed_rollouts: we.failed,
     })
 }
 
@@ -787,9 +964,9 @@ pub fn compare_model(
             hint: "load the data with load_bags_timed so every trajectory has its stamps",
         });
     }
-    let eval = evaluate(model, &data.data, cfg.steps, cfg.segment_s)?;
     let ds = world.state_dim();
     let we = window_errors(model, data, cfg)?;
+    let eval = eval_report(model, data, &we, cfg)?;
     let qs = quantities(world, data, &we);
     let binned = qs
         .iter()
