@@ -43,6 +43,49 @@ pub struct CompareArgs {
     /// Command topic (default /car/cmd or /push/action).
     #[arg(long, alias = "action-topic")]
     cmd_topic: Option<String>,
+    /// Also replay the bag(s) through the live predictor of the `model_server` node and write its
+    /// predictions, one JSON object per pose, to this file (what the node publishes on the same
+    /// data).
+    #[arg(long, value_name = "FILE")]
+    online: Option<PathBuf>,
+    /// Steps of the online predicted path (the node's `steps`).
+    #[arg(long, default_value_t = 10)]
+    online_steps: usize,
+}
+
+fn write_online(
+    args: &CompareArgs,
+    model: &dynlab_learn::Model,
+    topics: &Topics,
+) -> anyhow::Result<()> {
+    use dynlab_diagnose::compare::online::{OnlineConfig, OnlinePredictor, replay};
+    use std::io::Write as _;
+    let Some(path) = &args.online else {
+        return Ok(());
+    };
+    let mut f = std::io::BufWriter::new(
+        std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?,
+    );
+    for b in &args.bags {
+        let bag = dynlab_bag::Bag::open(b)?;
+        let (poses, cmds) = dynlab_learn::dataset::read_samples(&bag, model.world(), topics)?;
+        let mut p = OnlinePredictor::new(
+            model.clone(),
+            OnlineConfig {
+                steps: args.online_steps,
+                ..Default::default()
+            },
+        )?;
+        for (t, o) in replay(&mut p, &poses, &cmds) {
+            writeln!(
+                f,
+                "{}",
+                serde_json::json!({"bag": b.display().to_string(), "pose_ns": t, "prediction": o.prediction, "error": o.error, "warning": o.warning})
+            )?;
+        }
+    }
+    f.flush()?;
+    Ok(())
 }
 
 pub fn run(args: CompareArgs) -> anyhow::Result<()> {
@@ -106,6 +149,7 @@ pub fn run(args: CompareArgs) -> anyhow::Result<()> {
     std::fs::write(&json, serde_json::to_string_pretty(&report)?)
         .with_context(|| format!("writing {}", json.display()))?;
     let page = html::report(&report).write(&args.out)?;
+    write_online(&args, &model, &topics)?;
     print!("{}", report.summary());
     println!("report: {} and {}", page.display(), json.display());
     Ok(())

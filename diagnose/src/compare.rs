@@ -24,6 +24,7 @@
 //! summary.
 
 pub mod html;
+pub mod online;
 pub mod stats;
 
 use dynlab_learn::dynamics::conventions::{l_rel, tve, wrap_angle};
