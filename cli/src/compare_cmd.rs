@@ -8,7 +8,7 @@ use anyhow::{Context, bail};
 use clap::Args;
 use dynlab_diagnose::compare::{CompareConfig, compare_with_baseline, html};
 use dynlab_learn::dynamics::data::SavGol;
-use dynlab_learn::{Topics, load_bags_timed, load_model};
+use dynlab_learn::{Topics, load_bags_timed, load_bags_timed_at, load_model};
 
 /// `dynlab compare …`
 #[derive(Debug, Args)]
@@ -123,7 +123,26 @@ pub fn run(args: CompareArgs) -> anyhow::Result<()> {
         pose: args.pose_topic.clone(),
         cmd: args.cmd_topic.clone(),
     };
-    let data = load_bags_timed(&args.bags, Some(world), &topics, &SavGol::default())?;
+    let mut data = load_bags_timed(&args.bags, Some(world), &topics, &SavGol::default())?;
+    // a car model steps a fixed dt: poses at another rate (a 240 Hz motion capture) are
+    // resampled to it
+    if world == dynlab_learn::World::Car
+        && (data.data.pose_dt_s - model.dt()).abs() > 0.01 * model.dt()
+    {
+        println!(
+            "data: poses every {:.2} ms ({:.1} Hz); the model steps {:.2} ms: resampled to the model's step",
+            data.data.pose_dt_s * 1e3,
+            1.0 / data.data.pose_dt_s,
+            model.dt() * 1e3
+        );
+        data = load_bags_timed_at(
+            &args.bags,
+            Some(world),
+            &topics,
+            &SavGol::default(),
+            Some(model.dt()),
+        )?;
+    }
     let cfg = CompareConfig {
         steps: args.steps,
         segment_s: args.segment,

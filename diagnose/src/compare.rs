@@ -954,6 +954,17 @@ pub fn compare_model(
         }
         .into());
     }
+    if world == World::Car && (data.data.pose_dt_s - model.dt()).abs() > 0.01 * model.dt() {
+        return Err(CompareError::Setting {
+            name: "data step",
+            value: format!(
+                "{:.5} s (the model steps {:.5} s)",
+                data.data.pose_dt_s,
+                model.dt()
+            ),
+            hint: "resample the poses to the model's step (load_bags_timed_at; dynlab compare does this itself)",
+        });
+    }
     if data.stamps.t_ns.len() != data.data.trajectories.len() {
         return Err(CompareError::Setting {
             name: "stamps",

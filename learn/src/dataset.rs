@@ -104,7 +104,7 @@ fn trajectories_of(
     commands: &[CommandSample],
     sg: &SavGol,
 ) -> Result<(Vec<StateTrajectory>, PipelineReport, f64), LearnError> {
-    trajectories_with_stamps(world, poses, commands, sg).map(|(s, r, dt, _)| (s, r, dt))
+    trajectories_with_stamps(world, poses, commands, sg, None).map(|(s, r, dt, _)| (s, r, dt))
 }
 
 #[allow(clippy::type_complexity)]
@@ -113,6 +113,7 @@ fn trajectories_with_stamps(
     poses: &[PoseSample],
     commands: &[CommandSample],
     sg: &SavGol,
+    step_ns: Option<i64>,
 ) -> Result<(Vec<StateTrajectory>, PipelineReport, f64, Vec<Vec<i64>>), LearnError> {
     sg.validate()?;
     let cfg = match world {
@@ -125,11 +126,19 @@ fn trajectories_with_stamps(
         World::Car => PipelineConfig {
             hold: CommandHold::AtPose,
             min_poses: sg.window,
+            resample: match step_ns {
+                Some(dt_ns) => dynlab_dynamics::data::Resample::Fixed { dt_ns },
+                None => PipelineConfig::default().resample,
+            },
             ..Default::default()
         },
     };
     let (trajs, report) = build_trajectories(poses, commands, &cfg)?;
-    let dt = report.median_dt_s;
+    // resampled to a fixed step: that is the step of the data now
+    let dt = match (world, step_ns) {
+        (World::Car, Some(ns)) => ns as f64 * 1e-9,
+        _ => report.median_dt_s,
+    };
     let states = match world {
         World::Push => trajs.iter().map(StateTrajectory::from_poses).collect(),
         World::Car => trajs
@@ -292,6 +301,36 @@ pub struct TimedDataset {
     pub stamps: Stamps,
 }
 
+impl TimedDataset {
+    /// Builds a timed data set from raw samples (poses and commands at any rates, in any
+    /// order), as [`Dataset::from_samples`] does, keeping the stamps (one "bag": index 0, whose
+    /// start is the first pose).
+    pub fn from_samples(
+        world: World,
+        poses: &[PoseSample],
+        commands: &[CommandSample],
+        sg: &SavGol,
+    ) -> Result<Self, LearnError> {
+        let (trajectories, report, dt, t_ns) =
+            trajectories_with_stamps(world, poses, commands, sg, None)?;
+        let n = t_ns.len();
+        Ok(Self {
+            data: Dataset {
+                world,
+                trajectories,
+                pose_dt_s: dt,
+                sources: Vec::new(),
+                reports: vec![report],
+            },
+            stamps: Stamps {
+                t_ns,
+                bag: vec![0; n],
+                bag_start_ns: vec![poses.iter().map(|p| p.t_ns).min().unwrap_or(0)],
+            },
+        })
+    }
+}
+
 /// [`load_bags`], keeping the bag stamp of every state (for error-over-time plots and for
 /// naming the worst segments of a bag by their time).
 pub fn load_bags_timed(
@@ -300,6 +339,30 @@ pub fn load_bags_timed(
     topics: &Topics,
     sg: &SavGol,
 ) -> Result<TimedDataset, LearnError> {
+    load_bags_timed_at(paths, world, topics, sg, None)
+}
+
+/// [`load_bags_timed`], with the car's poses resampled (linear interpolation, yaw unwrapped) to
+/// a fixed step of `step_s` seconds when given — to hold a model trained at 100 Hz against a
+/// motion capture at 240 Hz, say. Pushing data are never resampled (one state per pose).
+pub fn load_bags_timed_at(
+    paths: &[PathBuf],
+    world: Option<World>,
+    topics: &Topics,
+    sg: &SavGol,
+    step_s: Option<f64>,
+) -> Result<TimedDataset, LearnError> {
+    let step_ns = match step_s {
+        Some(s) if s.is_finite() && s > 0.0 => Some((s * 1e9).round() as i64),
+        Some(s) => {
+            return Err(LearnError::setting(
+                "step",
+                s,
+                "a positive number of seconds",
+            ));
+        }
+        None => None,
+    };
     if paths.is_empty() {
         return Err(LearnError::setting(
             "bag",
@@ -324,14 +387,14 @@ pub fn load_bags_timed(
             }
         };
         let (poses, commands) = read_samples(&bag, w, topics)?;
-        let (trajs, report, dt, t_ns) = trajectories_with_stamps(w, &poses, &commands, sg)
+        let (trajs, report, dt, t_ns) = trajectories_with_stamps(w, &poses, &commands, sg, step_ns)
             .map_err(|e| in_bag(e, path, &topics.pose_topic(w), &topics.cmd_topic(w)))?;
         if trajs.is_empty() {
             return Err(LearnError::setting(
                 "bag",
                 path.display(),
                 format!(
-                    "no trajectory is long enough: {} poses on {} in {} pieces shorter than {} poses each; record longer uninterrupted runs",
+                    "too little data: no trajectory is long enough: {} poses on {} in {} pieces shorter than {} poses each; record longer uninterrupted runs",
                     report.poses_in,
                     topics.pose_topic(w),
                     report.short_trajectories_dropped,
@@ -390,14 +453,14 @@ fn in_bag(e: LearnError, path: &Path, pose_topic: &str, cmd_topic: &str) -> Lear
             "bag",
             path.display(),
             format!(
-                "topic {pose_topic} has no messages; record the robot's poses on it or name the pose topic (--pose-topic)"
+                "no poses: topic {pose_topic} has no messages; record the robot's poses on it or name the pose topic (--pose-topic)"
             ),
         ),
         LearnError::Data(DataError::NoCommands { poses }) => LearnError::setting(
             "bag",
             path.display(),
             format!(
-                "topic {cmd_topic} has no messages ({poses} poses on {pose_topic}); record the commands sent to the robot on it or name the command topic (--cmd-topic / --action-topic)"
+                "no commands: topic {cmd_topic} has no messages ({poses} poses on {pose_topic}); record the commands sent to the robot on it or name the command topic (--cmd-topic / --action-topic)"
             ),
         ),
         other => other,
@@ -528,4 +591,112 @@ pub fn excitation_warnings(data: &Dataset) -> Vec<String> {
         }
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A car driving a circle, seen by a 240 Hz motion capture with ±20 % stamp jitter, commands
+    /// at 37 Hz not aligned with the poses, and a 0.5 s gap in the poses.
+    fn mocap() -> (Vec<PoseSample>, Vec<CommandSample>) {
+        let dt = 1e9 / 240.0;
+        let mut poses = Vec::new();
+        for i in 0..1200i64 {
+            let jitter = ((i * 7919) % 41 - 20) as f64 / 100.0;
+            let t = (i as f64 * dt + jitter * dt) as i64 + 3_000_000;
+            if (2.0e9..2.5e9).contains(&(t as f64)) {
+                continue; // the gap
+            }
+            let a = t as f64 * 1e-9;
+            poses.push(PoseSample {
+                t_ns: t,
+                x: a.cos(),
+                y: a.sin(),
+                yaw: a + std::f64::consts::FRAC_PI_2,
+            });
+        }
+        let commands = (0..200i64)
+            .map(|i| CommandSample {
+                t_ns: i * 27_027_027,
+                u: vec![0.1, 0.3 + 0.001 * i as f64],
+            })
+            .collect();
+        (poses, commands)
+    }
+
+    #[test]
+    fn mocap_rate_jitter_and_a_gap_split_resample_and_say_so() {
+        let (poses, commands) = mocap();
+        let d =
+            TimedDataset::from_samples(World::Car, &poses, &commands, &SavGol::default()).unwrap();
+        // split at the gap into two trajectories, each resampled to the median step
+        assert_eq!(d.data.trajectories.len(), 2);
+        assert!(
+            (d.data.pose_dt_s - 1.0 / 240.0).abs() < 2e-4,
+            "{}",
+            d.data.pose_dt_s
+        );
+        let r = &d.data.reports[0];
+        assert_eq!(r.gaps.len(), 1);
+        assert!(r.gaps[0].from_ns < 2_000_000_000 && r.gaps[0].to_ns >= 2_500_000_000);
+        assert_eq!(r.resampled_trajectories, 2);
+        // stamps: one per state, equidistant after resampling, on both sides of the gap
+        for (t, tr) in d.stamps.t_ns.iter().zip(&d.data.trajectories) {
+            assert_eq!(t.len(), tr.len());
+            let step = t[1] - t[0];
+            assert!(t.windows(2).all(|w| w[1] - w[0] == step));
+        }
+        assert!(*d.stamps.t_ns[0].last().unwrap() < 2_000_000_000);
+        assert!(d.stamps.t_ns[1][0] >= 2_500_000_000);
+        assert_eq!(d.stamps.bag_start_ns, vec![poses[0].t_ns]);
+        // the speed estimated from 240 Hz poses is the circle's 1 m/s
+        let s = &d.data.trajectories[1].s;
+        let mid = d.data.trajectories[1].len() / 2;
+        assert!((s[mid * 6 + 3] - 1.0).abs() < 0.01, "vx {}", s[mid * 6 + 3]);
+        assert!(
+            (s[mid * 6 + 5] - 1.0).abs() < 0.01,
+            "omega {}",
+            s[mid * 6 + 5]
+        );
+        // the commands are held: each state's command is the latest at or before its stamp
+        let u = &d.data.trajectories[1].u;
+        let t = d.stamps.t_ns[1][mid];
+        let k = (t / 27_027_027) as f64;
+        assert!((u[mid * 2 + 1] - (0.3 + 0.001 * k)).abs() < 1e-12);
+        // and the notes say all of it
+        let notes = pipeline_notes(r).join("\n");
+        assert!(notes.contains("1 gap(s)"), "{notes}");
+        assert!(notes.contains("resampled"), "{notes}");
+        assert!(notes.contains("zero-order hold"), "{notes}");
+        assert!(
+            notes.contains("240.0 Hz") || notes.contains("239.") || notes.contains("240."),
+            "{notes}"
+        );
+        assert!(
+            excitation_warnings(&d.data)
+                .iter()
+                .any(|w| w.contains("delta is constant"))
+        );
+    }
+
+    #[test]
+    fn a_car_standing_still_is_too_little_excitation() {
+        let poses: Vec<PoseSample> = (0..100)
+            .map(|i| PoseSample {
+                t_ns: i * 10_000_000,
+                x: 0.0,
+                y: 0.0,
+                yaw: 0.0,
+            })
+            .collect();
+        let commands = vec![CommandSample {
+            t_ns: 0,
+            u: vec![0.0, 0.0],
+        }];
+        let d = Dataset::from_samples(World::Car, &poses, &commands, &SavGol::default()).unwrap();
+        let w = excitation_warnings(&d).join("\n");
+        assert!(w.contains("standing still"), "{w}");
+        assert!(w.contains("command d is constant"), "{w}");
+    }
 }

@@ -27,7 +27,7 @@ pub mod world;
 
 pub use dataset::{
     BagSource, Dataset, Stamps, TimedDataset, Topics, excitation_warnings, load_bags,
-    load_bags_timed, pipeline_notes,
+    load_bags_timed, load_bags_timed_at, pipeline_notes,
 };
 pub use dynlab_dynamics as dynamics;
 pub use error::LearnError;
