@@ -41,7 +41,8 @@ pub fn use_fma() -> bool {
 /// Whether this process uses the AVX-512 code path (x86-64 with AVX-512F and VL besides AVX2 and
 /// FMA). It runs exactly the same arithmetic as the AVX2 + FMA path (every output element is the
 /// same sequence of fused multiply–adds), 16 lanes at a time instead of 8, so results are
-/// bit-identical between the two.
+/// bit-identical between the two. Setting the environment variable `DYNLAB_NO_AVX512` (read
+/// once, at the first call) forces the AVX2 path, to compare the two.
 pub fn use_avx512() -> bool {
     static AVX512: OnceLock<bool> = OnceLock::new();
     *AVX512.get_or_init(|| {
@@ -59,12 +60,15 @@ pub fn use_avx512() -> bool {
     })
 }
 
-/// The SIMD code path chosen for this process: `"avx2+fma"`, `"neon+fma"` or `"baseline"`.
+/// The SIMD code path chosen for this process: `"avx512"`, `"avx2+fma"`, `"neon+fma"` or
+/// `"baseline"`.
 pub fn simd_level() -> &'static str {
     if !use_fma() {
         "baseline"
     } else if cfg!(target_arch = "aarch64") {
         "neon+fma"
+    } else if use_avx512() {
+        "avx512"
     } else {
         "avx2+fma"
     }
