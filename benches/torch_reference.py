@@ -17,7 +17,9 @@ Usage (torch is large; keep it out of the repository's .venv):
     $HOME/torchvenv/bin/python benches/torch_reference.py            # table
     $HOME/torchvenv/bin/python benches/torch_reference.py --json     # one JSON line (the Rust
                                                                      # bench reads this)
-Threads: 2 (torch.set_num_threads), as the Rust benchmark's parallel parts.
+Threads: 2 (torch.set_num_threads; --threads N to change), as the Rust benchmark's parallel parts;
+the JSON reports torch.get_num_threads() after setting it. cargo bench -p dynlab-learn runs this
+with 2 and with 1 thread in every round.
 """
 
 import argparse
@@ -145,7 +147,8 @@ def main():
             rounds[k].append(f())
     res = {k: statistics.median(v) for k, v in rounds.items()}
     res["torch"] = torch.__version__
-    res["threads"] = a.threads
+    # what torch actually runs with (intra-op threads), not just what was asked for
+    res["threads"] = torch.get_num_threads()
     if a.json:
         print(json.dumps(res))
     else:

@@ -6,8 +6,8 @@
 #   launch_scripts/eval_tu_lin.sh [BAG] [--full] [--epochs N] [--batch B] [--lr LR] [--threads T] [--kinds a,b] [--json OUT]
 #
 # BAG defaults to ../shared/data/tu_lin_pushing.mcap (relative to the repository). The default
-# budget (250 epochs at lr 1e-3, hybrid 60, batch 500) takes ≈ 15 min on 2 cores; --full uses theirs
-# (3000 epochs at lr 1e-4, several hours).
+# budget (250 epochs at lr 1e-3, hybrid 60, batch 100: 2000 Adam steps) takes ≈ 20 min on 2 cores;
+# --full uses theirs (3000 epochs at lr 1e-4, batch 500: 6000 steps, several hours).
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 bag="$root/../shared/data/tu_lin_pushing.mcap"

@@ -7,7 +7,8 @@
 //! ```
 //!
 //! Rows (medians over rounds; with PyTorch each round runs ours, then `benches/torch_reference.py
-//! --rounds 1`, interleaved so both see the same machine load):
+//! --rounds 1` with 2 threads and with 1 thread, interleaved so all see the same machine load;
+//! ratios are how many times faster dynlab is than each):
 //!
 //! * `train_*`: training samples/s of `dynlab_learn::train` (forward + backward through the
 //!   solver + Adam, batch 500, pushing MLP 6 → 100 → 100 → 3 tanh, 2 threads), measured over
@@ -167,10 +168,11 @@ fn car_model_jac_ms() -> f64 {
     )
 }
 
-fn torch_round(python: &str) -> Option<Vec<(String, f64)>> {
+fn torch_round(python: &str, threads: usize) -> Option<Vec<(String, f64)>> {
     let script = concat!(env!("CARGO_MANIFEST_DIR"), "/../benches/torch_reference.py");
+    let threads = threads.to_string();
     let out = std::process::Command::new(python)
-        .args([script, "--json", "--rounds", "1"])
+        .args([script, "--json", "--rounds", "1", "--threads", &threads])
         .stderr(std::process::Stdio::null())
         .output()
         .ok()?;
@@ -218,7 +220,10 @@ fn main() {
         ("20 car model step Jacobians", "ms", false, "car_jac_ms"),
     ];
     let mut ours: Vec<Vec<f64>> = vec![Vec::new(); rows.len()];
+    // PyTorch with 2 threads (the comparison the targets are stated against) and with 1 thread
+    // (on a busy machine its OpenMP workers wait for each other and 1 thread is often faster).
     let mut torch: Vec<Vec<f64>> = vec![Vec::new(); rows.len()];
+    let mut torch1: Vec<Vec<f64>> = vec![Vec::new(); rows.len()];
     for round in 0..rounds {
         eprintln!("round {}/{rounds}", round + 1);
         let vals = [
@@ -233,30 +238,36 @@ fn main() {
         for (o, v) in ours.iter_mut().zip(vals) {
             o.push(v);
         }
-        if let Some(py) = &python
-            && let Some(t) = torch_round(py)
-        {
-            for (i, row) in rows.iter().enumerate() {
-                if let Some((_, v)) = t.iter().find(|(k, _)| k == row.3) {
-                    torch[i].push(*v);
+        if let Some(py) = &python {
+            for (threads, dst) in [(2, &mut torch), (1, &mut torch1)] {
+                if let Some(t) = torch_round(py, threads) {
+                    for (i, row) in rows.iter().enumerate() {
+                        if let Some((_, v)) = t.iter().find(|(k, _)| k == row.3) {
+                            dst[i].push(*v);
+                        }
+                    }
                 }
             }
         }
     }
     println!(
-        "{:<36} {:>14} {:>14} {:>10}  unit",
-        "benchmark", "dynlab", "PyTorch", "ratio"
+        "{:<36} {:>12} {:>12} {:>9} {:>12} {:>9}  unit",
+        "benchmark", "dynlab", "PyTorch 2t", "ratio", "PyTorch 1t", "ratio"
     );
     for (i, (name, unit, higher, _)) in rows.iter().enumerate() {
         let o = median(ours[i].clone());
-        let (t, ratio) = if torch[i].is_empty() {
-            ("-".to_string(), "-".to_string())
-        } else {
-            let t = median(torch[i].clone());
-            let r = if *higher { o / t } else { t / o };
-            (format!("{t:.3}"), format!("{r:.2}×"))
+        let cell = |t: &Vec<f64>| {
+            if t.is_empty() {
+                ("-".to_string(), "-".to_string())
+            } else {
+                let t = median(t.clone());
+                let r = if *higher { o / t } else { t / o };
+                (format!("{t:.3}"), format!("{r:.2}×"))
+            }
         };
-        println!("{name:<36} {o:>14.3} {t:>14} {ratio:>10}  {unit}");
+        let (t2, r2) = cell(&torch[i]);
+        let (t1, r1) = cell(&torch1[i]);
+        println!("{name:<36} {o:>12.3} {t2:>12} {r2:>9} {t1:>12} {r1:>9}  {unit}");
     }
     if python.is_none() {
         println!("(set DYNLAB_TORCH_PYTHON=/path/to/python-with-torch for the PyTorch column)");

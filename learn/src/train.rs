@@ -18,7 +18,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::dataset::Dataset;
 use crate::model::{Model, ModelKind};
-use crate::net::{NetField, NetTape, Network, Normalization};
+use crate::net::{FixedStepTape, NetField, NetTape, Network, Normalization};
 use crate::{LearnError, World};
 
 /// How windows are split into training and validation.
@@ -331,6 +331,7 @@ struct ChunkState {
     pose: Vec<Vec<f64>>,
     net_out: Vec<f32>,
     node_tapes: Vec<SolverTape<f32, NetTape>>,
+    fixed_tapes: Vec<FixedStepTape>,
     net_tapes: Vec<NetTape>,
     phys_tapes: Vec<SolverTape<f64, InputTape<f64>>>,
     sfull: Vec<f64>,
@@ -404,6 +405,9 @@ impl Ctx<'_> {
         if st.node_tapes.len() < k {
             st.node_tapes.resize_with(k, Default::default);
         }
+        if st.fixed_tapes.len() < k {
+            st.fixed_tapes.resize_with(k, Default::default);
+        }
         if st.net_tapes.len() < k {
             st.net_tapes.resize_with(k, Default::default);
         }
@@ -412,6 +416,11 @@ impl Ctx<'_> {
         }
         // forward
         let solver = model.solver().unwrap_or(Solver::rk4());
+        // NeuralODEs with a fixed-step solver backpropagate through their own persistent tapes
+        // (same arithmetic as the generic solver tape, without re-growing workspaces per batch).
+        let fixed_path = matches!(model.kind(), ModelKind::NodeEuler | ModelKind::NodeRk4)
+            && !self.adjoint
+            && FixedStepTape::supports(&solver);
         for j in 0..k {
             let (head, tail) = st.z.split_at_mut(j + 1);
             let (zj, zn) = (&head[j], &mut tail[0]);
@@ -438,6 +447,11 @@ impl Ctx<'_> {
                         for (a, b) in tail[0].iter_mut().zip(&st.net_out) {
                             *a += b;
                         }
+                    }
+                }
+                _ if fixed_path => {
+                    if let Some(net) = net {
+                        st.fixed_tapes[j].forward(net, &solver, n, zj, &st.u[j], zn);
                     }
                 }
                 _ => {
@@ -578,6 +592,11 @@ impl Ctx<'_> {
                         &mut st.ubar,
                         grad,
                     );
+                }
+                _ if fixed_path => {
+                    if let Some(net) = net {
+                        st.fixed_tapes[j].backward(net, &st.zbar, &mut st.zbar_prev, grad);
+                    }
                 }
                 _ => {
                     ode::integrate_vjp(

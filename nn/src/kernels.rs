@@ -38,19 +38,45 @@ pub fn use_fma() -> bool {
     })
 }
 
-/// The SIMD code path chosen for this process: `"avx2+fma"`, `"neon+fma"` or `"baseline"`.
+/// Whether this process uses the AVX-512 code path (x86-64 with AVX-512F and VL besides AVX2 and
+/// FMA). It runs exactly the same arithmetic as the AVX2 + FMA path (every output element is the
+/// same sequence of fused multiply–adds), 16 lanes at a time instead of 8, so results are
+/// bit-identical between the two. Setting the environment variable `DYNLAB_NO_AVX512` (read
+/// once, at the first call) forces the AVX2 path, to compare the two.
+pub fn use_avx512() -> bool {
+    static AVX512: OnceLock<bool> = OnceLock::new();
+    *AVX512.get_or_init(|| {
+        #[cfg(target_arch = "x86_64")]
+        {
+            use_fma()
+                && std::arch::is_x86_feature_detected!("avx512f")
+                && std::arch::is_x86_feature_detected!("avx512vl")
+                && std::env::var_os("DYNLAB_NO_AVX512").is_none()
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        {
+            false
+        }
+    })
+}
+
+/// The SIMD code path chosen for this process: `"avx512"`, `"avx2+fma"`, `"neon+fma"` or
+/// `"baseline"`.
 pub fn simd_level() -> &'static str {
     if !use_fma() {
         "baseline"
     } else if cfg!(target_arch = "aarch64") {
         "neon+fma"
+    } else if use_avx512() {
+        "avx512"
     } else {
         "avx2+fma"
     }
 }
 
-/// Defines `pub(crate) fn $name(args)` dispatching to `$imp::<true>` compiled with AVX2 + FMA when
-/// available, else `$imp::<false>` for the baseline target.
+/// Defines `pub(crate) fn $name(args)` dispatching to `$imp::<true, true>` compiled with AVX-512,
+/// `$imp::<true, false>` compiled with AVX2 + FMA, or `$imp::<false, false>` for the baseline
+/// target (`<FMA, WIDE>`: fused multiply–add, 16-lane registers for the block shapes).
 macro_rules! dispatch {
     ($(#[$m:meta])* fn $name:ident($($a:ident : $t:ty),* $(,)?) => $imp:ident) => {
         $(#[$m])*
@@ -60,7 +86,16 @@ macro_rules! dispatch {
                 #[target_feature(enable = "avx2,fma")]
                 #[allow(clippy::too_many_arguments)]
                 fn simd($($a: $t),*) {
-                    $imp::<true>($($a),*)
+                    $imp::<true, false>($($a),*)
+                }
+                #[target_feature(enable = "avx512f,avx512vl,avx2,fma")]
+                #[allow(clippy::too_many_arguments)]
+                fn simd512($($a: $t),*) {
+                    $imp::<true, true>($($a),*)
+                }
+                if use_avx512() {
+                    // SAFETY: the CPU supports AVX-512F/VL, AVX2 and FMA (checked by `use_avx512`).
+                    return unsafe { simd512($($a),*) };
                 }
                 if use_fma() {
                     // SAFETY: the CPU supports AVX2 and FMA (checked by `use_fma`).
@@ -69,10 +104,10 @@ macro_rules! dispatch {
             }
             #[cfg(target_arch = "aarch64")]
             {
-                return $imp::<true>($($a),*);
+                return $imp::<true, false>($($a),*);
             }
             #[allow(unreachable_code)]
-            $imp::<false>($($a),*)
+            $imp::<false, false>($($a),*)
         }
     };
 }
@@ -96,7 +131,12 @@ fn map2(row: &mut [f32], other: &[f32], f: impl Fn(f32, f32) -> f32) {
 // Derivatives of the activation, from the tape (y for tanh/relu, z for gelu).
 
 #[inline(always)]
-fn act_derivative_impl<const F: bool>(act: Activation, y: &[f32], z: &[f32], out: &mut [f32]) {
+fn act_derivative_impl<const F: bool, const W: bool>(
+    act: Activation,
+    y: &[f32],
+    z: &[f32],
+    out: &mut [f32],
+) {
     match act {
         Activation::Tanh => {
             for (d, &y) in out.iter_mut().zip(y) {
@@ -130,7 +170,12 @@ dispatch! {
 }
 
 #[inline(always)]
-fn mul_act_derivative_impl<const F: bool>(act: Activation, y: &[f32], z: &[f32], g: &mut [f32]) {
+fn mul_act_derivative_impl<const F: bool, const W: bool>(
+    act: Activation,
+    y: &[f32],
+    z: &[f32],
+    g: &mut [f32],
+) {
     match act {
         Activation::Tanh => {
             for (g, &y) in g.iter_mut().zip(y) {
@@ -157,7 +202,12 @@ dispatch! {
 }
 
 #[inline(always)]
-fn scale_rows_impl<const F: bool>(rows: &mut [f32], width: usize, per_row_block: usize, d: &[f32]) {
+fn scale_rows_impl<const F: bool, const W: bool>(
+    rows: &mut [f32],
+    width: usize,
+    per_row_block: usize,
+    d: &[f32],
+) {
     // rows is (blocks × per_row_block) rows of `width`; row r of block b is multiplied by d[b].
     for (block, dv) in rows
         .chunks_exact_mut(per_row_block * width)
@@ -176,7 +226,7 @@ dispatch! {
 }
 
 #[inline(always)]
-fn add_column_sums_impl<const F: bool>(acc: &mut [f32], m: &[f32]) {
+fn add_column_sums_impl<const F: bool, const W: bool>(acc: &mut [f32], m: &[f32]) {
     let width = acc.len();
     for row in m.chunks_exact(width) {
         map2(acc, row, |a, r| a + r);
@@ -190,7 +240,7 @@ dispatch! {
 
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
-fn adam_impl<const F: bool>(
+fn adam_impl<const F: bool, const W: bool>(
     params: &mut [f32],
     grads: &[f32],
     m: &mut [f32],
@@ -289,41 +339,8 @@ pub(crate) fn gemm_a_b(
     }
 }
 
-/// C (m×n) = β·C + Aᵀ · B, with A stored k×m and B stored k×n row-major (weight gradients:
-/// dW = dZᵀ · X summed over the batch).
-pub(crate) fn gemm_at_b(
-    m: usize,
-    k: usize,
-    n: usize,
-    a: &[f32],
-    b: &[f32],
-    beta: f32,
-    c: &mut [f32],
-) {
-    assert!(a.len() >= k * m && b.len() >= k * n && c.len() >= m * n);
-    // SAFETY: A is read at p·m + i, B at p·n + j, C written at i·n + j.
-    unsafe {
-        matrixmultiply::sgemm(
-            m,
-            k,
-            n,
-            1.0,
-            a.as_ptr(),
-            1,
-            m as isize,
-            b.as_ptr(),
-            n as isize,
-            1,
-            beta,
-            c.as_mut_ptr(),
-            n as isize,
-            1,
-        );
-    }
-}
-
 #[inline(always)]
-fn tanh_in_place_impl<const F: bool>(x: &mut [f32]) {
+fn tanh_in_place_impl<const F: bool, const W: bool>(x: &mut [f32]) {
     let mut chunks = x.chunks_exact_mut(8);
     for c in &mut chunks {
         for v in c.iter_mut() {
@@ -423,7 +440,10 @@ fn dense_block<const F: bool, const R: usize, const C: usize>(
                 Err(_) => continue,
             };
             for r in 0..R {
-                let av = rows[r][p];
+                // SAFETY: every `rows[r]` has exactly `k` elements (sliced above; the caller's
+                // `a` holds m × k) and `p < k` (`take(k)`). Indexing without the check matters:
+                // with 8 rows the checks were a third of the loop's instructions.
+                let av = unsafe { *rows[r].get_unchecked(p) };
                 for q in 0..C {
                     acc[r][q] = math::fmadd::<F>(av, b[q], acc[r][q]);
                 }
@@ -457,7 +477,7 @@ fn dense_block<const F: bool, const R: usize, const C: usize>(
 
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
-fn dense_forward_impl<const F: bool>(
+fn dense_forward_impl<const F: bool, const W: bool>(
     act: Activation,
     m: usize,
     k: usize,
@@ -470,6 +490,13 @@ fn dense_forward_impl<const F: bool>(
     z: &mut [f32],
 ) {
     let mut i = 0;
+    if W {
+        // AVX-512: one 16-lane register per row, so twice the rows for 8 accumulators.
+        while i + 2 * MR <= m {
+            dense_block::<F, { 2 * MR }, NR>(act, i, k, n, n_pad, a, wt, bias_pad, out, z);
+            i += 2 * MR;
+        }
+    }
     while i + MR <= m {
         dense_block::<F, MR, NR>(act, i, k, n, n_pad, a, wt, bias_pad, out, z);
         i += MR;
@@ -485,4 +512,47 @@ dispatch! {
     /// GELU the pre-activation is also written to `z` (m×n), otherwise `z` may be empty.
     #[allow(clippy::too_many_arguments)]
     fn dense_forward(act: Activation, m: usize, k: usize, n: usize, n_pad: usize, a: &[f32], wt: &[f32], bias_pad: &[f32], out: &mut [f32], z: &mut [f32]) => dense_forward_impl
+}
+
+// ---------------------------------------------------------------------------------------------
+// Layouts for the reverse-mode products, which run on the forward layer's register-blocked kernel
+// (`dense_forward` with the identity activation and a zero bias): dA = dZ·W reads W padded to
+// n_pad columns, dW = dZᵀ·A reads dZᵀ and A padded. Copying these operands costs ≈ 1 % of the
+// product and nothing is allocated after the first call (the general GEMM used before packed both
+// operands into a buffer it allocated on every call).
+
+/// Pads `w` ([k, n] row-major) to k × n_pad (n_pad a multiple of [`NR`], zero columns) in `wp`,
+/// the layout `dense_forward` reads its weights in. Returns n_pad.
+pub(crate) fn pack_padded(w: &[f32], k: usize, n: usize, wp: &mut Vec<f32>) -> usize {
+    let n_pad = n.div_ceil(NR) * NR;
+    wp.clear();
+    wp.resize(k * n_pad, 0.0);
+    for (dst, src) in wp.chunks_exact_mut(n_pad).zip(w.chunks_exact(n)).take(k) {
+        dst[..n].copy_from_slice(src);
+    }
+    n_pad
+}
+
+/// `dst` (cols × rows, row-major) = `src`ᵀ (`src` rows × cols row-major), in 8 × 8 tiles so that
+/// both the reads and the writes stay within a few cache lines.
+pub(crate) fn transpose(src: &[f32], rows: usize, cols: usize, dst: &mut Vec<f32>) {
+    const T: usize = 8;
+    dst.resize(rows * cols, 0.0);
+    let src = &src[..rows * cols];
+    for r0 in (0..rows).step_by(T) {
+        let r1 = (r0 + T).min(rows);
+        for c0 in (0..cols).step_by(T) {
+            let c1 = (c0 + T).min(cols);
+            for r in r0..r1 {
+                for c in c0..c1 {
+                    // SAFETY: r < rows and c < cols, so r·cols + c < rows·cols = src.len() and
+                    // c·rows + r < rows·cols = dst.len(). (The checked version spent most of its
+                    // time on the bounds checks of these scattered writes.)
+                    unsafe {
+                        *dst.get_unchecked_mut(c * rows + r) = *src.get_unchecked(r * cols + c);
+                    }
+                }
+            }
+        }
+    }
 }

@@ -49,5 +49,5 @@ pub use activation::Activation;
 pub use adam::{Adam, AdamConfig, WeightDecay};
 pub use error::NnError;
 pub use io::{METADATA_ACTIVATIONS, METADATA_SIZES};
-pub use kernels::{simd_level, use_fma};
+pub use kernels::{simd_level, use_avx512, use_fma};
 pub use mlp::{Init, JacobianMode, LayerShape, LayerView, Mlp, MlpSpec, Workspace};

@@ -3,9 +3,13 @@
 
 use std::ops::Range;
 
-use crate::kernels::{self, gemm_a_b, gemm_a_bt, gemm_at_b};
+use crate::kernels::{self, gemm_a_b, gemm_a_bt};
 use crate::rng::SplitMix64;
 use crate::{Activation, NnError};
+
+/// Batch rows per block of the weight-gradient product (the padded layer input of a block,
+/// 64 × 112 floats for the pushing network, stays in the L1 cache).
+const KC: usize = 64;
 
 /// Layer sizes and hidden activations of an [`Mlp`].
 ///
@@ -354,6 +358,8 @@ impl Mlp {
         }
         let mut cur = std::mem::take(&mut ws.g0);
         let mut next = std::mem::take(&mut ws.g1);
+        let mut wp = std::mem::take(&mut ws.wt);
+        let mut zeros = std::mem::take(&mut ws.bias_pad);
         let mut dx = dx;
         for (l, layer) in self.layers.iter().enumerate().rev() {
             let (n_in, n_out) = (layer.n_in, layer.n_out);
@@ -364,21 +370,58 @@ impl Mlp {
                 &cur[..batch * n_out]
             };
             let input: &[f32] = if l == 0 { &ws.x } else { &ws.a[l - 1] };
-            gemm_at_b(
-                n_out,
-                batch,
-                n_in,
-                dz,
-                &input[..batch * n_in],
-                1.0,
-                &mut grad[layer.weight.clone()],
-            );
+            // dW += dzᵀ·input on the forward kernel, (n_out × rows) · (rows × n_in), in blocks of
+            // KC batch rows so that the padded input block stays in L1.
+            let n_pad = kernels::pack_padded(&input[..batch * n_in], batch, n_in, &mut ws.t1);
+            zeros.clear();
+            zeros.resize(n_pad, 0.0);
+            ws.t2.resize(n_out * n_in, 0.0);
+            let mut p0 = 0;
+            while p0 < batch {
+                let kc = KC.min(batch - p0);
+                kernels::transpose(&dz[p0 * n_out..(p0 + kc) * n_out], kc, n_out, &mut ws.t0);
+                kernels::dense_forward(
+                    Activation::Identity,
+                    n_out,
+                    kc,
+                    n_in,
+                    n_pad,
+                    &ws.t0,
+                    &ws.t1[p0 * n_pad..(p0 + kc) * n_pad],
+                    &zeros,
+                    &mut ws.t2[..n_out * n_in],
+                    &mut [],
+                );
+                kernels::add_column_sums(&mut grad[layer.weight.clone()], &ws.t2[..n_out * n_in]);
+                p0 += kc;
+            }
             kernels::add_column_sums(&mut grad[layer.bias.clone()], dz);
             let weight = &self.params[layer.weight.clone()];
+            // d(input) = dz·W: (batch × n_out) · (n_out × n_in).
+            let target: &mut [f32] = if l > 0 {
+                &mut next[..batch * n_in]
+            } else if let Some(dx) = dx.take() {
+                dx
+            } else {
+                continue;
+            };
+            let n_pad = kernels::pack_padded(weight, n_out, n_in, &mut wp);
+            zeros.clear();
+            zeros.resize(n_pad, 0.0);
+            kernels::dense_forward(
+                Activation::Identity,
+                batch,
+                n_out,
+                n_in,
+                n_pad,
+                dz,
+                &wp,
+                &zeros,
+                target,
+                &mut [],
+            );
             if l > 0 {
                 let prev = &self.layers[l - 1];
-                let da = &mut next[..batch * n_in];
-                gemm_a_b(batch, n_out, n_in, dz, weight, 0.0, da);
                 let z_len = if prev.activation.needs_preactivation() {
                     batch * n_in
                 } else {
@@ -388,15 +431,15 @@ impl Mlp {
                     prev.activation,
                     &ws.a[l - 1][..batch * n_in],
                     &ws.z[l - 1][..z_len],
-                    da,
+                    &mut next[..batch * n_in],
                 );
                 std::mem::swap(&mut cur, &mut next);
-            } else if let Some(dx) = dx.take() {
-                gemm_a_b(batch, n_out, n_in, dz, weight, 0.0, dx);
             }
         }
         ws.g0 = cur;
         ws.g1 = next;
+        ws.wt = wp;
+        ws.bias_pad = zeros;
         Ok(())
     }
 
@@ -639,6 +682,9 @@ pub struct Workspace {
     jac: Vec<f32>,
     wt: Vec<f32>,
     bias_pad: Vec<f32>,
+    t0: Vec<f32>,
+    t1: Vec<f32>,
+    t2: Vec<f32>,
 }
 
 impl Workspace {
@@ -661,6 +707,9 @@ impl Workspace {
             jac: Vec::new(),
             wt: Vec::new(),
             bias_pad: Vec::new(),
+            t0: Vec::new(),
+            t1: Vec::new(),
+            t2: Vec::new(),
         }
     }
 
