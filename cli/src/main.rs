@@ -5,6 +5,7 @@
 
 mod bag_cmd;
 mod collect_cmd;
+mod diagnose_cmd;
 mod eval_cmd;
 mod train_cmd;
 
@@ -30,6 +31,9 @@ enum Command {
     EvalModel(eval_cmd::EvalArgs),
     /// Collect simulated data into a bag, headless and far faster than real time.
     Collect(collect_cmd::CollectArgs),
+    /// Which physical effect is missing: fit each effect of the library to a model's residual on
+    /// a bag, score it on held-out data, rank (diagnosis.json, diagnosis.html).
+    Diagnose(diagnose_cmd::DiagnoseArgs),
 }
 
 fn main() -> ExitCode {
@@ -40,6 +44,7 @@ fn main() -> ExitCode {
         Command::Train(args) => train_cmd::run(args),
         Command::EvalModel(args) => eval_cmd::run(args),
         Command::Collect(args) => collect_cmd::run(args),
+        Command::Diagnose(args) => diagnose_cmd::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

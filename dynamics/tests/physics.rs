@@ -262,7 +262,11 @@ fn aero_drag_duplicated_nominal_drag() {
     let mut m = m;
     m.set_param("aero_drag.c", 0.01).unwrap();
     let t = m
-        .effect_term(Effect::AeroDrag, &[0.0, 0.0, 0.0, 1.0, 0.3, 0.0], &[0.0, 0.2])
+        .effect_term(
+            Effect::AeroDrag,
+            &[0.0, 0.0, 0.0, 1.0, 0.3, 0.0],
+            &[0.0, 0.2],
+        )
         .unwrap();
     assert!(t.contribution[4] < -1e-3, "{:?}", t.contribution);
 }
