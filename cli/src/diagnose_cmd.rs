@@ -22,7 +22,7 @@ pub struct DiagnoseArgs {
     /// Output directory for diagnosis.json and diagnosis.html.
     #[arg(long, default_value = "out/diagnosis")]
     out: PathBuf,
-    /// Open-loop steps k of the scored error (default: car 20, pushing 3).
+    /// Open-loop steps k of the scored error (default: car 50, pushing 3).
     #[arg(long)]
     steps: Option<usize>,
     /// Seed of the split, subsamples and bootstrap.

@@ -33,6 +33,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let car_dur: f64 = arg("--car-duration", 15.0);
     let push_eps: u64 = arg("--push-episodes", 20);
     let only: String = arg("--only", String::new());
+    let steps: usize = arg("--steps", 0);
     let fit_baseline = std::env::args().any(|a| a == "--fit-baseline");
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
     println!(
@@ -121,6 +122,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             };
             let cfg = DiagnoseConfig {
                 seed,
+                steps: (steps > 0).then_some(steps),
                 ..DiagnoseConfig::default()
             };
             let d = diagnose(&model, &data, &cfg)?;

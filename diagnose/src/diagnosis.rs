@@ -100,7 +100,7 @@ pub enum DiagnosisError {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
 pub struct DiagnoseConfig {
-    /// Open-loop steps k of the scored error (default: car 20 = 0.2 s at 100 Hz, pushing 3).
+    /// Open-loop steps k of the scored error (default: car 50 = 0.5 s at 100 Hz, pushing 3).
     pub steps: Option<usize>,
     /// Seed of the split, the window subsamples and the bootstrap (default 0).
     pub seed: u64,
@@ -146,7 +146,7 @@ impl DiagnoseConfig {
     /// The number of steps for a world.
     pub fn steps_for(&self, world: World) -> usize {
         self.steps.unwrap_or(match world {
-            World::Car => 20,
+            World::Car => 50,
             World::Push => 3,
         })
     }
@@ -398,7 +398,10 @@ fn starts(e: Effect, trajs: &[StateTrajectory]) -> Vec<Vec<(&'static str, f64)>>
     };
     match e {
         Effect::AeroDrag => vec![vec![("c", 0.0)]],
-        Effect::MotorLag => vec![vec![("tau", 0.03)], vec![("tau", 0.15)], vec![("tau", 0.5)]],
+        Effect::MotorLag => [0.02, 0.05, 0.1, 0.2, 0.35, 0.6]
+            .into_iter()
+            .map(|t| vec![("tau", t)])
+            .collect(),
         Effect::SteeringOffset => vec![vec![("delta0", 0.0)]],
         Effect::GripPatch => {
             let r = 0.3 * (hi[0] - lo[0]).max(hi[1] - lo[1]).max(0.1);
