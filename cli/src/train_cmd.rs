@@ -38,6 +38,9 @@ pub struct TrainArgs {
     /// measured mass, inertia and geometry stay fixed), e.g. Df,Dr,Cm1.
     #[arg(long, value_delimiter = ',', value_name = "NAMES")]
     free: Option<Vec<String>>,
+    /// Physics fit: windows used at most (seeded subsample).
+    #[arg(long, default_value_t = 2000, value_name = "N")]
+    physics_windows: usize,
     /// A physics parameter value set before the fit (repeatable), e.g. --set m=0.045 (kg).
     #[arg(long = "set", value_name = "NAME=VALUE")]
     set: Vec<String>,
@@ -131,6 +134,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         cfg.epochs = e;
     }
     cfg.physics_free = args.free.clone();
+    cfg.physics_max_windows = args.physics_windows.max(1);
     for kv in &args.set {
         let (k, v) = kv
             .split_once('=')
