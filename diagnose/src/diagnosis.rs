@@ -397,12 +397,18 @@ fn starts(e: Effect, trajs: &[StateTrajectory]) -> Vec<Vec<(&'static str, f64)>>
         v
     };
     match e {
-        Effect::AeroDrag => vec![vec![("c", 0.0)]],
+        Effect::AeroDrag => [0.0, 0.003, 0.01, 0.03, 0.1]
+            .into_iter()
+            .map(|c| vec![("c", c)])
+            .collect(),
         Effect::MotorLag => [0.02, 0.05, 0.1, 0.2, 0.35, 0.6]
             .into_iter()
             .map(|t| vec![("tau", t)])
             .collect(),
-        Effect::SteeringOffset => vec![vec![("delta0", 0.0)]],
+        Effect::SteeringOffset => [-0.05, -0.01, 0.0, 0.01, 0.05]
+            .into_iter()
+            .map(|d| vec![("delta0", d)])
+            .collect(),
         Effect::GripPatch => {
             let r = 0.3 * (hi[0] - lo[0]).max(hi[1] - lo[1]).max(0.1);
             let mut v = Vec::new();
@@ -537,9 +543,9 @@ pub fn diagnose(
     });
     let test_traj: Vec<usize> = split.validation.clone();
     let mut candidates = Vec::new();
-    for e in lib {
+    let fit_one = |e: Effect| -> Result<Option<Candidate>, DiagnosisError> {
         if have.contains(&e) || e.robot() != world.robot() {
-            continue;
+            return Ok(None);
         }
         let mut effects = have.clone();
         effects.push(e);
@@ -625,10 +631,10 @@ pub fn diagnose(
             }
         }
         let Some((_, theta, std)) = best else {
-            continue;
+            return Ok(None);
         };
         let Some(after_test) = cost_of(&theta, &test_w, None) else {
-            continue;
+            return Ok(None);
         };
         let after_fit = cost_of(&theta, &fit_w, None).unwrap_or_default();
         let (eb, ea) = (mean(&before_test), mean(&after_test));
@@ -643,7 +649,7 @@ pub fn diagnose(
             cfg.seed ^ (e as u64 + 1).wrapping_mul(0x9E37_79B9_7F4A_7C15),
         );
         let significant = raw >= cfg.min_reduction && ci_lower > 0.0 && test_traj.len() >= 2;
-        candidates.push(Candidate {
+        Ok(Some(Candidate {
             effect: e.name().to_string(),
             error_reduction: raw.clamp(0.0, 1.0),
             significant,
@@ -667,7 +673,27 @@ pub fn diagnose(
             error_after: ea,
             fit_error: [mean(&before_fit), mean(&after_fit)],
             description: e.description().to_string(),
+        }))
+    };
+    // candidates are independent: fit them on parallel threads, collect in library order
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let mut results: Vec<Result<Option<Candidate>, DiagnosisError>> = Vec::new();
+    for chunk in lib.chunks(threads.max(1)) {
+        let part: Vec<_> = std::thread::scope(|sc| {
+            let hs: Vec<_> = chunk
+                .iter()
+                .map(|&e| sc.spawn(move || fit_one(e)))
+                .collect();
+            hs.into_iter()
+                .map(|h| h.join().unwrap_or(Ok(None)))
+                .collect()
         });
+        results.extend(part);
+    }
+    for r in results {
+        if let Some(c) = r? {
+            candidates.push(c);
+        }
     }
     candidates.sort_by(|a, b| {
         b.error_reduction
