@@ -171,7 +171,7 @@ impl DiagnoseConfig {
                 "use a value in (0.5, 1), e.g. 0.95",
             ));
         }
-        if !(self.segment_s > 0.0) {
+        if self.segment_s.is_nan() || self.segment_s <= 0.0 {
             return Err(bad(
                 "segment_s",
                 self.segment_s,
@@ -363,11 +363,6 @@ impl Augmented<'_> {
                 }
             }
             s.copy_from_slice(&next);
-            if self.pure_physics && self.with.is_some() {
-                // keep the measured-layout state in step (already copied from nw)
-            } else if !self.pure_physics && self.with.is_none() {
-                // nothing to carry
-            }
         }
         err
     }
@@ -498,12 +493,12 @@ pub fn diagnose(
     let mut scale = vec![0.0; ds];
     for w in &all {
         let t = &trajs[w.trajectory];
-        for c in 0..ds {
+        for (c, sc) in scale.iter_mut().enumerate() {
             let mut e = t.s[(w.start + k) * ds + c] - t.s[w.start * ds + c];
             if c == angle {
                 e = wrap_angle(e);
             }
-            scale[c] += e * e;
+            *sc += e * e;
         }
     }
     for v in &mut scale {
@@ -643,7 +638,6 @@ pub fn diagnose(
             &test_w,
             &before_test,
             &after_test,
-            &test_traj,
             cfg.bootstrap,
             cfg.confidence,
             cfg.seed ^ (e as u64 + 1).wrapping_mul(0x9E37_79B9_7F4A_7C15),
@@ -781,7 +775,6 @@ fn bootstrap_lower(
     ws: &[Window],
     before: &[f64],
     after: &[f64],
-    segments: &[usize],
     resamples: usize,
     confidence: f64,
     seed: u64,
@@ -792,7 +785,6 @@ fn bootstrap_lower(
         e.0 += b;
         e.1 += a;
     }
-    let _ = segments;
     let per: Vec<(f64, f64)> = sb.into_values().collect();
     if per.len() < 2 || resamples == 0 {
         return f64::NEG_INFINITY;
@@ -882,13 +874,13 @@ fn residual_correlations(
                     .map(|i| s[i * ds + 3] * s[i * ds + 3].abs())
                     .collect(),
             ));
-            for c in 0..2 {
-                feats.push((format!("{}", names[c]), 0, col(&s, ds, c)));
+            for (c, name) in names.iter().enumerate().take(2) {
+                feats.push((name.to_string(), 0, col(&s, ds, c)));
             }
         }
         World::Push => {
-            for c in 0..3 {
-                feats.push((names[c].to_string(), 0, col(&s, ds, c)));
+            for (c, name) in names.iter().enumerate().take(3) {
+                feats.push((name.to_string(), 0, col(&s, ds, c)));
             }
         }
     }

@@ -20,6 +20,10 @@ use dynlab_dynamics::physics::{Effect, PhysicsModel};
 use crate::train::{Loss, PhysicsFit, TrainConfig};
 use crate::{LearnError, World};
 
+/// Residuals and Jacobian of a least-squares problem at `θ`: `eval(θ, with_jacobian)` returns
+/// `(r, J)` with `J` empty when not asked for.
+pub type ResidualFn<'a> = dyn FnMut(&[f64], bool) -> (Vec<f64>, Vec<f64>) + 'a;
+
 /// The result of [`bounded_least_squares`].
 #[derive(Clone, Debug, PartialEq)]
 pub struct LsqResult {
@@ -47,7 +51,7 @@ pub fn bounded_least_squares(
     upper: &[f64],
     free: &[bool],
     iterations: usize,
-    eval: &mut dyn FnMut(&[f64], bool) -> (Vec<f64>, Vec<f64>),
+    eval: &mut ResidualFn<'_>,
 ) -> LsqResult {
     let n = theta0.len();
     let idx: Vec<usize> = (0..n).filter(|&i| free[i]).collect();
