@@ -41,7 +41,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     );
     println!(
         "{:<8} {:<16} {:>9} {:>11} {:>14} {:>8}",
-        "world", "hidden effect", "recovered", "mean reduct.", "mean param", "time/s"
+        "world", "hidden effect", "recovered", "mean reduct.", "mean strength", "time/s"
     );
     let mut cases: Vec<(World, Option<Effect>)> = vec![(World::Car, None)];
     for e in Effect::ALL {
@@ -138,7 +138,18 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 && let Some(c) = d.candidates.iter().find(|c| c.effect == e.name())
             {
                 red += c.error_reduction;
-                if let Some((_, v)) = c.params.iter().next_back() {
+                // the parameter that says how strong the effect is
+                let key = match e {
+                    Effect::AeroDrag => "c",
+                    Effect::MotorLag => "tau",
+                    Effect::SteeringOffset => "delta0",
+                    Effect::GripPatch => "k",
+                    Effect::ComOffset => "ox",
+                    Effect::TableTilt => "gx",
+                    Effect::FrictionPatch => "beta",
+                    Effect::PusherFriction => "mu",
+                };
+                if let Some(v) = c.params.get(key) {
                     par.push(*v);
                 }
             } else if let Some(c) = d.candidates.first() {
