@@ -6,6 +6,7 @@
 mod bag_cmd;
 mod collect_cmd;
 mod compare_cmd;
+mod diagnose_cmd;
 mod eval_cmd;
 mod train_cmd;
 
@@ -34,6 +35,9 @@ enum Command {
     Compare(compare_cmd::CompareArgs),
     /// Collect simulated data into a bag, headless and far faster than real time.
     Collect(collect_cmd::CollectArgs),
+    /// Which physical effect is missing: fit each effect of the library to a model's residual on
+    /// a bag, score it on held-out data, rank (diagnosis.json, diagnosis.html).
+    Diagnose(diagnose_cmd::DiagnoseArgs),
 }
 
 fn main() -> ExitCode {
@@ -45,6 +49,7 @@ fn main() -> ExitCode {
         Command::EvalModel(args) => eval_cmd::run(args),
         Command::Collect(args) => collect_cmd::run(args),
         Command::Compare(args) => compare_cmd::run(args),
+        Command::Diagnose(args) => diagnose_cmd::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -34,6 +34,16 @@ pub struct TrainArgs {
     /// Physics effects, comma-separated (physics and hybrid only), e.g. aero_drag,steering_offset.
     #[arg(long, value_delimiter = ',')]
     effects: Vec<String>,
+    /// Nominal physics parameters to fit, comma-separated (default: the identifiable ones; the
+    /// measured mass, inertia and geometry stay fixed), e.g. Df,Dr,Cm1.
+    #[arg(long, value_delimiter = ',', value_name = "NAMES")]
+    free: Option<Vec<String>>,
+    /// Physics fit: windows used at most (seeded subsample).
+    #[arg(long, default_value_t = 2000, value_name = "N")]
+    physics_windows: usize,
+    /// A physics parameter value set before the fit (repeatable), e.g. --set m=0.045 (kg).
+    #[arg(long = "set", value_name = "NAME=VALUE")]
+    set: Vec<String>,
     /// Epochs (default 300).
     #[arg(long)]
     epochs: Option<usize>,
@@ -122,6 +132,18 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     };
     if let Some(e) = args.epochs {
         cfg.epochs = e;
+    }
+    cfg.physics_free = args.free.clone();
+    cfg.physics_max_windows = args.physics_windows.max(1);
+    for kv in &args.set {
+        let (k, v) = kv
+            .split_once('=')
+            .ok_or_else(|| anyhow::anyhow!("--set {kv}: write NAME=VALUE, e.g. --set m=0.045"))?;
+        let v: f64 = v
+            .trim()
+            .parse()
+            .map_err(|_| anyhow::anyhow!("--set {kv}: the value must be a number"))?;
+        cfg.physics_values.insert(k.trim().to_string(), v);
     }
     if let Some(lr) = args.lr {
         cfg.lr = lr;

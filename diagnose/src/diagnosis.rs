@@ -1,1 +1,1021 @@
-//! The residual explained by the effect library.
+//! The residual of a model explained by the library of physical effects.
+//!
+//! [`diagnose`] holds a model (any kind) against measured trajectories. The data are cut into
+//! segments (car: [`DiagnoseConfig::segment_s`]) and split by whole segments (seeded) into a fit
+//! half and a held-out half. For every candidate effect of the world's library the model is
+//! *augmented* with the effect:
+//!
+//! ```text
+//! s⁺ = model(s, u) + [Φ_{P+e}(s, u; θ_e) − Φ_P(s, u)]
+//! ```
+//!
+//! where `P` is the model's own physics (physics and hybrid models) or the nominal physics model
+//! at its documented values (network models), `P+e` the same with effect `e` enabled and `Φ` one
+//! step of the integrator. For a physics model this *is* the physics model with the effect added
+//! (its nominal parameters held at their fitted values); for a network it is the effect's own
+//! contribution fitted to the network's residual. Effect states (`motor_lag`'s filtered
+//! throttle) are reconstructed from the command history at every window start and carried along
+//! the rollout.
+//!
+//! The effect's parameters `θ_e` are fitted within their bounds (bounded Levenberg–Marquardt
+//! with a clarabel QP step, several starts for the patch effects) on the k-step open-loop error
+//! of the fit half, and the candidate is scored on the held-out half: `error_reduction =
+//! 1 − E_after/E_before` of the k-step error `E` (the squared error of every state dimension over
+//! k steps, each dimension divided by the RMS k-step change of that dimension in the data, so
+//! the scale is the error of the "nothing moves" model). A candidate is **significant** when the
+//! reduction is at least [`DiagnoseConfig::min_reduction`] *and* the lower end of a one-sided
+//! bootstrap confidence interval over held-out segments (resampled whole, seeded) is above zero.
+//! The verdict is the best significant candidate, or none: then the report says so and lists
+//! what the residual correlates with (state and input features, and inputs at lags).
+
+pub mod html;
+pub mod simdata;
+
+use std::collections::BTreeMap;
+
+use dynlab_learn::dynamics::conventions::wrap_angle;
+use dynlab_learn::dynamics::data::{
+    DataError, SplitMix64, StateTrajectory, Window, split_trajectories, windows,
+};
+use dynlab_learn::dynamics::ode;
+use dynlab_learn::dynamics::physics::{Effect, ModelError, PhysicsModel};
+use dynlab_learn::fit::{bounded_least_squares, initial_state};
+use dynlab_learn::train::segment;
+use dynlab_learn::{Dataset, LearnError, Model, World};
+use serde::{Deserialize, Serialize};
+use thiserror::Error;
+
+pub use html::{diagnosis_html, diagnosis_page};
+
+/// Errors of a diagnosis (outcomes such as "nothing explains the residual" are data, not errors).
+#[derive(Debug, Error)]
+pub enum DiagnosisError {
+    /// The model and the data are of different robots.
+    #[error(
+        "the model is a {model} model but the data are {data} data; diagnose a model with data of its own robot"
+    )]
+    WorldMismatch {
+        /// The model's world.
+        model: World,
+        /// The data's world.
+        data: World,
+    },
+    /// Too little data for a split and k-step windows.
+    #[error(
+        "too little data: {segments} segments, {windows} windows of {k} steps; record more (at least 4 trajectories of more than {k} steps) or lower --steps"
+    )]
+    TooLittleData {
+        /// Segments.
+        segments: usize,
+        /// Windows.
+        windows: usize,
+        /// Steps.
+        k: usize,
+    },
+    /// A setting out of range.
+    #[error("setting {name} = {value} is invalid: {hint}")]
+    Setting {
+        /// The key.
+        name: &'static str,
+        /// The value.
+        value: String,
+        /// What to set.
+        hint: &'static str,
+    },
+    /// From the model code.
+    #[error(transparent)]
+    Learn(#[from] LearnError),
+    /// From the physics model.
+    #[error(transparent)]
+    Physics(#[from] ModelError),
+    /// From the data pipeline.
+    #[error(transparent)]
+    Data(#[from] DataError),
+    /// From the simulator (test data generation).
+    #[error("simulator: {0}")]
+    Simulator(String),
+}
+
+/// Settings of [`diagnose`]; every field has a documented default.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct DiagnoseConfig {
+    /// Open-loop steps k of the scored error (default: car 50 = 0.5 s at 100 Hz, pushing 3).
+    pub steps: Option<usize>,
+    /// Seed of the split, the window subsamples and the bootstrap (default 0).
+    pub seed: u64,
+    /// Fraction of segments held out for scoring (default 0.5).
+    pub holdout_fraction: f64,
+    /// Car trajectories are cut into segments of this length \[s\] (default 2 s).
+    pub segment_s: f64,
+    /// Windows used to fit a candidate at most (seeded subsample; default 600).
+    pub fit_windows: usize,
+    /// Windows used to score at most (seeded subsample; default 3000).
+    pub score_windows: usize,
+    /// Smallest held-out error reduction that counts as an explanation (default 0.05).
+    pub min_reduction: f64,
+    /// Bootstrap resamples of the held-out segments (default 1000).
+    pub bootstrap: usize,
+    /// One-sided confidence of the bootstrap interval (default 0.95).
+    pub confidence: f64,
+    /// Levenberg–Marquardt iterations per start (default 20).
+    pub iterations: usize,
+    /// Candidate effects (default: every effect of the world's library).
+    pub effects: Option<Vec<Effect>>,
+}
+
+impl Default for DiagnoseConfig {
+    fn default() -> Self {
+        Self {
+            steps: None,
+            seed: 0,
+            holdout_fraction: 0.5,
+            segment_s: 2.0,
+            fit_windows: 600,
+            score_windows: 3000,
+            min_reduction: 0.05,
+            bootstrap: 1000,
+            confidence: 0.95,
+            iterations: 20,
+            effects: None,
+        }
+    }
+}
+
+impl DiagnoseConfig {
+    /// The number of steps for a world.
+    pub fn steps_for(&self, world: World) -> usize {
+        self.steps.unwrap_or(match world {
+            World::Car => 50,
+            World::Push => 3,
+        })
+    }
+
+    fn validate(&self) -> Result<(), DiagnosisError> {
+        let bad = |name, value: f64, hint| DiagnosisError::Setting {
+            name,
+            value: value.to_string(),
+            hint,
+        };
+        if !(self.holdout_fraction > 0.0 && self.holdout_fraction < 1.0) {
+            return Err(bad(
+                "holdout_fraction",
+                self.holdout_fraction,
+                "use a fraction in (0, 1), e.g. 0.5",
+            ));
+        }
+        if !(self.confidence > 0.5 && self.confidence < 1.0) {
+            return Err(bad(
+                "confidence",
+                self.confidence,
+                "use a value in (0.5, 1), e.g. 0.95",
+            ));
+        }
+        if self.segment_s.is_nan() || self.segment_s <= 0.0 {
+            return Err(bad(
+                "segment_s",
+                self.segment_s,
+                "use a positive length, e.g. 2",
+            ));
+        }
+        if self.steps == Some(0) {
+            return Err(bad("steps", 0.0, "use at least 1 step"));
+        }
+        Ok(())
+    }
+}
+
+/// One candidate effect, fitted and scored.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Candidate {
+    /// Effect name (`aero_drag`, …).
+    pub effect: String,
+    /// Held-out k-step error removed, `1 − E_after/E_before`, clipped to \[0, 1\].
+    pub error_reduction: f64,
+    /// Whether the reduction is practically large enough and its bootstrap interval excludes 0.
+    pub significant: bool,
+    /// Fitted parameters by name.
+    pub params: BTreeMap<String, f64>,
+    /// Their standard errors (from the fit's `σ²(JᵀJ)⁻¹`; 0 for a parameter held fixed).
+    pub param_std: BTreeMap<String, f64>,
+    /// Units of the parameters.
+    pub param_units: BTreeMap<String, String>,
+    /// The reduction before clipping (negative: the effect makes held-out predictions worse).
+    pub raw_reduction: f64,
+    /// Lower end of the one-sided bootstrap interval of the reduction.
+    pub ci_lower: f64,
+    /// Held-out k-step error before and after (normalised units).
+    pub error_before: f64,
+    /// … after.
+    pub error_after: f64,
+    /// Fit-half error before and after.
+    pub fit_error: [f64; 2],
+    /// One line on the effect.
+    pub description: String,
+}
+
+/// A correlation of the one-step residual of one state dimension with a feature.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Correlation {
+    /// State dimension of the residual.
+    pub dimension: String,
+    /// Feature (`vx`, `speed²`, `d[t−5]`, …).
+    pub feature: String,
+    /// Lag in steps (0: same step; inputs only).
+    pub lag: usize,
+    /// Pearson correlation.
+    pub r: f64,
+}
+
+/// What [`diagnose`] found.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Diagnosis {
+    /// The best significant effect, or `None` when nothing in the library explains the residual.
+    pub verdict: Option<String>,
+    /// Candidates, best (largest held-out error reduction) first.
+    pub candidates: Vec<Candidate>,
+    /// The world.
+    pub world: World,
+    /// The model kind.
+    pub model_kind: String,
+    /// Effects the model already has.
+    pub model_effects: Vec<String>,
+    /// k.
+    pub steps: usize,
+    /// Segments used to fit and to score.
+    pub segments: [usize; 2],
+    /// Windows used to fit and to score.
+    pub windows: [usize; 2],
+    /// The held-out k-step error of the model (normalised units).
+    pub baseline_error: f64,
+    /// The strongest correlations of the one-step residual (always computed; what to look at
+    /// when there is no verdict).
+    pub correlations: Vec<Correlation>,
+    /// One plain sentence: the verdict or that nothing explains the residual.
+    pub summary: String,
+    /// Settings used.
+    pub config: DiagnoseConfig,
+}
+
+/// Windows, their data and the scale of each state dimension.
+struct Data<'a> {
+    trajs: &'a [StateTrajectory],
+    ds: usize,
+    du: usize,
+    k: usize,
+    scale: Vec<f64>,
+    angle: usize,
+}
+
+/// An augmented predictor: the model plus an effect's contribution.
+struct Augmented<'a> {
+    model: &'a Model,
+    base: PhysicsModel,
+    with: Option<PhysicsModel>,
+    /// The model is the base physics itself (skip the model and base integrations).
+    pure_physics: bool,
+}
+
+impl Augmented<'_> {
+    /// Per-window normalised squared error over k steps (`n_windows × k × ds` residuals when
+    /// `resid` is given).
+    fn errors(&self, d: &Data, ws: &[Window], mut resid: Option<&mut Vec<f64>>) -> Vec<f64> {
+        let (ds, du, k) = (d.ds, d.du, d.k);
+        let n = ws.len();
+        let mut s = vec![0.0; n * ds];
+        let mut u = vec![0.0; n * du];
+        let dt_phys = self.model.physics_time();
+        let solver = self.model.physics_solver();
+        let db = self.base.dim_state();
+        let mut sb: Vec<f64> = Vec::new();
+        let mut sw: Vec<f64> = Vec::new();
+        let dw = self.with.as_ref().map_or(0, |p| p.dim_state());
+        for (i, w) in ws.iter().enumerate() {
+            let t = &d.trajs[w.trajectory];
+            s[i * ds..(i + 1) * ds].copy_from_slice(&t.s[w.start * ds..(w.start + 1) * ds]);
+            if !self.pure_physics {
+                sb.extend(initial_state(&self.base, t, w.start));
+            }
+            if let Some(p) = &self.with {
+                sw.extend(initial_state(p, t, w.start));
+            }
+        }
+        let mut err = vec![0.0; n];
+        let mut next = vec![0.0; n * ds];
+        let mut nb = vec![0.0; n * db];
+        let mut nw = vec![0.0; n * dw];
+        for j in 0..k {
+            for (i, w) in ws.iter().enumerate() {
+                let t = &d.trajs[w.trajectory];
+                let a = w.start + j;
+                u[i * du..(i + 1) * du].copy_from_slice(&t.u[a * du..(a + 1) * du]);
+            }
+            if self.pure_physics {
+                // the model is Φ_P: the augmented model is Φ_{P+e}
+                if let Some(p) = &self.with {
+                    ode::integrate(p, &solver, n, &sw, &u, dt_phys, &mut nw);
+                    for i in 0..n {
+                        next[i * ds..(i + 1) * ds].copy_from_slice(&nw[i * dw..i * dw + ds]);
+                    }
+                    sw.copy_from_slice(&nw);
+                } else {
+                    let _ = self.model.step(&s, &u, &mut next);
+                }
+            } else {
+                let _ = self.model.step(&s, &u, &mut next);
+                if let Some(p) = &self.with {
+                    ode::integrate(&self.base, &solver, n, &sb, &u, dt_phys, &mut nb);
+                    ode::integrate(p, &solver, n, &sw, &u, dt_phys, &mut nw);
+                    for i in 0..n {
+                        for c in 0..ds {
+                            next[i * ds + c] += nw[i * dw + c] - nb[i * db + c];
+                        }
+                    }
+                    // both physics copies follow the augmented state; effect states their own
+                    for i in 0..n {
+                        sb[i * db..i * db + ds].copy_from_slice(&next[i * ds..(i + 1) * ds]);
+                        sw[i * dw..i * dw + ds].copy_from_slice(&next[i * ds..(i + 1) * ds]);
+                        for c in ds..db {
+                            sb[i * db + c] = nb[i * db + c];
+                        }
+                        for c in ds..dw {
+                            sw[i * dw + c] = nw[i * dw + c];
+                        }
+                    }
+                }
+            }
+            for (i, w) in ws.iter().enumerate() {
+                let t = &d.trajs[w.trajectory];
+                let meas = &t.s[(w.start + j + 1) * ds..(w.start + j + 2) * ds];
+                for c in 0..ds {
+                    let mut e = next[i * ds + c] - meas[c];
+                    if c == d.angle {
+                        e = wrap_angle(e);
+                    }
+                    let mut z = e / d.scale[c];
+                    if !z.is_finite() {
+                        z = 1e3;
+                    }
+                    err[i] += z * z / (k * ds) as f64;
+                    if let Some(r) = resid.as_deref_mut() {
+                        r.push(z);
+                    }
+                }
+            }
+            s.copy_from_slice(&next);
+        }
+        err
+    }
+}
+
+/// Starting points of an effect's parameters (the rest at their defaults), chosen from the
+/// data's extent for the patch effects.
+fn starts(e: Effect, trajs: &[StateTrajectory]) -> Vec<Vec<(&'static str, f64)>> {
+    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+    for t in trajs {
+        for i in 0..t.len() {
+            for c in 0..2 {
+                lo[c] = lo[c].min(t.s[i * t.dim_s + c]);
+                hi[c] = hi[c].max(t.s[i * t.dim_s + c]);
+            }
+        }
+    }
+    let grid = |n: usize| -> Vec<(f64, f64)> {
+        let mut v = Vec::new();
+        for a in 0..n {
+            for b in 0..n {
+                let fx = (a as f64 + 0.5) / n as f64;
+                let fy = (b as f64 + 0.5) / n as f64;
+                v.push((lo[0] + fx * (hi[0] - lo[0]), lo[1] + fy * (hi[1] - lo[1])));
+            }
+        }
+        v
+    };
+    match e {
+        Effect::AeroDrag => [0.0, 0.003, 0.01, 0.03, 0.1]
+            .into_iter()
+            .map(|c| vec![("c", c)])
+            .collect(),
+        Effect::MotorLag => [0.02, 0.05, 0.1, 0.2, 0.35, 0.6]
+            .into_iter()
+            .map(|t| vec![("tau", t)])
+            .collect(),
+        Effect::SteeringOffset => [-0.05, -0.01, 0.0, 0.01, 0.05]
+            .into_iter()
+            .map(|d| vec![("delta0", d)])
+            .collect(),
+        Effect::GripPatch => {
+            let r = 0.3 * (hi[0] - lo[0]).max(hi[1] - lo[1]).max(0.1);
+            let mut v = Vec::new();
+            for (x, y) in grid(3) {
+                for k in [0.5, 1.5] {
+                    v.push(vec![("cx", x), ("cy", y), ("r", r), ("w", 0.05), ("k", k)]);
+                }
+            }
+            v
+        }
+        Effect::ComOffset => vec![vec![("ox", 0.0), ("oy", 0.0)]],
+        Effect::TableTilt => vec![vec![("gx", 0.0), ("gy", 0.0)]],
+        Effect::FrictionPatch => {
+            let r = 0.25 * (hi[0] - lo[0]).max(hi[1] - lo[1]).max(0.02);
+            let mut v = Vec::new();
+            for (x, y) in grid(3) {
+                for b in [-0.3, 0.5] {
+                    v.push(vec![
+                        ("cx", x),
+                        ("cy", y),
+                        ("r", r),
+                        ("w", 0.01),
+                        ("beta", b),
+                    ]);
+                }
+            }
+            v
+        }
+        Effect::PusherFriction => vec![vec![("mu", 0.1)], vec![("mu", 0.4)], vec![("mu", 1.0)]],
+    }
+}
+
+/// Explains the residual of `model` on `data` with the effect library; see the
+/// [module docs](self).
+pub fn diagnose(
+    model: &Model,
+    data: &Dataset,
+    cfg: &DiagnoseConfig,
+) -> Result<Diagnosis, DiagnosisError> {
+    cfg.validate()?;
+    let world = model.world();
+    if data.world != world {
+        return Err(DiagnosisError::WorldMismatch {
+            model: world,
+            data: data.world,
+        });
+    }
+    let k = cfg.steps_for(world);
+    let trajs = match world {
+        World::Car => segment(
+            &data.trajectories,
+            (cfg.segment_s / data.pose_dt_s.max(1e-9)).round().max(2.0) as usize + 1,
+        ),
+        World::Push => push_level(&data.trajectories),
+    };
+    let trajs: Vec<StateTrajectory> = trajs.into_iter().filter(|t| t.len() > k).collect();
+    let lengths: Vec<usize> = trajs.iter().map(|t| t.len()).collect();
+    let too_little = |w: usize| DiagnosisError::TooLittleData {
+        segments: trajs.len(),
+        windows: w,
+        k,
+    };
+    if trajs.len() < 4 {
+        return Err(too_little(0));
+    }
+    let all = windows(&lengths, k).map_err(|_| too_little(0))?;
+    let split = split_trajectories(trajs.len(), cfg.holdout_fraction, cfg.seed)?;
+    let is_test: Vec<bool> = (0..trajs.len())
+        .map(|i| split.validation.binary_search(&i).is_ok())
+        .collect();
+    let (mut test_w, mut fit_w): (Vec<Window>, Vec<Window>) =
+        all.iter().partition(|w| is_test[w.trajectory]);
+    let subsample = |v: &mut Vec<Window>, n: usize, salt: u64| {
+        SplitMix64::new(cfg.seed ^ salt).shuffle(v);
+        v.truncate(n.max(1));
+        v.sort_by_key(|w| (w.trajectory, w.start));
+    };
+    subsample(&mut fit_w, cfg.fit_windows, 0x243F_6A88_85A3_08D3);
+    subsample(&mut test_w, cfg.score_windows, 0x1319_8A2E_0370_7344);
+    if fit_w.is_empty() || test_w.is_empty() {
+        return Err(too_little(all.len()));
+    }
+    let ds = world.state_dim();
+    let du = world.action_dim();
+    let angle = world.angle_dim();
+    // scale: RMS k-step change of each dimension
+    let mut scale = vec![0.0; ds];
+    for w in &all {
+        let t = &trajs[w.trajectory];
+        for (c, sc) in scale.iter_mut().enumerate() {
+            let mut e = t.s[(w.start + k) * ds + c] - t.s[w.start * ds + c];
+            if c == angle {
+                e = wrap_angle(e);
+            }
+            *sc += e * e;
+        }
+    }
+    for v in &mut scale {
+        *v = (*v / all.len() as f64).sqrt().max(1e-6);
+    }
+    let d = Data {
+        trajs: &trajs,
+        ds,
+        du,
+        k,
+        scale,
+        angle,
+    };
+    let base = match model.physics() {
+        Some(p) => p.clone(),
+        None => PhysicsModel::new(world.robot(), &[])?,
+    };
+    let pure_physics =
+        model.physics().is_some() && model.network().is_none() && base.dim_state() == ds;
+    let baseline = Augmented {
+        model,
+        base: base.clone(),
+        with: None,
+        pure_physics,
+    };
+    let before_test = baseline.errors(&d, &test_w, None);
+    let before_fit = baseline.errors(&d, &fit_w, None);
+    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
+    let baseline_error = mean(&before_test);
+    // candidates
+    let have = base.effects();
+    let lib: Vec<Effect> = cfg.effects.clone().unwrap_or_else(|| {
+        Effect::ALL
+            .into_iter()
+            .filter(|e| e.robot() == world.robot())
+            .collect()
+    });
+    let test_traj: Vec<usize> = split.validation.clone();
+    let mut candidates = Vec::new();
+    let fit_one = |e: Effect| -> Result<Option<Candidate>, DiagnosisError> {
+        if have.contains(&e) || e.robot() != world.robot() {
+            return Ok(None);
+        }
+        let mut effects = have.clone();
+        effects.push(e);
+        let mut with = PhysicsModel::new(world.robot(), &effects)?;
+        let mut p0 = with.params().to_vec();
+        p0[..base.params().len()].copy_from_slice(base.params());
+        with.set_params(&p0)?;
+        let range = with
+            .effect_param_range(e)
+            .ok_or(ModelError::NotEnabled(e))?;
+        let specs: Vec<_> = e.params().to_vec();
+        let lower: Vec<f64> = specs.iter().map(|s| s.lower).collect();
+        let upper: Vec<f64> = specs.iter().map(|s| s.upper).collect();
+        let free: Vec<bool> = specs.iter().map(|s| s.name != "w").collect();
+        let cost_of = |theta: &[f64], ws: &[Window], resid: Option<&mut Vec<f64>>| {
+            let mut m = with.clone();
+            let mut p = m.params().to_vec();
+            p[range.clone()].copy_from_slice(theta);
+            if m.set_params(&p).is_err() {
+                return None;
+            }
+            let a = Augmented {
+                model,
+                base: base.clone(),
+                with: Some(m),
+                pure_physics,
+            };
+            Some(a.errors(&d, ws, resid))
+        };
+        // starts: screen by cost, refine the best two
+        let mut scored: Vec<(f64, Vec<f64>)> = Vec::new();
+        for st in starts(e, &trajs) {
+            let mut th: Vec<f64> = specs.iter().map(|s| s.default).collect();
+            for (name, v) in st {
+                if let Some(i) = specs.iter().position(|s| s.name == name) {
+                    th[i] = v.clamp(lower[i], upper[i]);
+                }
+            }
+            if let Some(errs) = cost_of(&th, &fit_w, None) {
+                scored.push((mean(&errs), th));
+            }
+        }
+        scored.sort_by(|a, b| a.0.total_cmp(&b.0));
+        scored.truncate(2);
+        let nr = (fit_w.len() * k * ds) as f64;
+        let mut best: Option<(f64, Vec<f64>, Vec<f64>)> = None;
+        for (_, th0) in scored {
+            let mut eval = |th: &[f64], with_j: bool| -> (Vec<f64>, Vec<f64>) {
+                let resid_of = |th: &[f64]| -> Vec<f64> {
+                    let mut r = Vec::new();
+                    match cost_of(th, &fit_w, Some(&mut r)) {
+                        Some(_) => r.iter().map(|x| x / nr.sqrt()).collect(),
+                        None => vec![f64::INFINITY],
+                    }
+                };
+                let r = resid_of(th);
+                if !with_j {
+                    return (r, Vec::new());
+                }
+                let np = th.len();
+                let mut jac = vec![0.0; r.len() * np];
+                for c in 0..np {
+                    if !free[c] {
+                        continue;
+                    }
+                    let h = 1e-4 * th[c].abs().max(1e-3 * (upper[c] - lower[c]).min(1.0));
+                    let mut t2 = th.to_vec();
+                    let sgn = if th[c] + h <= upper[c] { 1.0 } else { -1.0 };
+                    t2[c] += sgn * h;
+                    let r2 = resid_of(&t2);
+                    if r2.len() != r.len() {
+                        continue;
+                    }
+                    for (i, (a, b)) in r2.iter().zip(&r).enumerate() {
+                        jac[i * np + c] = (a - b) / (sgn * h);
+                    }
+                }
+                (r, jac)
+            };
+            let res = bounded_least_squares(&th0, &lower, &upper, &free, cfg.iterations, &mut eval);
+            if best.as_ref().is_none_or(|b| res.cost < b.0) {
+                best = Some((res.cost, res.theta, res.std));
+            }
+        }
+        let Some((_, theta, std)) = best else {
+            return Ok(None);
+        };
+        let Some(after_test) = cost_of(&theta, &test_w, None) else {
+            return Ok(None);
+        };
+        let after_fit = cost_of(&theta, &fit_w, None).unwrap_or_default();
+        let (eb, ea) = (mean(&before_test), mean(&after_test));
+        let raw = if eb > 0.0 { 1.0 - ea / eb } else { 0.0 };
+        let ci_lower = bootstrap_lower(
+            &test_w,
+            &before_test,
+            &after_test,
+            cfg.bootstrap,
+            cfg.confidence,
+            cfg.seed ^ (e as u64 + 1).wrapping_mul(0x9E37_79B9_7F4A_7C15),
+        );
+        let significant = raw >= cfg.min_reduction && ci_lower > 0.0 && test_traj.len() >= 2;
+        Ok(Some(Candidate {
+            effect: e.name().to_string(),
+            error_reduction: raw.clamp(0.0, 1.0),
+            significant,
+            params: specs
+                .iter()
+                .zip(&theta)
+                .map(|(s, v)| (s.name.to_string(), *v))
+                .collect(),
+            param_std: specs
+                .iter()
+                .zip(&std)
+                .map(|(s, v)| (s.name.to_string(), if v.is_finite() { *v } else { -1.0 }))
+                .collect(),
+            param_units: specs
+                .iter()
+                .map(|s| (s.name.to_string(), s.unit.to_string()))
+                .collect(),
+            raw_reduction: raw,
+            ci_lower,
+            error_before: eb,
+            error_after: ea,
+            fit_error: [mean(&before_fit), mean(&after_fit)],
+            description: e.description().to_string(),
+        }))
+    };
+    // candidates are independent: fit them on parallel threads, collect in library order
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let mut results: Vec<Result<Option<Candidate>, DiagnosisError>> = Vec::new();
+    for chunk in lib.chunks(threads.max(1)) {
+        let part: Vec<_> = std::thread::scope(|sc| {
+            let hs: Vec<_> = chunk
+                .iter()
+                .map(|&e| sc.spawn(move || fit_one(e)))
+                .collect();
+            hs.into_iter()
+                .map(|h| h.join().unwrap_or(Ok(None)))
+                .collect()
+        });
+        results.extend(part);
+    }
+    for r in results {
+        if let Some(c) = r? {
+            candidates.push(c);
+        }
+    }
+    candidates.sort_by(|a, b| {
+        b.error_reduction
+            .total_cmp(&a.error_reduction)
+            .then(b.raw_reduction.total_cmp(&a.raw_reduction))
+    });
+    let verdict = candidates
+        .iter()
+        .find(|c| c.significant)
+        .map(|c| c.effect.clone());
+    let correlations = residual_correlations(model, &d, &fit_w, &test_w);
+    let summary = match &verdict {
+        Some(v) => {
+            let c = candidates.iter().find(|c| &c.effect == v);
+            format!(
+                "verdict: {v} explains {:.0} % of the held-out {k}-step error (significant)",
+                100.0 * c.map_or(0.0, |c| c.error_reduction)
+            )
+        }
+        None => format!(
+            "verdict: none — no effect in the library explains the residual (none removes ≥ {:.0} % of the held-out {k}-step error with a bootstrap interval above 0); see what the residual correlates with",
+            100.0 * cfg.min_reduction
+        ),
+    };
+    Ok(Diagnosis {
+        verdict,
+        candidates,
+        world,
+        model_kind: model.kind().name().to_string(),
+        model_effects: have.iter().map(|e| e.name().to_string()).collect(),
+        steps: k,
+        segments: [split.train.len(), split.validation.len()],
+        windows: [fit_w.len(), test_w.len()],
+        baseline_error,
+        correlations,
+        summary,
+        config: cfg.clone(),
+    })
+}
+
+/// Pushing data recorded with poses between pushes (a 10 Hz block pose) hold each action over
+/// many poses; a pushing model steps one whole push. Keeps the pose at each push start (where the
+/// action changes) and the last pose, so that one transition is one push. Data with one pose per
+/// push pass unchanged.
+pub fn push_level(trajs: &[StateTrajectory]) -> Vec<StateTrajectory> {
+    trajs
+        .iter()
+        .map(|t| {
+            let (ds, du) = (t.dim_s, t.dim_u);
+            let n = t.len();
+            let mut keep: Vec<usize> = (0..n)
+                .filter(|&i| i == 0 || t.u[i * du..(i + 1) * du] != t.u[(i - 1) * du..i * du])
+                .collect();
+            if n > 0 && keep.last() != Some(&(n - 1)) {
+                keep.push(n - 1);
+            }
+            StateTrajectory {
+                s: keep
+                    .iter()
+                    .flat_map(|&i| t.s[i * ds..(i + 1) * ds].iter().copied())
+                    .collect(),
+                u: keep
+                    .iter()
+                    .flat_map(|&i| t.u[i * du..(i + 1) * du].iter().copied())
+                    .collect(),
+                dim_s: ds,
+                dim_u: du,
+                dt: 1.0,
+            }
+        })
+        .collect()
+}
+
+/// [`push_level`] applied to a data set (pose interval set to one push).
+pub fn push_level_dataset(mut data: Dataset) -> Dataset {
+    if data.world == World::Push {
+        data.trajectories = push_level(&data.trajectories);
+        data.pose_dt_s = 1.0;
+    }
+    data
+}
+
+/// One-sided lower bootstrap bound of the error reduction, resampling held-out segments whole.
+fn bootstrap_lower(
+    ws: &[Window],
+    before: &[f64],
+    after: &[f64],
+    resamples: usize,
+    confidence: f64,
+    seed: u64,
+) -> f64 {
+    let mut sb: BTreeMap<usize, (f64, f64)> = BTreeMap::new();
+    for (w, (b, a)) in ws.iter().zip(before.iter().zip(after)) {
+        let e = sb.entry(w.trajectory).or_insert((0.0, 0.0));
+        e.0 += b;
+        e.1 += a;
+    }
+    let per: Vec<(f64, f64)> = sb.into_values().collect();
+    if per.len() < 2 || resamples == 0 {
+        return f64::NEG_INFINITY;
+    }
+    let mut rng = SplitMix64::new(seed);
+    let mut stats = Vec::with_capacity(resamples);
+    for _ in 0..resamples {
+        let (mut b, mut a) = (0.0, 0.0);
+        for _ in 0..per.len() {
+            let i = (rng.next_u64() % per.len() as u64) as usize;
+            b += per[i].0;
+            a += per[i].1;
+        }
+        stats.push(if b > 0.0 { 1.0 - a / b } else { 0.0 });
+    }
+    stats.sort_by(|a, b| a.total_cmp(b));
+    let q = ((1.0 - confidence) * resamples as f64).floor() as usize;
+    stats[q.min(resamples - 1)]
+}
+
+fn pearson(x: &[f64], y: &[f64]) -> f64 {
+    let n = x.len().min(y.len());
+    if n < 3 {
+        return 0.0;
+    }
+    let mx = x.iter().take(n).sum::<f64>() / n as f64;
+    let my = y.iter().take(n).sum::<f64>() / n as f64;
+    let (mut sxy, mut sxx, mut syy) = (0.0, 0.0, 0.0);
+    for i in 0..n {
+        let (a, b) = (x[i] - mx, y[i] - my);
+        sxy += a * b;
+        sxx += a * a;
+        syy += b * b;
+    }
+    if sxx <= 0.0 || syy <= 0.0 {
+        0.0
+    } else {
+        sxy / (sxx * syy).sqrt()
+    }
+}
+
+/// Correlations of the model's one-step residual per dimension with state and input features and
+/// with the inputs at lags (a lagged peak suggests an unmodelled delay or lag), strongest first.
+fn residual_correlations(
+    model: &Model,
+    d: &Data,
+    fit_w: &[Window],
+    test_w: &[Window],
+) -> Vec<Correlation> {
+    let (ds, du) = (d.ds, d.du);
+    let world = model.world();
+    let ws: Vec<Window> = fit_w.iter().chain(test_w).copied().collect();
+    let n = ws.len();
+    let mut s = vec![0.0; n * ds];
+    let mut u = vec![0.0; n * du];
+    for (i, w) in ws.iter().enumerate() {
+        let t = &d.trajs[w.trajectory];
+        s[i * ds..(i + 1) * ds].copy_from_slice(&t.s[w.start * ds..(w.start + 1) * ds]);
+        u[i * du..(i + 1) * du].copy_from_slice(&t.u[w.start * du..(w.start + 1) * du]);
+    }
+    let mut next = vec![0.0; n * ds];
+    if model.step(&s, &u, &mut next).is_err() {
+        return Vec::new();
+    }
+    let names = world.state_names();
+    let unames = world.action_names();
+    let mut feats: Vec<(String, usize, Vec<f64>)> = Vec::new();
+    let col = |v: &[f64], stride: usize, c: usize| -> Vec<f64> {
+        (0..n).map(|i| v[i * stride + c]).collect()
+    };
+    match world {
+        World::Car => {
+            for (c, name) in [(3, "vx"), (4, "vy"), (5, "ω")] {
+                feats.push((name.to_string(), 0, col(&s, ds, c)));
+            }
+            feats.push((
+                "speed²".into(),
+                0,
+                (0..n)
+                    .map(|i| s[i * ds + 3].powi(2) + s[i * ds + 4].powi(2))
+                    .collect(),
+            ));
+            feats.push((
+                "vx|vx|".into(),
+                0,
+                (0..n)
+                    .map(|i| s[i * ds + 3] * s[i * ds + 3].abs())
+                    .collect(),
+            ));
+            for (c, name) in names.iter().enumerate().take(2) {
+                feats.push((name.to_string(), 0, col(&s, ds, c)));
+            }
+        }
+        World::Push => {
+            for (c, name) in names.iter().enumerate().take(3) {
+                feats.push((name.to_string(), 0, col(&s, ds, c)));
+            }
+        }
+    }
+    let max_lag = match world {
+        World::Car => 30,
+        World::Push => 2,
+    };
+    for (c, uname) in unames.iter().enumerate().take(du) {
+        for lag in 0..=max_lag {
+            let v: Vec<f64> = ws
+                .iter()
+                .map(|w| {
+                    let t = &d.trajs[w.trajectory];
+                    let a = w.start.saturating_sub(lag);
+                    t.u[a * du + c]
+                })
+                .collect();
+            let name = if lag == 0 {
+                uname.to_string()
+            } else {
+                format!("{uname}[t−{lag}]")
+            };
+            feats.push((name, lag, v));
+        }
+    }
+    let mut out = Vec::new();
+    for c in 0..ds {
+        let r: Vec<f64> = ws
+            .iter()
+            .enumerate()
+            .map(|(i, w)| {
+                let t = &d.trajs[w.trajectory];
+                let mut e = next[i * ds + c] - t.s[(w.start + 1) * ds + c];
+                if c == d.angle {
+                    e = wrap_angle(e);
+                }
+                e
+            })
+            .collect();
+        for (fname, lag, f) in &feats {
+            let v = pearson(f, &r);
+            if v.is_finite() {
+                out.push(Correlation {
+                    dimension: names[c].to_string(),
+                    feature: fname.clone(),
+                    lag: *lag,
+                    r: v,
+                });
+            }
+        }
+    }
+    out.sort_by(|a, b| b.r.abs().total_cmp(&a.r.abs()));
+    out.truncate(12);
+    out
+}
+
+impl Diagnosis {
+    /// The terminal summary: a table of candidates and the verdict line.
+    pub fn table(&self) -> String {
+        use std::fmt::Write as _;
+        let mut o = String::new();
+        let _ = writeln!(
+            o,
+            "diagnosis of a {} {} model{} over {} held-out segments ({} windows of {} steps); baseline error {:.4}",
+            self.world,
+            self.model_kind,
+            if self.model_effects.is_empty() {
+                String::new()
+            } else {
+                format!(" with {}", self.model_effects.join(", "))
+            },
+            self.segments[1],
+            self.windows[1],
+            self.steps,
+            self.baseline_error
+        );
+        let _ = writeln!(
+            o,
+            "{:<16} {:>10} {:>10} {:>12}  parameters (± std)",
+            "effect", "reduction", "CI low", "significant"
+        );
+        for c in &self.candidates {
+            let params: Vec<String> = c
+                .params
+                .iter()
+                .map(|(k, v)| {
+                    let sd = c.param_std.get(k).copied().unwrap_or(0.0);
+                    let unit = c.param_units.get(k).cloned().unwrap_or_default();
+                    if sd > 0.0 {
+                        format!("{k} = {} ± {} {unit}", g4(*v), g4(sd))
+                    } else {
+                        format!("{k} = {} {unit}", g4(*v))
+                    }
+                })
+                .collect();
+            let _ = writeln!(
+                o,
+                "{:<16} {:>9.1}% {:>9.1}% {:>12}  {}",
+                c.effect,
+                100.0 * c.error_reduction,
+                100.0 * c.ci_lower.max(-9.99),
+                if c.significant { "yes" } else { "no" },
+                params.join(", ")
+            );
+        }
+        if self.verdict.is_none() && !self.correlations.is_empty() {
+            let _ = writeln!(o, "the one-step residual correlates most with:");
+            for c in self.correlations.iter().take(6) {
+                let _ = writeln!(
+                    o,
+                    "  {:<4} ~ {:<12} r = {:+.2}",
+                    c.dimension, c.feature, c.r
+                );
+            }
+        }
+        let _ = writeln!(o, "{}", self.summary);
+        o
+    }
+
+    /// `diagnosis.json`: `{"verdict", "candidates": [{"effect", "error_reduction",
+    /// "significant", "params", "param_std", …}], …}`.
+    pub fn to_json(&self) -> serde_json::Value {
+        serde_json::to_value(self).unwrap_or(serde_json::Value::Null)
+    }
+}
+
+/// 4 significant digits.
+pub(crate) fn g4(v: f64) -> String {
+    let a = v.abs();
+    if v == 0.0 {
+        "0".into()
+    } else if !(1e-3..1e4).contains(&a) {
+        format!("{v:.3e}")
+    } else {
+        let digits = (3 - a.log10().floor() as i32).max(0) as usize;
+        format!("{v:.digits$}")
+    }
+}

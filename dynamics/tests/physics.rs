@@ -215,22 +215,90 @@ fn effect_terms_and_their_jacobians_match_finite_differences() {
 }
 
 #[test]
-fn aero_drag_is_exactly_minus_c_vx_abs_vx_and_linear_in_c() {
+fn aero_drag_is_minus_c_speed_times_body_velocity_over_mass_and_linear_in_c() {
     let mut m = PhysicsModel::car(&[Effect::AeroDrag]).unwrap();
-    m.set_param("aero_drag.c", 0.1).unwrap();
+    m.set_param("aero_drag.c", 0.01).unwrap();
     let s = [0.0, 0.0, 0.3, -1.5, 0.2, 0.4];
     let t = m.effect_term(Effect::AeroDrag, &s, &[0.1, 0.3]).unwrap();
-    let want = [0.0, 0.0, 0.0, -0.1 * -1.5 * 1.5, 0.0, 0.0];
+    let mass = 0.041;
+    let v = (1.5f64 * 1.5 + 0.2 * 0.2).sqrt();
+    let want = [
+        0.0,
+        0.0,
+        0.0,
+        -0.01 * v * -1.5 / mass,
+        -0.01 * v * 0.2 / mass,
+        0.0,
+    ];
     assert!(
-        max_rel_diff(&t.contribution, &want) < 1e-14,
+        max_rel_diff(&t.contribution, &want) < 1e-9,
         "{:?}",
         t.contribution
     );
     assert!(Effect::AeroDrag.linear_in_params());
-    m.set_param("aero_drag.c", 0.2).unwrap();
+    m.set_param("aero_drag.c", 0.02).unwrap();
     let t2 = m.effect_term(Effect::AeroDrag, &s, &[0.1, 0.3]).unwrap();
-    assert!((t2.contribution[3] - 2.0 * t.contribution[3]).abs() < 1e-14);
-    assert!((t.d_params[3] - (-(-1.5f64) * 1.5)).abs() < 1e-14);
+    assert!((t2.contribution[3] - 2.0 * t.contribution[3]).abs() < 1e-12);
+    assert!((t.d_params[3] - (-v * -1.5 / mass)).abs() < 1e-9);
+}
+
+/// Regression: `aero_drag` was `c·vx|vx|`, the same function as the nominal `C_r2·vx|vx|`, so a
+/// fit that freed `C_r2` absorbed it and adding the effect changed nothing. `C_r2` is now fixed
+/// by default and the effect acts on the whole body velocity, as the simulator's drag does.
+#[test]
+fn aero_drag_duplicated_nominal_drag() {
+    let m = PhysicsModel::car(&[Effect::AeroDrag]).unwrap();
+    let free = m.default_free();
+    let names = m.param_names();
+    let free_names: Vec<&str> = names
+        .iter()
+        .zip(&free)
+        .filter(|(_, f)| **f)
+        .map(|(n, _)| n.as_str())
+        .collect();
+    assert!(!free_names.contains(&"Cr2"), "{free_names:?}");
+    assert!(free_names.contains(&"aero_drag.c"), "{free_names:?}");
+    // the effect moves vy too, which no nominal drag term does
+    let mut m = m;
+    m.set_param("aero_drag.c", 0.01).unwrap();
+    let t = m
+        .effect_term(
+            Effect::AeroDrag,
+            &[0.0, 0.0, 0.0, 1.0, 0.3, 0.0],
+            &[0.0, 0.2],
+        )
+        .unwrap();
+    assert!(t.contribution[4] < -1e-3, "{:?}", t.contribution);
+}
+
+/// Regression: the car fit freed every nominal parameter, and the mass (which scales every
+/// force) came out as 0.040 ± 0.28 kg. Measured quantities stay fixed by default.
+#[test]
+fn car_fit_freed_non_identifiable_mass() {
+    let m = PhysicsModel::car(&[]).unwrap();
+    let free = m.default_free();
+    for (name, f) in m.param_names().iter().zip(&free) {
+        let measured = ["m", "Iz", "lf", "lr", "Cr2", "v_reg", "Cf", "Cr"].contains(&name.as_str());
+        assert_eq!(*f, !measured, "{name}");
+    }
+    let p = PhysicsModel::pushing(&[]).unwrap();
+    let pf = p.default_free();
+    assert_eq!(pf, vec![false, true, false, true]);
+}
+
+/// The rear axle saturates on the friction circle like the simulator's: at full throttle the
+/// drive force is capped at the rear peak force `D_r`.
+#[test]
+fn rear_friction_ellipse_caps_the_drive_force() {
+    let m = PhysicsModel::car(&[]).unwrap();
+    let mut f = [0.0; 6];
+    // standing start at full throttle: C_m1 = 0.287 N asked, D_r = 0.1737 N available
+    m.eval_one(&[0.0, 0.0, 0.0, 0.0, 0.0, 0.0], &[0.0, 1.0], &mut f);
+    let a = f[3] * 0.041;
+    assert!((a - 0.1737).abs() < 2e-3, "drive force {a}");
+    // gentle throttle is unchanged: 0.1·C_m1
+    m.eval_one(&[0.0, 0.0, 0.0, 0.0, 0.0, 0.0], &[0.0, 0.1], &mut f);
+    assert!((f[3] * 0.041 - 0.0287).abs() < 1e-4, "{}", f[3] * 0.041);
 }
 
 #[test]
@@ -268,7 +336,8 @@ fn car_drives_straight_accelerates_and_stands_still_sensibly() {
     // straight at 1 m/s with throttle: no lateral motion, forward acceleration = F_rx/m
     car.eval_one(&[0.0, 0.0, 0.0, 1.0, 0.0, 0.0], &[0.0, 0.5], &mut f);
     let frx = (0.287 - 0.0545) * 0.5 - 0.0518 * (1.0f64 / 0.05).tanh() - 0.00035;
-    assert!((f[3] - frx / 0.041).abs() < 1e-12);
+    // (the smooth friction ellipse is 1 − 10⁻⁶ inside the circle)
+    assert!((f[3] - frx / 0.041).abs() < 1e-5 * (frx / 0.041).abs());
     assert_eq!((f[4], f[5]), (0.0, 0.0));
     // a standing car with the wheels turned and no throttle does not move
     car.eval_one(&[0.0, 0.0, 0.7, 0.0, 0.0, 0.0], &[0.3, 0.0], &mut f);
@@ -484,9 +553,9 @@ fn equations_print_fitted_effects_with_uncertainty() {
     se[m.param_index("aero_drag.c").unwrap()] = 0.0008;
     m.set_std_errors(Some(se)).unwrap();
     let text = m.to_string();
-    assert!(text.contains("− 0.01230·vx|vx|"), "{text}");
+    assert!(text.contains("− 0.01230·|v|·vx/m"), "{text}");
     assert!(
-        text.contains("(aero_drag c = 0.01230 ± 0.0008000 1/m)"),
+        text.contains("(aero_drag c = 0.01230 ± 0.0008000 N·s²/m²)"),
         "{text}"
     );
     assert!(text.contains("ḋ_f = (d − d_f)/0.05000"), "{text}");

@@ -20,6 +20,7 @@ pub mod dataset;
 mod error;
 pub mod eval;
 pub mod file;
+pub mod fit;
 pub mod model;
 pub mod net;
 pub mod train;

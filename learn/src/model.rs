@@ -239,7 +239,7 @@ impl Model {
                     hint: "use the physics model of the same robot".into(),
                 });
             }
-            if p.dim_state() != world.state_dim() {
+            if p.dim_state() != world.state_dim() && kind != ModelKind::Physics {
                 return Err(LearnError::setting(
                     "effects",
                     p.effects()
@@ -247,7 +247,7 @@ impl Model {
                         .map(|e| e.name())
                         .collect::<Vec<_>>()
                         .join(","),
-                    "effects that add states (motor_lag) are not supported by learned models yet; leave them out",
+                    "effects that add states (motor_lag) are supported by physics models only, not by hybrid ones; use --kind physics or leave the effect out",
                 ));
             }
         }
@@ -362,7 +362,26 @@ impl Model {
         let mut status = OdeStatus::Success;
         // physics part
         if let Some(p) = &self.physics {
-            let rep = ode::integrate(p, &self.physics_solver, n, s, u, self.physics_time(), out);
+            let rep = if p.dim_state() == ds {
+                ode::integrate(p, &self.physics_solver, n, s, u, self.physics_time(), out)
+            } else {
+                let dp = p.dim_state();
+                let sp = pad_effect_states(p, n, s, u);
+                let mut op = vec![0.0; n * dp];
+                let rep = ode::integrate(
+                    p,
+                    &self.physics_solver,
+                    n,
+                    &sp,
+                    u,
+                    self.physics_time(),
+                    &mut op,
+                );
+                for i in 0..n {
+                    out[i * ds..(i + 1) * ds].copy_from_slice(&op[i * dp..i * dp + ds]);
+                }
+                rep
+            };
             status = rep.status;
         }
         let Some(net) = &self.net else {
@@ -494,17 +513,53 @@ impl Model {
         let mut js = vec![0.0; n * ds * ds];
         let mut ju = vec![0.0; n * ds * du];
         if let Some(p) = &self.physics {
-            ode::step_jacobians(
-                p,
-                &self.physics_solver,
-                n,
-                s,
-                u,
-                self.physics_time(),
-                &mut next,
-                &mut js,
-                &mut ju,
-            );
+            if p.dim_state() == ds {
+                ode::step_jacobians(
+                    p,
+                    &self.physics_solver,
+                    n,
+                    s,
+                    u,
+                    self.physics_time(),
+                    &mut next,
+                    &mut js,
+                    &mut ju,
+                );
+            } else {
+                // padded effect states are functions of the input (see `pad_effect_states`):
+                // their columns fold into ∂/∂u by the chain rule
+                let dp = p.dim_state();
+                let sp = pad_effect_states(p, n, s, u);
+                let mut np_ = vec![0.0; n * dp];
+                let mut jsp = vec![0.0; n * dp * dp];
+                let mut jup = vec![0.0; n * dp * du];
+                ode::step_jacobians(
+                    p,
+                    &self.physics_solver,
+                    n,
+                    &sp,
+                    u,
+                    self.physics_time(),
+                    &mut np_,
+                    &mut jsp,
+                    &mut jup,
+                );
+                for b in 0..n {
+                    next[b * ds..(b + 1) * ds].copy_from_slice(&np_[b * dp..b * dp + ds]);
+                    for r in 0..ds {
+                        for c in 0..ds {
+                            js[b * ds * ds + r * ds + c] = jsp[b * dp * dp + r * dp + c];
+                        }
+                        for c in 0..du {
+                            ju[b * ds * du + r * du + c] = jup[b * dp * du + r * du + c];
+                        }
+                        // d_f = d (throttle, input 1)
+                        for e in ds..dp {
+                            ju[b * ds * du + r * du + 1] += jsp[b * dp * dp + r * dp + e];
+                        }
+                    }
+                }
+            }
         }
         let Some(net) = &self.net else {
             return Ok(StepJacobians {
@@ -904,6 +959,26 @@ impl BlockBuffers {
             ws.reserve(nb);
         }
     }
+}
+
+/// The physics state of a batch with the effects' extra states appended. A single step sees only
+/// the measured state, not the command history, so the filtered throttle `d_f` of `motor_lag`
+/// starts settled at the command (`d_f = d`): within one step the lag then acts only through the
+/// throttle change of the step. Fits and the diagnosis, which have the command history,
+/// reconstruct `d_f` with [`PhysicsModel::motor_lag_filter`] instead.
+pub fn pad_effect_states(p: &PhysicsModel, n: usize, s: &[f64], u: &[f64]) -> Vec<f64> {
+    let dp = p.dim_state();
+    let ds = s.len() / n.max(1);
+    let du = u.len() / n.max(1);
+    let mut out = Vec::with_capacity(n * dp);
+    for i in 0..n {
+        out.extend_from_slice(&s[i * ds..(i + 1) * ds]);
+        for _ in ds..dp {
+            // motor_lag is the only effect with a state: the filtered throttle
+            out.push(u[i * du + du.min(2) - 1]);
+        }
+    }
+    out
 }
 
 fn check_finite(what: &'static str, v: &[f64]) -> Result<(), LearnError> {

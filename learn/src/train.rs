@@ -11,7 +11,7 @@ use dynlab_dynamics::conventions::{LossNorm, wrap_angle};
 use dynlab_dynamics::data::{
     SplitMix64, StateTrajectory, Window, split_trajectories, split_windows_overlapping, windows,
 };
-use dynlab_dynamics::ode::{self, InputTape, OdeStatus, Solver, SolverTape, VectorField};
+use dynlab_dynamics::ode::{self, InputTape, Solver, SolverTape, VectorField};
 use dynlab_dynamics::physics::{Effect, PhysicsModel};
 use dynlab_nn::{Activation, Adam, AdamConfig, Init, Mlp, MlpSpec};
 use serde::{Deserialize, Serialize};
@@ -116,6 +116,11 @@ pub struct TrainConfig {
     pub physics_iterations: usize,
     /// Windows used by the physics fit at most (seeded subsample; default 2000).
     pub physics_max_windows: usize,
+    /// Nominal physics parameters the fit frees (default: the identifiable ones,
+    /// [`PhysicsModel::default_free`]); effect parameters are always fitted.
+    pub physics_free: Option<Vec<String>>,
+    /// Physics parameter values set before the fit (measured mass, geometry, …; default none).
+    pub physics_values: std::collections::BTreeMap<String, f64>,
 }
 
 impl Default for TrainConfig {
@@ -142,6 +147,8 @@ impl Default for TrainConfig {
             adjoint: false,
             physics_iterations: 30,
             physics_max_windows: 2000,
+            physics_free: None,
+            physics_values: std::collections::BTreeMap::new(),
         }
     }
 }
@@ -882,7 +889,7 @@ pub fn train(
     let mut curve = Vec::new();
     let physics = if cfg.kind.has_physics() {
         let mut p = physics_model(world, &cfg.effects)?;
-        let fit = fit_physics(
+        let fit = crate::fit::fit_physics(
             &mut p,
             &phys_solver,
             world,
@@ -1227,248 +1234,4 @@ fn normalization(
         output_mean: no.mean,
         output_std: no.std,
     })
-}
-
-/// Fits all parameters of `p` (nominal and effects, within their bounds) by Levenberg–Marquardt
-/// on the k-step open-loop residual of the learned dimensions, weighted like the training loss
-/// (pushing: `√w_d`, car: `1/σ_d` of the velocities, discount `√γ^(j−1)`), and sets the
-/// parameter standard errors from `σ²(JᵀJ)⁻¹`.
-#[allow(clippy::too_many_arguments)]
-fn fit_physics(
-    p: &mut PhysicsModel,
-    solver: &Solver,
-    world: World,
-    dt: f64,
-    trajs: &[StateTrajectory],
-    train_w: &[Window],
-    k: usize,
-    cfg: &TrainConfig,
-    loss: &Loss,
-) -> Result<PhysicsFit, LearnError> {
-    let lr = world.learned_dims();
-    let ds = world.state_dim();
-    let t_phys = if world == World::Push { 1.0 } else { dt };
-    let weights: Vec<f64> = match loss {
-        Loss::PoseMse { weights } => weights.iter().map(|w| w.sqrt()).collect(),
-        Loss::LRel { .. } => {
-            let mut rows = Vec::new();
-            for t in trajs {
-                for i in 0..t.len() {
-                    rows.extend_from_slice(&t.s[i * ds + lr.start..i * ds + lr.end]);
-                }
-            }
-            let nz = dynlab_dynamics::data::Normalizer::fit(&rows, lr.len(), 1e-9)?;
-            nz.std.iter().map(|s| 1.0 / s).collect()
-        }
-    };
-    let mut ws: Vec<Window> = train_w.to_vec();
-    SplitMix64::new(cfg.seed ^ 0x5851_F42D_4C95_7F2D).shuffle(&mut ws);
-    ws.truncate(cfg.physics_max_windows.max(1));
-    ws.sort_by_key(|w| (w.trajectory, w.start));
-    let specs = p.param_specs();
-    let np = specs.len();
-    let eval = |p: &PhysicsModel, with_j: bool| -> (Vec<f64>, Vec<f64>) {
-        let mut r = Vec::new();
-        let mut jac = Vec::new();
-        let mut tape = SolverTape::default();
-        let mut s = vec![0.0; ds];
-        let mut sn = vec![0.0; ds];
-        let mut sens = vec![0.0; ds * np];
-        let mut phis = vec![0.0; ds * ds];
-        let mut phit = vec![0.0; ds * np];
-        let mut ybar = vec![0.0; ds];
-        let mut sbar0 = vec![0.0; ds];
-        let du = world.action_dim();
-        let mut ubar = vec![0.0; du];
-        let mut pbar = vec![0.0; np];
-        for w in &ws {
-            let t = &trajs[w.trajectory];
-            s.copy_from_slice(&t.s[w.start * ds..(w.start + 1) * ds]);
-            sens.iter_mut().for_each(|x| *x = 0.0);
-            let mut g: f64 = 1.0;
-            for j in 0..k {
-                let a = w.start + j;
-                let u = &t.u[a * du..(a + 1) * du];
-                let rep = if with_j {
-                    ode::integrate_taped(p, solver, 1, &s, u, t_phys, &mut sn, &mut tape)
-                } else {
-                    ode::integrate(p, solver, 1, &s, u, t_phys, &mut sn)
-                };
-                let bad = rep.status != OdeStatus::Success;
-                if with_j {
-                    for d in 0..ds {
-                        ybar.iter_mut().for_each(|x| *x = 0.0);
-                        ybar[d] = 1.0;
-                        pbar.iter_mut().for_each(|x| *x = 0.0);
-                        ode::integrate_vjp(p, &tape, &ybar, &mut sbar0, &mut ubar, &mut pbar);
-                        phis[d * ds..(d + 1) * ds].copy_from_slice(&sbar0);
-                        phit[d * np..(d + 1) * np].copy_from_slice(&pbar);
-                    }
-                    let mut new = phit.clone();
-                    for r_ in 0..ds {
-                        for m in 0..ds {
-                            let a_ = phis[r_ * ds + m];
-                            if a_ != 0.0 {
-                                for c in 0..np {
-                                    new[r_ * np + c] += a_ * sens[m * np + c];
-                                }
-                            }
-                        }
-                    }
-                    sens = new;
-                }
-                let meas = &t.s[(a + 1) * ds..(a + 2) * ds];
-                let sg = g.sqrt();
-                for (q, d) in lr.clone().enumerate() {
-                    let e = sn[d] - meas[d];
-                    let e = if d == world.angle_dim() {
-                        wrap_angle(e)
-                    } else {
-                        e
-                    };
-                    let e = if bad || !e.is_finite() { 1e3 } else { e };
-                    r.push(sg * weights[q] * e);
-                    if with_j {
-                        jac.extend(sens[d * np..(d + 1) * np].iter().map(|x| {
-                            let v = sg * weights[q] * x;
-                            if v.is_finite() { v } else { 0.0 }
-                        }));
-                    }
-                }
-                s.copy_from_slice(&sn);
-                g *= cfg.gamma;
-            }
-        }
-        (r, jac)
-    };
-    let cost = |r: &[f64]| r.iter().map(|x| x * x).sum::<f64>();
-    let mut theta = p.params().to_vec();
-    let (mut r, mut jac) = eval(p, true);
-    let initial_cost = cost(&r);
-    let mut c = initial_cost;
-    let mut lambda = 1e-3;
-    let m = r.len();
-    let mut iterations = 0;
-    for _ in 0..cfg.physics_iterations {
-        iterations += 1;
-        let (jtj, jtr) = normal_equations(&jac, &r, np);
-        let mut improved = false;
-        for _ in 0..10 {
-            let mut a = jtj.clone();
-            for i in 0..np {
-                a[i * np + i] += lambda * jtj[i * np + i].max(1e-12) + 1e-15;
-            }
-            let neg: Vec<f64> = jtr.iter().map(|x| -x).collect();
-            let Some(delta) = solve(&a, &neg, np) else {
-                lambda *= 10.0;
-                continue;
-            };
-            let cand: Vec<f64> = theta
-                .iter()
-                .zip(&delta)
-                .zip(&specs)
-                .map(|((t, d), (_, s))| (t + d).clamp(s.lower, s.upper))
-                .collect();
-            let mut trial = p.clone();
-            if trial.set_params(&cand).is_err() {
-                lambda *= 10.0;
-                continue;
-            }
-            let (rt, _) = eval(&trial, false);
-            let ct = cost(&rt);
-            if ct.is_finite() && ct < c {
-                *p = trial;
-                theta = cand;
-                let rel = (c - ct) / c.max(f64::MIN_POSITIVE);
-                c = ct;
-                lambda = (lambda / 3.0).max(1e-12);
-                improved = rel > 1e-10;
-                break;
-            }
-            lambda *= 4.0;
-        }
-        if !improved {
-            break;
-        }
-        let (r2, j2) = eval(p, true);
-        r = r2;
-        jac = j2;
-    }
-    // standard errors
-    let (jtj, _) = normal_equations(&jac, &r, np);
-    let dof = (m as f64 - np as f64).max(1.0);
-    let sigma2 = cost(&r) / dof;
-    let trace: f64 = (0..np).map(|i| jtj[i * np + i]).sum::<f64>().max(1e-300);
-    let mut a = jtj.clone();
-    for i in 0..np {
-        a[i * np + i] += 1e-12 * trace / np as f64;
-    }
-    let mut std = vec![f64::NAN; np];
-    for i in 0..np {
-        let mut e = vec![0.0; np];
-        e[i] = 1.0;
-        if let Some(col) = solve(&a, &e, np) {
-            std[i] = (sigma2 * col[i]).max(0.0).sqrt();
-        }
-    }
-    p.set_std_errors(Some(std))?;
-    Ok(PhysicsFit {
-        initial_cost,
-        final_cost: c,
-        iterations,
-        residuals: m,
-    })
-}
-
-fn normal_equations(jac: &[f64], r: &[f64], np: usize) -> (Vec<f64>, Vec<f64>) {
-    let mut jtj = vec![0.0; np * np];
-    let mut jtr = vec![0.0; np];
-    for (row, ri) in jac.chunks_exact(np).zip(r) {
-        for a in 0..np {
-            if row[a] == 0.0 {
-                continue;
-            }
-            jtr[a] += row[a] * ri;
-            for b in 0..np {
-                jtj[a * np + b] += row[a] * row[b];
-            }
-        }
-    }
-    (jtj, jtr)
-}
-
-/// Solves `A x = b` (n × n) by Gaussian elimination with partial pivoting.
-fn solve(a: &[f64], b: &[f64], n: usize) -> Option<Vec<f64>> {
-    let mut m = a.to_vec();
-    let mut x = b.to_vec();
-    for col in 0..n {
-        let piv =
-            (col..n).max_by(|&i, &j| m[i * n + col].abs().total_cmp(&m[j * n + col].abs()))?;
-        if m[piv * n + col].abs() < 1e-300 || !m[piv * n + col].is_finite() {
-            return None;
-        }
-        if piv != col {
-            for c in 0..n {
-                m.swap(piv * n + c, col * n + c);
-            }
-            x.swap(piv, col);
-        }
-        for r in col + 1..n {
-            let f = m[r * n + col] / m[col * n + col];
-            if f != 0.0 {
-                for c in col..n {
-                    m[r * n + c] -= f * m[col * n + c];
-                }
-                x[r] -= f * x[col];
-            }
-        }
-    }
-    for col in (0..n).rev() {
-        let mut s = x[col];
-        for c in col + 1..n {
-            s -= m[col * n + c] * x[c];
-        }
-        x[col] = s / m[col * n + col];
-    }
-    x.iter().all(|v| v.is_finite()).then_some(x)
 }

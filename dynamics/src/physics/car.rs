@@ -19,6 +19,19 @@
 //! `vx = 0` and opposing lateral sliding when reversing. Rolling resistance `C_r0` acts through
 //! `tanh(vx/v_reg)` so it never pushes a standing car backwards, and drag is `C_r2 vx|vx|`.
 //! `v_reg` defaults to 0.05 m/s (the ORCA car races at 1–3 m/s).
+//!
+//! **Friction ellipse on the driven rear axle** (as the simulator, `dynlab-sim`'s
+//! `friction_ellipse`): the rear tire's combined force `(F_rx, F_ry)` is scaled back onto the
+//! circle of radius `D_r` when it exceeds it, with a smooth maximum
+//! `s = D_r / smax(‖F_r‖, D_r)`, `smax(a, b) = ½(a + b + √((a − b)² + ε²))`, `ε = 10⁻³ D_r`, so
+//! that full throttle eats lateral grip (power oversteer) and the derivatives stay continuous.
+//! Rolling resistance and drag act outside the ellipse, as in the simulator.
+//!
+//! **Measured and fitted parameters.** Mass, yaw inertia, axle distances, the quadratic drag
+//! `C_r2`, the tire shape factors and `v_reg` are measured or published values and stay fixed in a
+//! fit (see [`CAR_FITTED_PARAMS`]); the mass is not identifiable from poses anyway (every force
+//! term scales with it). Keeping `C_r2` fixed is what lets the `aero_drag` effect be identified:
+//! a free `C_r2` would absorb it.
 
 use super::{Effect, ParamSpec, ps};
 use crate::real::Real;
@@ -141,6 +154,11 @@ pub static CAR_NOMINAL_PARAMS: [ParamSpec; 15] = [
     ),
 ];
 
+/// Nominal car parameters a fit frees by default: tire stiffness and peak forces and the
+/// drivetrain. The rest are measured (mass, inertia, geometry) or published (shape factors,
+/// quadratic drag) and held at their values.
+pub static CAR_FITTED_PARAMS: [&str; 7] = ["Bf", "Df", "Br", "Dr", "Cm1", "Cm2", "Cr0"];
+
 /// Where an enabled effect's parameters and extra states live.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Slot {
@@ -210,8 +228,18 @@ pub(crate) fn rhs<R: Real>(
     let alpha_f = -(v_lat_f / (v_long_f * v_long_f + reg).sqrt()).atan();
     let alpha_r = -((vy - lr * om) / (vx * vx + reg).sqrt()).atan();
     let ffy = grip * df * (cf * (bf * alpha_f).atan()).sin();
-    let fry = grip * dr * (cr * (br * alpha_r).atan()).sin();
-    let frx = (cm1 - cm2 * vx) * d - cr0 * (vx / vreg).tanh() - cr2 * vx.mul_abs();
+    let mut fry = grip * dr * (cr * (br * alpha_r).atan()).sin();
+    // friction ellipse on the driven rear axle (smooth saturation at the peak force)
+    let mut drive = (cm1 - cm2 * vx) * d;
+    let dr_eff = grip * dr;
+    let total = (drive * drive + fry * fry + 1e-12).sqrt();
+    let eps = dr_eff * 1e-3 + 1e-9;
+    let diff = total - dr_eff;
+    let smax = (total + dr_eff + (diff * diff + eps * eps).sqrt()) * 0.5;
+    let scale = dr_eff / smax;
+    drive = drive * scale;
+    fry = fry * scale;
+    let frx = drive - cr0 * (vx / vreg).tanh() - cr2 * vx.mul_abs();
     let (sp, cp) = (psi.sin(), psi.cos());
     out[0] = vx * cp - vy * sp;
     out[1] = vx * sp + vy * cp;
@@ -228,7 +256,12 @@ pub(crate) fn rhs<R: Real>(
         }
         let q = &p[sl.p_off..];
         match sl.effect {
-            Effect::AeroDrag => out[3] = out[3] - q[0] * vx.mul_abs(),
+            Effect::AeroDrag => {
+                // F = −c·|v|·v on the body velocity vector (as the simulator), over the mass
+                let speed = (vx * vx + vy * vy + 1e-12).sqrt();
+                out[3] = out[3] - q[0] * speed * vx / m;
+                out[4] = out[4] - q[0] * speed * vy / m;
+            }
             Effect::MotorLag => out[sl.s_off] = (u[1] - s[sl.s_off]) / q[0],
             _ => {}
         }

@@ -25,10 +25,10 @@ mod fit;
 mod model;
 mod push;
 
-pub use car::{CAR_NOMINAL_PARAMS, MOTOR_LAG_STATE};
+pub use car::{CAR_FITTED_PARAMS, CAR_NOMINAL_PARAMS, MOTOR_LAG_STATE};
 pub use fit::{ResidualJacobian, Transition, residuals, residuals_and_jacobian};
 pub use model::{EffectTerm, ModelError, PhysicsModel};
-pub use push::PUSH_NOMINAL_PARAMS;
+pub use push::{PUSH_FITTED_PARAMS, PUSH_NOMINAL_PARAMS};
 
 /// Which robot a model or effect belongs to.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -83,7 +83,9 @@ const fn ps(
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Effect {
-    /// Car: aerodynamic drag `v̇x −= c·vx|vx|` (mass-normalised).
+    /// Car: aerodynamic drag `F = −c·|v|·v` on the body velocity vector `v = (vx, vy)`, so
+    /// `v̇x −= c|v|vx/m`, `v̇y −= c|v|vy/m` (the simulator's hidden drag). The nominal
+    /// `C_r2·vx|vx|` stays fixed at its published value, so this term is identifiable.
     AeroDrag,
     /// Car: first-order lag of the motor: the drivetrain sees the filtered throttle `d_f`,
     /// `ḋ_f = (d − d_f)/τ`, an extra state (see [`MOTOR_LAG_STATE`]).
@@ -109,11 +111,11 @@ pub enum Effect {
 static AERO_DRAG: [ParamSpec; 1] = [ps(
     "c",
     "c",
-    "1/m",
+    "N·s²/m²",
     0.0,
-    5.0,
+    1.0,
     0.0,
-    "drag coefficient over mass, ½ρC_dA/m (a 1:43 car: ≈ 0.01–0.1)",
+    "drag coefficient ½ρC_dA on top of the nominal C_r2 (the simulator's default: 0.01)",
 )];
 static MOTOR_LAG: [ParamSpec; 1] = [ps(
     "tau",

@@ -280,6 +280,25 @@ impl PhysicsModel {
             .map(|s| s.p_off..s.p_off + e.params().len())
     }
 
+    /// Which parameters a fit frees by default, in vector order: the identifiable nominal
+    /// parameters ([`CAR_FITTED_PARAMS`](super::CAR_FITTED_PARAMS),
+    /// [`PUSH_FITTED_PARAMS`](super::PUSH_FITTED_PARAMS)) and every effect parameter except the
+    /// width `w` of a patch's smooth edge (a modelling choice, not a physical quantity). Measured
+    /// values (mass, inertia, geometry, published drag) stay fixed.
+    pub fn default_free(&self) -> Vec<bool> {
+        let fitted: &[&str] = match self.robot {
+            Robot::Car => &super::CAR_FITTED_PARAMS,
+            Robot::Pushing => &super::PUSH_FITTED_PARAMS,
+        };
+        self.param_specs()
+            .iter()
+            .map(|(e, p)| match e {
+                None => fitted.contains(&p.name),
+                Some(_) => p.name != "w",
+            })
+            .collect()
+    }
+
     /// Sets all parameters, checking length, finiteness and bounds.
     pub fn set_params(&mut self, p: &[f64]) -> Result<(), ModelError> {
         if p.len() != self.params.len() {
@@ -531,7 +550,7 @@ impl PhysicsModel {
                 let _ = writeln!(o, "  ẏ   = vx·sin ψ + vy·cos ψ");
                 let _ = writeln!(o, "  ψ̇   = ω");
                 let drag = match has(Effect::AeroDrag) {
-                    Some(_) => format!(" − {}·vx|vx|", num(pv(Effect::AeroDrag, 0))),
+                    Some(_) => format!(" − {}·|v|·vx/m", num(pv(Effect::AeroDrag, 0))),
                     None => String::new(),
                 };
                 let _ = writeln!(
@@ -539,7 +558,11 @@ impl PhysicsModel {
                     "  v̇x  = (F_rx − F_fy·sin {delta})/m + vy·ω{drag}{}",
                     tag(Effect::AeroDrag)
                 );
-                let _ = writeln!(o, "  v̇y  = (F_ry + F_fy·cos {delta})/m − vx·ω");
+                let drag_y = match has(Effect::AeroDrag) {
+                    Some(_) => format!(" − {}·|v|·vy/m", num(pv(Effect::AeroDrag, 0))),
+                    None => String::new(),
+                };
+                let _ = writeln!(o, "  v̇y  = (F_ry + F_fy·cos {delta})/m − vx·ω{drag_y}");
                 let _ = writeln!(o, "  ω̇   = (F_fy·l_f·cos {delta} − F_ry·l_r)/I_z");
                 if has(Effect::MotorLag).is_some() {
                     let _ = writeln!(

@@ -68,6 +68,11 @@ pub static PUSH_NOMINAL_PARAMS: [ParamSpec; 4] = [
     ),
 ];
 
+/// Nominal pushing parameters a fit frees by default: the limit-surface ratio `c` and the usable
+/// face fraction `κ`. The block side `a` is measured and the push length `L` is the commanded
+/// scale; both stay fixed.
+pub static PUSH_FITTED_PARAMS: [&str; 2] = ["c", "kappa"];
+
 /// The pushing vector field with the effects in `slots` whose `active` flag is set.
 pub(crate) fn rhs<R: Real>(
     p: &[R],

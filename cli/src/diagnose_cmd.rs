@@ -1,0 +1,79 @@
+//! `dynlab diagnose`: which physical effect of the library explains a model's residual on a bag
+//! (a thin adapter over `dynlab_diagnose::diagnosis`).
+
+use std::path::PathBuf;
+
+use anyhow::Context;
+use clap::Args;
+use dynlab_diagnose::diagnosis::{DiagnoseConfig, diagnose, diagnosis_page};
+use dynlab_learn::dynamics::data::SavGol;
+use dynlab_learn::dynamics::physics::PhysicsModel;
+use dynlab_learn::{Topics, load_bags, load_model};
+
+/// `dynlab diagnose …`
+#[derive(Debug, Args)]
+pub struct DiagnoseArgs {
+    /// Model directory (from `dynlab train`; any kind).
+    #[arg(long)]
+    model: PathBuf,
+    /// Bag(s) with the measurements (of the model's robot).
+    #[arg(long = "bag", required = true, num_args = 1.., value_name = "BAG")]
+    bags: Vec<PathBuf>,
+    /// Output directory for diagnosis.json and diagnosis.html.
+    #[arg(long, default_value = "out/diagnosis")]
+    out: PathBuf,
+    /// Open-loop steps k of the scored error (default: car 50, pushing 3).
+    #[arg(long)]
+    steps: Option<usize>,
+    /// Seed of the split, subsamples and bootstrap.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Candidate effects, comma-separated (default: the world's whole library).
+    #[arg(long, value_delimiter = ',')]
+    effects: Option<Vec<String>>,
+    /// Smallest held-out error reduction that counts (fraction).
+    #[arg(long, default_value_t = 0.05)]
+    min_reduction: f64,
+    /// Pose topic (default from the model's world).
+    #[arg(long)]
+    pose_topic: Option<String>,
+    /// Command topic (default from the model's world).
+    #[arg(long, alias = "action-topic")]
+    cmd_topic: Option<String>,
+}
+
+pub fn run(args: DiagnoseArgs) -> anyhow::Result<()> {
+    let (model, _meta) = load_model(&args.model, None, None)
+        .with_context(|| format!("loading the model {}", args.model.display()))?;
+    let topics = Topics {
+        pose: args.pose_topic.clone(),
+        cmd: args.cmd_topic.clone(),
+    };
+    let data = load_bags(&args.bags, Some(model.world()), &topics, &SavGol::default())?;
+    let effects = match &args.effects {
+        Some(names) => {
+            let n: Vec<&str> = names.iter().map(|s| s.as_str()).collect();
+            Some(PhysicsModel::parse_effects(&n)?)
+        }
+        None => None,
+    };
+    let cfg = DiagnoseConfig {
+        steps: args.steps,
+        seed: args.seed,
+        effects,
+        min_reduction: args.min_reduction,
+        ..DiagnoseConfig::default()
+    };
+    let d = diagnose(&model, &data, &cfg)?;
+    print!("{}", d.table());
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("creating {}", args.out.display()))?;
+    let json = args.out.join("diagnosis.json");
+    std::fs::write(&json, serde_json::to_string_pretty(&d.to_json())? + "\n")
+        .with_context(|| format!("writing {}", json.display()))?;
+    let html = args.out.join("diagnosis.html");
+    std::fs::write(&html, diagnosis_page(&d))
+        .with_context(|| format!("writing {}", html.display()))?;
+    println!("report: {} and {}", json.display(), html.display());
+    Ok(())
+}

@@ -1,0 +1,80 @@
+//! `dynlab diagnose` end to end on a bundled bag with a hidden effect: terminal table,
+//! `diagnosis.json` with the contract keys, `diagnosis.html`; and a clear error for a bag of the
+//! wrong robot.
+
+use std::path::Path;
+use std::process::Command;
+
+use dynlab_learn::dynamics::physics::PhysicsModel;
+use dynlab_learn::train::default_physics_solver;
+use dynlab_learn::{Model, ModelKind, World, save_model};
+
+fn repo(p: &str) -> std::path::PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join(p)
+}
+
+fn nominal_car_model(dir: &Path) {
+    let m = Model::new(
+        ModelKind::Physics,
+        World::Car,
+        0.01,
+        None,
+        None,
+        Some(PhysicsModel::car(&[]).unwrap()),
+        default_physics_solver(World::Car),
+    )
+    .unwrap();
+    save_model(&m, dir, None, serde_json::Map::new()).unwrap();
+}
+
+#[test]
+fn diagnose_names_the_steering_offset_of_the_bundled_bag_and_writes_json_and_html() {
+    let tmp = tempfile::tempdir().unwrap();
+    let model = tmp.path().join("model");
+    nominal_car_model(&model);
+    let out = tmp.path().join("diag");
+    let o = Command::new(env!("CARGO_BIN_EXE_dynlab"))
+        .args(["diagnose", "--model"])
+        .arg(&model)
+        .arg("--bag")
+        .arg(repo("bags/car_steering_offset"))
+        .args(["--effects", "steering_offset,aero_drag", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(stdout.contains("verdict: steering_offset"), "{stdout}");
+    let j: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("diagnosis.json")).unwrap())
+            .unwrap();
+    assert_eq!(j["verdict"], "steering_offset", "{j}");
+    let c = &j["candidates"][0];
+    assert_eq!(c["effect"], "steering_offset");
+    assert_eq!(c["significant"], true);
+    let d0 = c["params"]["delta0"].as_f64().unwrap();
+    assert!((d0 - 0.03).abs() < 0.005, "δ₀ = {d0}");
+    assert!(c["param_std"]["delta0"].as_f64().unwrap() > 0.0);
+    assert_eq!(j["candidates"][1]["significant"], false);
+    let html = std::fs::read_to_string(out.join("diagnosis.html")).unwrap();
+    assert!(html.contains("<section") && html.contains("steering_offset"));
+}
+
+#[test]
+fn diagnose_rejects_a_bag_of_the_other_robot_with_a_clear_message() {
+    let tmp = tempfile::tempdir().unwrap();
+    let model = tmp.path().join("model");
+    nominal_car_model(&model);
+    let o = Command::new(env!("CARGO_BIN_EXE_dynlab"))
+        .args(["diagnose", "--model"])
+        .arg(&model)
+        .arg("--bag")
+        .arg(repo("bags/push_nominal"))
+        .arg("--out")
+        .arg(tmp.path().join("d"))
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("/car/pose"), "{err}");
+}

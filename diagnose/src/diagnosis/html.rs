@@ -1,0 +1,113 @@
+//! The diagnosis as an HTML fragment (for `diagnosis.html` and for embedding in a report).
+
+use std::fmt::Write as _;
+
+use super::{Diagnosis, g4};
+
+fn esc(s: &str) -> String {
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+        .replace('"', "&quot;")
+}
+
+/// The diagnosis as a self-contained HTML fragment (a `<section>` with inline styles): the
+/// verdict, a table of candidates with a bar per error reduction, and the residual correlations.
+/// Wrap it in a page with [`diagnosis_page`] or embed it in another report.
+pub fn diagnosis_html(d: &Diagnosis) -> String {
+    let mut o = String::new();
+    let _ = writeln!(
+        o,
+        "<section class=\"diagnosis\" style=\"font-family:sans-serif;max-width:60em\">"
+    );
+    let _ = writeln!(o, "<h2>Diagnosis: which physical effect is missing?</h2>");
+    let colour = if d.verdict.is_some() {
+        "#1a7f37"
+    } else {
+        "#9a6700"
+    };
+    let _ = writeln!(
+        o,
+        "<p style=\"font-size:1.2em;color:{colour}\"><b>{}</b></p>",
+        esc(&d.summary)
+    );
+    let _ = writeln!(
+        o,
+        "<p>{} {} model{}; {}-step open-loop error on {} held-out segments ({} windows), candidates fitted on {} other segments. Baseline error {} (normalised: 1 = the error of a model that predicts no motion).</p>",
+        d.world,
+        esc(&d.model_kind),
+        if d.model_effects.is_empty() {
+            String::new()
+        } else {
+            format!(" with {}", esc(&d.model_effects.join(", ")))
+        },
+        d.steps,
+        d.segments[1],
+        d.windows[1],
+        d.segments[0],
+        g4(d.baseline_error)
+    );
+    let _ = writeln!(
+        o,
+        "<table style=\"border-collapse:collapse\"><tr><th align=left>effect</th><th align=left>held-out error removed</th><th>bootstrap lower bound</th><th>significant</th><th align=left>fitted parameters (± std)</th></tr>"
+    );
+    for c in &d.candidates {
+        let w = (c.error_reduction * 200.0).round();
+        let params: Vec<String> = c
+            .params
+            .iter()
+            .map(|(k, v)| {
+                let sd = c.param_std.get(k).copied().unwrap_or(0.0);
+                let unit = c.param_units.get(k).cloned().unwrap_or_default();
+                if sd > 0.0 {
+                    format!("{k} = {} ± {} {}", g4(*v), g4(sd), esc(&unit))
+                } else {
+                    format!("{k} = {} {}", g4(*v), esc(&unit))
+                }
+            })
+            .collect();
+        let bold = if d.verdict.as_deref() == Some(c.effect.as_str()) {
+            "font-weight:bold;"
+        } else {
+            ""
+        };
+        let _ = writeln!(
+            o,
+            "<tr style=\"{bold}border-top:1px solid #ddd\"><td title=\"{}\">{}</td><td><span style=\"display:inline-block;height:0.8em;width:{w}px;background:{}\"></span> {:.1} %</td><td align=right>{:.1} %</td><td align=center>{}</td><td>{}</td></tr>",
+            esc(&c.description),
+            esc(&c.effect),
+            if c.significant { "#1a7f37" } else { "#aaa" },
+            100.0 * c.error_reduction,
+            100.0 * c.ci_lower.max(-9.99),
+            if c.significant { "yes" } else { "no" },
+            params.join(", ")
+        );
+    }
+    let _ = writeln!(o, "</table>");
+    if !d.correlations.is_empty() {
+        let _ = writeln!(
+            o,
+            "<h3>What the one-step residual correlates with</h3><table style=\"border-collapse:collapse\"><tr><th align=left>residual of</th><th align=left>feature</th><th>r</th></tr>"
+        );
+        for c in &d.correlations {
+            let _ = writeln!(
+                o,
+                "<tr><td>{}</td><td>{}</td><td align=right>{:+.2}</td></tr>",
+                esc(&c.dimension),
+                esc(&c.feature),
+                c.r
+            );
+        }
+        let _ = writeln!(o, "</table>");
+    }
+    let _ = writeln!(o, "</section>");
+    o
+}
+
+/// A complete offline HTML page around [`diagnosis_html`].
+pub fn diagnosis_page(d: &Diagnosis) -> String {
+    format!(
+        "<!doctype html>\n<html><head><meta charset=\"utf-8\"><title>dynlab diagnosis</title></head><body>\n{}</body></html>\n",
+        diagnosis_html(d)
+    )
+}

@@ -1,0 +1,145 @@
+//! Data sets straight from the simulator, in process (no bag): for tests, the recovery-rate
+//! evaluation and benchmarks. The same pipeline as `dynlab train` reads a bag with (poses and
+//! commands → [`Dataset::from_samples`]).
+
+use dynlab_learn::dynamics::data::{CommandSample, PoseSample, SavGol};
+use dynlab_learn::dynamics::physics::Effect;
+use dynlab_learn::{Dataset, World};
+use dynlab_sim::episode::{Record, concatenate, generate_car_episodes, generate_push_episodes};
+use dynlab_sim::{CarExplorer, CarScenario, PushExplorer, PushScenario, Region, RegionShape};
+
+use super::DiagnosisError;
+
+/// Gap between episodes on the time line \[ns\] (splits them into trajectories).
+const GAP_NS: u64 = 1_000_000_000;
+
+fn to_dataset(world: World, samples: &[dynlab_sim::Sample]) -> Result<Dataset, DiagnosisError> {
+    let mut poses = Vec::new();
+    let mut cmds = Vec::new();
+    for s in samples {
+        let t_ns = s.t_ns as i64;
+        match s.record {
+            Record::CarPose(p) | Record::BlockPose(p) => poses.push(PoseSample {
+                t_ns,
+                x: p.x,
+                y: p.y,
+                yaw: p.theta,
+            }),
+            Record::CarCmd(u) => cmds.push(CommandSample {
+                t_ns,
+                u: vec![u.steering, u.throttle],
+            }),
+            Record::PushAction(a) => cmds.push(CommandSample {
+                t_ns,
+                u: vec![a.location, a.angle, a.length],
+            }),
+            _ => {}
+        }
+    }
+    Ok(Dataset::from_samples(
+        world,
+        &poses,
+        &cmds,
+        &SavGol::default(),
+    )?)
+}
+
+/// `episodes` car episodes of `duration` seconds from `scenario`, seeded.
+pub fn car_dataset(
+    scenario: &CarScenario,
+    episodes: u64,
+    duration: f64,
+    seed: u64,
+    threads: usize,
+) -> Result<Dataset, DiagnosisError> {
+    let explorer = CarExplorer {
+        duration,
+        ..CarExplorer::default()
+    };
+    let eps = generate_car_episodes(scenario, &explorer, seed, episodes, threads.max(1))
+        .map_err(|e| DiagnosisError::Simulator(e.to_string()))?;
+    to_dataset(World::Car, &concatenate(&eps, 0, GAP_NS))
+}
+
+/// `episodes` pushing episodes of `pushes` pushes each from `scenario`, seeded.
+pub fn push_dataset(
+    scenario: &PushScenario,
+    episodes: u64,
+    pushes: u32,
+    seed: u64,
+    threads: usize,
+) -> Result<Dataset, DiagnosisError> {
+    let explorer = PushExplorer {
+        pushes_per_episode: pushes,
+        ..PushExplorer::default()
+    };
+    let eps = generate_push_episodes(scenario, &explorer, seed, episodes, threads.max(1))
+        .map_err(|e| DiagnosisError::Simulator(e.to_string()))?;
+    to_dataset(World::Push, &concatenate(&eps, 0, GAP_NS))
+}
+
+/// The car world with only `effect` on, at the strength the tests and the recovery evaluation
+/// use (the simulator's documented defaults unless noted), and mocap-like noise scaled by
+/// `noise` (1: 0.5 mm, 0.002 rad). `None`: the nominal car.
+pub fn car_scenario(effect: Option<Effect>, noise: f64) -> CarScenario {
+    use dynlab_sim::car::{AeroDrag, GripPatch, MotorLag, SteeringOffset};
+    let mut s = CarScenario::default();
+    s.noise.position_std = 0.0005 * noise;
+    s.noise.yaw_std = 0.002 * noise;
+    match effect {
+        Some(Effect::AeroDrag) => s.effects.aero_drag = Some(AeroDrag::default()),
+        Some(Effect::MotorLag) => {
+            s.effects.motor_lag = Some(MotorLag {
+                enabled: true,
+                tau: 0.2,
+            })
+        }
+        Some(Effect::SteeringOffset) => s.effects.steering_offset = Some(SteeringOffset::default()),
+        Some(Effect::GripPatch) => {
+            s.effects.grip_patch = Some(GripPatch {
+                enabled: true,
+                scale: 0.5,
+                region: Region {
+                    shape: RegionShape::Disc,
+                    centre: [0.5, 0.0],
+                    radius: 0.6,
+                    ..Region::default()
+                },
+            })
+        }
+        _ => {}
+    }
+    s
+}
+
+/// The pushing world with only `effect` on (see [`car_scenario`]).
+pub fn push_scenario(effect: Option<Effect>, noise: f64) -> PushScenario {
+    use dynlab_sim::push::{ComOffset, FrictionPatch, PusherFriction, TableTilt};
+    let mut s = PushScenario::default();
+    s.noise.position_std = 0.0005 * noise;
+    s.noise.yaw_std = 0.002 * noise;
+    match effect {
+        Some(Effect::ComOffset) => {
+            s.effects.com_offset = Some(ComOffset {
+                enabled: true,
+                offset: [0.02, 0.01],
+            })
+        }
+        Some(Effect::TableTilt) => s.effects.table_tilt = Some(TableTilt::default()),
+        Some(Effect::FrictionPatch) => {
+            s.effects.friction_patch = Some(FrictionPatch {
+                enabled: true,
+                mu: 0.5,
+                region: Region {
+                    shape: RegionShape::Disc,
+                    centre: [0.5, 0.1],
+                    radius: 0.1,
+                    ..Region::default()
+                },
+            })
+        }
+        Some(Effect::PusherFriction) => s.effects.pusher_friction = Some(PusherFriction::default()),
+        _ => {}
+    }
+    s
+}

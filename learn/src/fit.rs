@@ -1,0 +1,439 @@
+//! Bounded nonlinear least squares for physical parameters, and the physics fit of [`train`]
+//! (crate::train::train).
+//!
+//! [`bounded_least_squares`] is Levenberg–Marquardt whose step is the box-constrained quadratic
+//! program `min ½δᵀ(JᵀJ + λ diag(JᵀJ))δ + (Jᵀr)ᵀδ  s.t.  lower ≤ θ + δ ≤ upper`, solved by
+//! `clarabel` (an interior-point QP solver), so bounds are honoured exactly instead of by clamping.
+//! For a residual that is linear in the parameters the first step with `λ → 0` is the constrained
+//! linear least-squares solution. Standard errors come from `σ²(JᵀJ)⁻¹` over the free parameters,
+//! `σ² = ‖r‖²/(m − n)`.
+
+use clarabel::algebra::CscMatrix;
+use clarabel::solver::{
+    DefaultSettingsBuilder, DefaultSolver, IPSolver, NonnegativeConeT, SolverStatus,
+};
+use dynlab_dynamics::conventions::wrap_angle;
+use dynlab_dynamics::data::{SplitMix64, StateTrajectory, Window};
+use dynlab_dynamics::ode::{self, OdeStatus, Solver, SolverTape};
+use dynlab_dynamics::physics::{Effect, PhysicsModel};
+
+use crate::train::{Loss, PhysicsFit, TrainConfig};
+use crate::{LearnError, World};
+
+/// Residuals and Jacobian of a least-squares problem at `θ`: `eval(θ, with_jacobian)` returns
+/// `(r, J)` with `J` empty when not asked for.
+pub type ResidualFn<'a> = dyn FnMut(&[f64], bool) -> (Vec<f64>, Vec<f64>) + 'a;
+
+/// The result of [`bounded_least_squares`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct LsqResult {
+    /// Fitted parameters (all of them; fixed ones unchanged).
+    pub theta: Vec<f64>,
+    /// Standard errors (0 for fixed parameters, NaN where `JᵀJ` is singular).
+    pub std: Vec<f64>,
+    /// `‖r‖²` at the start.
+    pub initial_cost: f64,
+    /// `‖r‖²` at the end.
+    pub cost: f64,
+    /// Iterations run.
+    pub iterations: usize,
+    /// Number of residuals.
+    pub residuals: usize,
+}
+
+/// Minimises `‖r(θ)‖²` over the parameters with `free[i]` set, within `[lower, upper]`.
+/// `eval(θ, with_jacobian)` returns the residuals and, when asked, the Jacobian (`m × n`
+/// row-major over all `n` parameters; fixed columns are ignored). A trial whose residuals are not
+/// finite is rejected like a worse one.
+pub fn bounded_least_squares(
+    theta0: &[f64],
+    lower: &[f64],
+    upper: &[f64],
+    free: &[bool],
+    iterations: usize,
+    eval: &mut ResidualFn<'_>,
+) -> LsqResult {
+    let n = theta0.len();
+    let idx: Vec<usize> = (0..n).filter(|&i| free[i]).collect();
+    let nf = idx.len();
+    let cost = |r: &[f64]| r.iter().map(|x| x * x).sum::<f64>();
+    let mut theta: Vec<f64> = theta0
+        .iter()
+        .zip(lower.iter().zip(upper))
+        .map(|(t, (l, u))| t.clamp(*l, *u))
+        .collect();
+    let (mut r, mut jac) = eval(&theta, nf > 0);
+    let initial_cost = cost(&r);
+    let mut c = initial_cost;
+    let mut lambda = 1e-3;
+    let mut its = 0;
+    while nf > 0 && its < iterations {
+        its += 1;
+        let (jtj, jtr) = reduced_normal_equations(&jac, &r, n, &idx);
+        let mut improved = false;
+        for _ in 0..12 {
+            let mut a = jtj.clone();
+            for i in 0..nf {
+                a[i * nf + i] += lambda * jtj[i * nf + i].max(1e-12) + 1e-15;
+            }
+            let lo: Vec<f64> = idx.iter().map(|&i| lower[i] - theta[i]).collect();
+            let hi: Vec<f64> = idx.iter().map(|&i| upper[i] - theta[i]).collect();
+            let Some(delta) = box_qp(&a, &jtr, &lo, &hi) else {
+                lambda *= 10.0;
+                continue;
+            };
+            let mut cand = theta.clone();
+            for (k, &i) in idx.iter().enumerate() {
+                cand[i] = (theta[i] + delta[k]).clamp(lower[i], upper[i]);
+            }
+            let (rt, _) = eval(&cand, false);
+            let ct = cost(&rt);
+            if ct.is_finite() && ct < c {
+                let rel = (c - ct) / c.max(f64::MIN_POSITIVE);
+                theta = cand;
+                c = ct;
+                lambda = (lambda / 3.0).max(1e-12);
+                improved = rel > 1e-10;
+                break;
+            }
+            lambda *= 4.0;
+        }
+        if !improved {
+            break;
+        }
+        let (r2, j2) = eval(&theta, true);
+        r = r2;
+        jac = j2;
+    }
+    let m = r.len();
+    let mut std = vec![0.0; n];
+    if nf > 0 && jac.len() == m * n {
+        let (jtj, _) = reduced_normal_equations(&jac, &r, n, &idx);
+        let dof = (m as f64 - nf as f64).max(1.0);
+        let sigma2 = cost(&r) / dof;
+        let trace: f64 = (0..nf).map(|i| jtj[i * nf + i]).sum::<f64>().max(1e-300);
+        let mut a = jtj.clone();
+        for i in 0..nf {
+            a[i * nf + i] += 1e-12 * trace / nf as f64;
+        }
+        for (k, &i) in idx.iter().enumerate() {
+            let mut e = vec![0.0; nf];
+            e[k] = 1.0;
+            std[i] = match solve(&a, &e, nf) {
+                Some(col) => (sigma2 * col[k]).max(0.0).sqrt(),
+                None => f64::NAN,
+            };
+        }
+    }
+    LsqResult {
+        theta,
+        std,
+        initial_cost,
+        cost: c,
+        iterations: its,
+        residuals: m,
+    }
+}
+
+/// `JᵀJ` and `Jᵀr` over the columns `idx`.
+fn reduced_normal_equations(
+    jac: &[f64],
+    r: &[f64],
+    n: usize,
+    idx: &[usize],
+) -> (Vec<f64>, Vec<f64>) {
+    let nf = idx.len();
+    let mut jtj = vec![0.0; nf * nf];
+    let mut jtr = vec![0.0; nf];
+    for (row, ri) in jac.chunks_exact(n).zip(r) {
+        for (a, &ia) in idx.iter().enumerate() {
+            let va = row[ia];
+            if va == 0.0 {
+                continue;
+            }
+            jtr[a] += va * ri;
+            for (b, &ib) in idx.iter().enumerate() {
+                jtj[a * nf + b] += va * row[ib];
+            }
+        }
+    }
+    (jtj, jtr)
+}
+
+/// `min ½δᵀAδ + gᵀδ  s.t.  lo ≤ δ ≤ hi` by clarabel; falls back to the clamped unconstrained
+/// solution when the solver does not converge.
+#[allow(non_snake_case)] // P, A, q as in Clarabel's paper
+fn box_qp(a: &[f64], g: &[f64], lo: &[f64], hi: &[f64]) -> Option<Vec<f64>> {
+    let n = g.len();
+    let neg: Vec<f64> = g.iter().map(|x| -x).collect();
+    let raw = solve(a, &neg, n);
+    let clamp = |d: &[f64]| -> Vec<f64> {
+        d.iter()
+            .zip(lo.iter().zip(hi))
+            .map(|(x, (l, h))| x.clamp(*l, *h))
+            .collect()
+    };
+    if let Some(d) = &raw
+        && d.iter()
+            .zip(lo.iter().zip(hi))
+            .all(|(x, (l, h))| x >= l && x <= h)
+    {
+        return raw; // inside the box: the QP's solution is the Newton step
+    }
+    // P upper triangular
+    let mut colptr = vec![0usize];
+    let mut rowval = Vec::new();
+    let mut nzval = Vec::new();
+    for c in 0..n {
+        for r in 0..=c {
+            rowval.push(r);
+            nzval.push(a[r * n + c]);
+        }
+        colptr.push(rowval.len());
+    }
+    let P = CscMatrix::new(n, n, colptr, rowval, nzval);
+    // [I; −I] δ ≤ [hi; −lo]
+    let mut colptr = vec![0usize];
+    let mut rowval = Vec::new();
+    let mut nzval = Vec::new();
+    for c in 0..n {
+        rowval.extend([c, n + c]);
+        nzval.extend([1.0, -1.0]);
+        colptr.push(rowval.len());
+    }
+    let A = CscMatrix::new(2 * n, n, colptr, rowval, nzval);
+    let b: Vec<f64> = hi.iter().copied().chain(lo.iter().map(|l| -l)).collect();
+    let cones = [NonnegativeConeT(2 * n)];
+    let settings = DefaultSettingsBuilder::default()
+        .verbose(false)
+        .build()
+        .ok()?;
+    let mut solver = DefaultSolver::new(&P, g, &A, &b, &cones, settings).ok()?;
+    solver.solve();
+    match solver.solution.status {
+        SolverStatus::Solved | SolverStatus::AlmostSolved => Some(clamp(&solver.solution.x)),
+        _ => raw.map(|d| clamp(&d)),
+    }
+}
+
+/// Solves `A x = b` (n × n) by Gaussian elimination with partial pivoting.
+pub(crate) fn solve(a: &[f64], b: &[f64], n: usize) -> Option<Vec<f64>> {
+    let mut m = a.to_vec();
+    let mut x = b.to_vec();
+    for col in 0..n {
+        let piv =
+            (col..n).max_by(|&i, &j| m[i * n + col].abs().total_cmp(&m[j * n + col].abs()))?;
+        if m[piv * n + col].abs() < 1e-300 || !m[piv * n + col].is_finite() {
+            return None;
+        }
+        if piv != col {
+            for c in 0..n {
+                m.swap(piv * n + c, col * n + c);
+            }
+            x.swap(piv, col);
+        }
+        for r in col + 1..n {
+            let f = m[r * n + col] / m[col * n + col];
+            if f != 0.0 {
+                for c in col..n {
+                    m[r * n + c] -= f * m[col * n + c];
+                }
+                x[r] -= f * x[col];
+            }
+        }
+    }
+    for col in (0..n).rev() {
+        let mut s = x[col];
+        for c in col + 1..n {
+            s -= m[col * n + c] * x[c];
+        }
+        x[col] = s / m[col * n + col];
+    }
+    x.iter().all(|v| v.is_finite()).then_some(x)
+}
+
+/// The model state at state index `a` of trajectory `t`: the measured state with the effects'
+/// extra states reconstructed from the command history (`motor_lag`: the filtered throttle
+/// from [`PhysicsModel::motor_lag_filter`] started settled at the first command).
+pub fn initial_state(p: &PhysicsModel, t: &StateTrajectory, a: usize) -> Vec<f64> {
+    let ds = t.dim_s;
+    let mut s = t.s[a * ds..(a + 1) * ds].to_vec();
+    for e in p.effects() {
+        if e == Effect::MotorLag {
+            let tau = p
+                .effect_param_range(e)
+                .map(|r| p.params()[r.start])
+                .unwrap_or(0.05);
+            let du = t.dim_u;
+            let thr: Vec<f64> = (0..=a).map(|i| t.u[i * du + du - 1]).collect();
+            let df = PhysicsModel::motor_lag_filter(&thr, t.dt, tau, thr[0]);
+            s.push(df[a]);
+        }
+    }
+    s
+}
+
+/// Which parameters the fit frees: `cfg.physics_free` names the nominal ones when set (effect
+/// parameters are always free except a patch's edge width), else [`PhysicsModel::default_free`].
+pub fn free_mask(p: &PhysicsModel, cfg: &TrainConfig) -> Result<Vec<bool>, LearnError> {
+    let mut free = p.default_free();
+    if let Some(names) = &cfg.physics_free {
+        let all = p.param_names();
+        let nominal = PhysicsModel::nominal_specs(p.robot()).len();
+        for f in free.iter_mut().take(nominal) {
+            *f = false;
+        }
+        for n in names {
+            let i = all.iter().position(|a| a == n).ok_or_else(|| {
+                LearnError::setting(
+                    "physics_free",
+                    n,
+                    format!("name parameters of the model: {}", all.join(", ")),
+                )
+            })?;
+            free[i] = true;
+        }
+    }
+    Ok(free)
+}
+
+/// Fits the free parameters of `p` (see [`free_mask`]; values from `cfg.physics_values` are set
+/// first) by [`bounded_least_squares`] on the k-step open-loop residual of the learned
+/// dimensions, weighted like the training loss (pushing: `√w_d`, car: `1/σ_d` of the velocities,
+/// discount `√γ^(j−1)`), and sets the parameter standard errors.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn fit_physics(
+    p: &mut PhysicsModel,
+    solver: &Solver,
+    world: World,
+    dt: f64,
+    trajs: &[StateTrajectory],
+    train_w: &[Window],
+    k: usize,
+    cfg: &TrainConfig,
+    loss: &Loss,
+) -> Result<PhysicsFit, LearnError> {
+    for (name, v) in &cfg.physics_values {
+        p.set_param(name, *v)?;
+    }
+    let free = free_mask(p, cfg)?;
+    let lr = world.learned_dims();
+    let ds = world.state_dim();
+    let dp = p.dim_state();
+    let t_phys = if world == World::Push { 1.0 } else { dt };
+    let weights: Vec<f64> = match loss {
+        Loss::PoseMse { weights } => weights.iter().map(|w| w.sqrt()).collect(),
+        Loss::LRel { .. } => {
+            let mut rows = Vec::new();
+            for t in trajs {
+                for i in 0..t.len() {
+                    rows.extend_from_slice(&t.s[i * ds + lr.start..i * ds + lr.end]);
+                }
+            }
+            let nz = dynlab_dynamics::data::Normalizer::fit(&rows, lr.len(), 1e-9)?;
+            nz.std.iter().map(|s| 1.0 / s).collect()
+        }
+    };
+    let mut ws: Vec<Window> = train_w.to_vec();
+    SplitMix64::new(cfg.seed ^ 0x5851_F42D_4C95_7F2D).shuffle(&mut ws);
+    ws.truncate(cfg.physics_max_windows.max(1));
+    ws.sort_by_key(|w| (w.trajectory, w.start));
+    let specs = p.param_specs();
+    let np = specs.len();
+    let lower: Vec<f64> = specs.iter().map(|(_, s)| s.lower).collect();
+    let upper: Vec<f64> = specs.iter().map(|(_, s)| s.upper).collect();
+    let base = p.clone();
+    let mut eval = |theta: &[f64], with_j: bool| -> (Vec<f64>, Vec<f64>) {
+        let mut p = base.clone();
+        if p.set_params(theta).is_err() {
+            return (vec![f64::INFINITY], Vec::new());
+        }
+        let mut r = Vec::new();
+        let mut jac = Vec::new();
+        let mut tape = SolverTape::default();
+        let mut sn = vec![0.0; dp];
+        let mut sens = vec![0.0; dp * np];
+        let mut phis = vec![0.0; dp * dp];
+        let mut phit = vec![0.0; dp * np];
+        let mut ybar = vec![0.0; dp];
+        let mut sbar0 = vec![0.0; dp];
+        let du = world.action_dim();
+        let mut ubar = vec![0.0; du];
+        let mut pbar = vec![0.0; np];
+        for w in &ws {
+            let t = &trajs[w.trajectory];
+            let mut s = initial_state(&p, t, w.start);
+            sens.iter_mut().for_each(|x| *x = 0.0);
+            let mut g: f64 = 1.0;
+            for j in 0..k {
+                let a = w.start + j;
+                let u = &t.u[a * du..(a + 1) * du];
+                let rep = if with_j {
+                    ode::integrate_taped(&p, solver, 1, &s, u, t_phys, &mut sn, &mut tape)
+                } else {
+                    ode::integrate(&p, solver, 1, &s, u, t_phys, &mut sn)
+                };
+                let bad = rep.status != OdeStatus::Success;
+                if with_j {
+                    for d in 0..dp {
+                        ybar.iter_mut().for_each(|x| *x = 0.0);
+                        ybar[d] = 1.0;
+                        pbar.iter_mut().for_each(|x| *x = 0.0);
+                        ode::integrate_vjp(&p, &tape, &ybar, &mut sbar0, &mut ubar, &mut pbar);
+                        phis[d * dp..(d + 1) * dp].copy_from_slice(&sbar0);
+                        phit[d * np..(d + 1) * np].copy_from_slice(&pbar);
+                    }
+                    let mut new = phit.clone();
+                    for r_ in 0..dp {
+                        for m in 0..dp {
+                            let a_ = phis[r_ * dp + m];
+                            if a_ != 0.0 {
+                                for c in 0..np {
+                                    new[r_ * np + c] += a_ * sens[m * np + c];
+                                }
+                            }
+                        }
+                    }
+                    sens = new;
+                }
+                let meas = &t.s[(a + 1) * ds..(a + 2) * ds];
+                let sg = g.sqrt();
+                for (q, d) in lr.clone().enumerate() {
+                    let e = sn[d] - meas[d];
+                    let e = if d == world.angle_dim() {
+                        wrap_angle(e)
+                    } else {
+                        e
+                    };
+                    let e = if bad || !e.is_finite() { 1e3 } else { e };
+                    r.push(sg * weights[q] * e);
+                    if with_j {
+                        jac.extend(sens[d * np..(d + 1) * np].iter().map(|x| {
+                            let v = sg * weights[q] * x;
+                            if v.is_finite() { v } else { 0.0 }
+                        }));
+                    }
+                }
+                s.copy_from_slice(&sn);
+                g *= cfg.gamma;
+            }
+        }
+        (r, jac)
+    };
+    let res = bounded_least_squares(
+        p.params(),
+        &lower,
+        &upper,
+        &free,
+        cfg.physics_iterations,
+        &mut eval,
+    );
+    p.set_params(&res.theta)?;
+    p.set_std_errors(Some(res.std))?;
+    Ok(PhysicsFit {
+        initial_cost: res.initial_cost,
+        final_cost: res.cost,
+        iterations: res.iterations,
+        residuals: res.residuals,
+    })
+}
