@@ -6,6 +6,8 @@
 mod bag_cmd;
 mod collect_cmd;
 mod eval_cmd;
+mod eval_group;
+mod eval_push_cmd;
 mod train_cmd;
 
 use std::process::ExitCode;
@@ -30,6 +32,9 @@ enum Command {
     EvalModel(eval_cmd::EvalArgs),
     /// Collect simulated data into a bag, headless and far faster than real time.
     Collect(collect_cmd::CollectArgs),
+    /// Closed-loop evaluations: `eval push` (MPPI pushing episodes).
+    #[command(subcommand)]
+    Eval(eval_group::EvalCommand),
 }
 
 fn main() -> ExitCode {
@@ -40,6 +45,7 @@ fn main() -> ExitCode {
         Command::Train(args) => train_cmd::run(args),
         Command::EvalModel(args) => eval_cmd::run(args),
         Command::Collect(args) => collect_cmd::run(args),
+        Command::Eval(cmd) => eval_group::run(cmd),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

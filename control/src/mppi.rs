@@ -17,9 +17,11 @@
 
 mod config;
 mod cost;
+mod episode;
 
 pub use config::{ACTION_MAX, ACTION_MIN, MppiConfig};
 pub use cost::{CostWeights, PushTask, Rect, goal_error, quadratic, trajectory_cost};
+pub use episode::{EpisodeError, EpisodeResult, EpisodeSettings, run_episode};
 
 use dynlab_learn::{LearnError, Model, RolloutWorkspace, World};
 use dynlab_sim::{SimRng, derive_seed};
@@ -179,9 +181,9 @@ impl Mppi {
         }
         let (k, t) = (self.cfg.samples, self.cfg.horizon);
         self.sample();
-        for i in 0..k {
-            for d in 0..3 {
-                self.s0[i * 3 + d] = state[d] as f32;
+        for row in self.s0.chunks_exact_mut(3) {
+            for (x, s) in row.iter_mut().zip(state) {
+                *x = s as f32;
             }
         }
         self.rollout(model)?;
