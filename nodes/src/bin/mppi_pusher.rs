@@ -215,5 +215,7 @@ fn main() -> anyhow::Result<()> {
 
 /// The stamp of the latest pose (the action is stamped with the pose it was planned from).
 fn msg_stamp_ns(logic: &PusherLogic) -> Option<u64> {
-    logic.pose_stamp().map(|s| (s * 1e9).round().max(0.0) as u64)
+    logic
+        .pose_stamp()
+        .map(|s| (s * 1e9).round().max(0.0) as u64)
 }
