@@ -33,9 +33,6 @@ use dynlab_simbridge::messages::{
     SimBagWriter, SimWorld, car_cmd_msg, car_input_from_msg, push_action_from_msg, push_action_msg,
 };
 
-/// Gap between episodes on the bag's time line (ns).
-const EPISODE_GAP_NS: u64 = 1_000_000_000;
-
 /// Which world to collect.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum WorldArg {
@@ -98,6 +95,10 @@ pub struct CollectArgs {
     /// Chunk compression.
     #[arg(long, value_enum, default_value_t = CompressionArg::Zstd)]
     compression: CompressionArg,
+    /// Time between episodes on the bag's time line (s). The offline tools split trajectories
+    /// at gaps over 5 pose intervals: with one pose per push (`pose_rate = 0.5`) use ≥ 20.
+    #[arg(long, value_name = "SECONDS", default_value_t = 1.0)]
+    episode_gap: f64,
 }
 
 enum Scenario {
@@ -208,7 +209,14 @@ pub fn run(args: CollectArgs) -> anyhow::Result<()> {
         .iter()
         .filter(|e| e.end == dynlab_sim::EpisodeEnd::LeftTable)
         .count();
-    let samples = concatenate(&episodes, 0, EPISODE_GAP_NS);
+    if !(args.episode_gap.is_finite() && args.episode_gap >= 0.0) {
+        anyhow::bail!(
+            "--episode-gap must be a finite number of seconds ≥ 0, got {}",
+            args.episode_gap
+        );
+    }
+    let gap_ns = (args.episode_gap * 1e9).round() as u64;
+    let samples = concatenate(&episodes, 0, gap_ns);
     let summary = write_bag(&args.out, world, args.clock, options, &samples)?;
     print_summary(&summary, Some((count, left_table)), started);
     Ok(())

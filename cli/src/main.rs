@@ -8,6 +8,8 @@ mod collect_cmd;
 mod compare_cmd;
 mod diagnose_cmd;
 mod eval_cmd;
+mod eval_group;
+mod eval_push_cmd;
 mod train_cmd;
 
 use std::process::ExitCode;
@@ -38,6 +40,9 @@ enum Command {
     /// Which physical effect is missing: fit each effect of the library to a model's residual on
     /// a bag, score it on held-out data, rank (diagnosis.json, diagnosis.html).
     Diagnose(diagnose_cmd::DiagnoseArgs),
+    /// Closed-loop evaluations: `eval push` (MPPI pushing episodes).
+    #[command(subcommand)]
+    Eval(eval_group::EvalCommand),
 }
 
 fn main() -> ExitCode {
@@ -50,6 +55,7 @@ fn main() -> ExitCode {
         Command::Collect(args) => collect_cmd::run(args),
         Command::Compare(args) => compare_cmd::run(args),
         Command::Diagnose(args) => diagnose_cmd::run(args),
+        Command::Eval(cmd) => eval_group::run(cmd),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -7,9 +7,11 @@
 //! |---|---|---|
 //! | [`record`] | `recorder` | topics discovered → rosbag2-compatible MCAP bag, flushed every second |
 //! | [`play`] | `player` | bag → topics with original timing, `--rate`, `--loop`, `/clock` |
+//! | [`mppi_pusher`] | `mppi_pusher` | when to push, hold off (stale pose) or stop (goal reached) |
 //! | [`probe`] | `dds_probe` | publish / receive `PoseStamped` and measure latency (benchmarks) |
 #![warn(missing_docs)]
 
+pub mod mppi_pusher;
 pub mod play;
 pub mod probe;
 pub mod record;

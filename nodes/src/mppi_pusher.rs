@@ -1,0 +1,174 @@
+//! The decision logic of `mppi_pusher`, without DDS: when to push, when to hold off, when the
+//! goal is reached. Times are inputs (pose stamps and receipt times in seconds), so the logic is
+//! testable and deterministic.
+//!
+//! - No goal yet, or no pose yet: hold.
+//! - Pose stale (received longer than `stale_timeout` ago): hold, no action.
+//! - Pose within `goal_tolerance` (xy) and `angle_tolerance` of the goal: at goal, no action.
+//! - A push was sent: wait until a pose stamped at least `push_wait` after the pose the push
+//!   started from arrives (the simulator or robot has finished and settled the push).
+//! - Otherwise: push (the caller runs MPPI on the latest pose).
+
+use dynlab_control::mppi::goal_error;
+
+/// Settings of the decision logic.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PusherSettings {
+    /// Goal reached when the xy distance is below this \[m\].
+    pub goal_tolerance: f64,
+    /// ... and the heading error below this \[rad\].
+    pub angle_tolerance: f64,
+    /// Hold off when the last pose was received longer ago than this \[s\].
+    pub stale_timeout: f64,
+    /// After a push, wait for a pose stamped this long after the push's start pose \[s\].
+    pub push_wait: f64,
+}
+
+impl Default for PusherSettings {
+    fn default() -> Self {
+        Self {
+            goal_tolerance: 0.02,
+            angle_tolerance: 0.1,
+            stale_timeout: 1.0,
+            push_wait: 1.8,
+        }
+    }
+}
+
+/// What to do now.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Decision {
+    /// Nothing to do: no goal or no pose yet.
+    Idle,
+    /// The last pose is too old: no action until a fresh one arrives.
+    Stale,
+    /// A push is running: wait for its end.
+    Waiting,
+    /// The block is at the goal.
+    AtGoal,
+    /// Push now from this pose `[x, y, θ]`.
+    Push([f64; 3]),
+}
+
+/// The state of the logic.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PusherLogic {
+    settings: PusherSettings,
+    goal: Option<[f64; 3]>,
+    /// Latest pose, its stamp \[s\] and its receipt time \[s\].
+    pose: Option<([f64; 3], f64, f64)>,
+    /// Stamp of the pose the last push started from.
+    pushed_from: Option<f64>,
+}
+
+impl PusherLogic {
+    /// New logic with `settings`.
+    pub fn new(settings: PusherSettings) -> Self {
+        Self {
+            settings,
+            goal: None,
+            pose: None,
+            pushed_from: None,
+        }
+    }
+
+    /// A new goal.
+    pub fn on_goal(&mut self, goal: [f64; 3]) {
+        self.goal = Some(goal);
+    }
+
+    /// The current goal.
+    pub fn goal(&self) -> Option<[f64; 3]> {
+        self.goal
+    }
+
+    /// A pose measurement, stamped `stamp` \[s\], received at `received` \[s\]. Non-finite poses
+    /// are ignored.
+    pub fn on_pose(&mut self, pose: [f64; 3], stamp: f64, received: f64) {
+        if pose.iter().all(|v| v.is_finite()) {
+            self.pose = Some((pose, stamp, received));
+        }
+    }
+
+    /// Decides at time `now` \[s\] (the clock of the receipt times).
+    pub fn decide(&self, now: f64) -> Decision {
+        let (Some(goal), Some((pose, stamp, received))) = (self.goal, self.pose) else {
+            return Decision::Idle;
+        };
+        if now - received > self.settings.stale_timeout {
+            return Decision::Stale;
+        }
+        if let Some(from) = self.pushed_from
+            && stamp < from + self.settings.push_wait
+        {
+            return Decision::Waiting;
+        }
+        let e = goal_error(pose, goal);
+        if e[0].hypot(e[1]) < self.settings.goal_tolerance
+            && e[2].abs() < self.settings.angle_tolerance
+        {
+            return Decision::AtGoal;
+        }
+        Decision::Push(pose)
+    }
+
+    /// Stamp of the latest pose \[s\].
+    pub fn pose_stamp(&self) -> Option<f64> {
+        self.pose.map(|p| p.1)
+    }
+
+    /// Records that a push was sent from the latest pose.
+    pub fn pushed(&mut self) {
+        self.pushed_from = self.pose.map(|p| p.1);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pushes_waits_for_the_push_and_stops_at_the_goal() {
+        let mut l = PusherLogic::new(PusherSettings::default());
+        assert_eq!(l.decide(0.0), Decision::Idle);
+        l.on_pose([0.4, 0.0, 0.0], 0.0, 0.0);
+        assert_eq!(l.decide(0.0), Decision::Idle, "no goal yet");
+        l.on_goal([0.8, 0.0, 0.0]);
+        assert_eq!(l.decide(0.1), Decision::Push([0.4, 0.0, 0.0]));
+        l.pushed();
+        l.on_pose([0.45, 0.0, 0.0], 1.0, 1.0);
+        assert_eq!(l.decide(1.0), Decision::Waiting, "push still running");
+        l.on_pose([0.5, 0.0, 0.0], 1.9, 1.9);
+        assert_eq!(l.decide(1.9), Decision::Push([0.5, 0.0, 0.0]));
+        l.pushed();
+        l.on_pose([0.79, 0.005, 0.05], 4.0, 4.0);
+        assert_eq!(l.decide(4.0), Decision::AtGoal);
+        // a new goal resumes pushing
+        l.on_goal([0.6, 0.0, 0.0]);
+        assert!(matches!(l.decide(4.0), Decision::Push(_)));
+    }
+
+    #[test]
+    fn holds_off_while_the_pose_is_stale() {
+        let mut l = PusherLogic::new(PusherSettings {
+            stale_timeout: 0.5,
+            ..PusherSettings::default()
+        });
+        l.on_goal([0.8, 0.0, 0.0]);
+        l.on_pose([0.4, 0.0, 0.0], 10.0, 10.0);
+        assert!(matches!(l.decide(10.4), Decision::Push(_)));
+        assert_eq!(l.decide(10.6), Decision::Stale);
+        l.on_pose([f64::NAN, 0.0, 0.0], 11.0, 11.0);
+        assert_eq!(l.decide(11.0), Decision::Stale, "a NaN pose is not fresh");
+        l.on_pose([0.4, 0.0, 0.0], 11.0, 11.0);
+        assert!(matches!(l.decide(11.0), Decision::Push(_)));
+    }
+
+    #[test]
+    fn the_goal_check_wraps_the_angle() {
+        let mut l = PusherLogic::new(PusherSettings::default());
+        l.on_goal([0.8, 0.0, std::f64::consts::PI - 0.02]);
+        l.on_pose([0.8, 0.0, -std::f64::consts::PI + 0.02], 0.0, 0.0);
+        assert_eq!(l.decide(0.0), Decision::AtGoal);
+    }
+}
