@@ -1,5 +1,5 @@
-//! Bounded nonlinear least squares for physical parameters, and the physics fit of [`train`]
-//! (crate::train::train).
+//! Bounded nonlinear least squares for physical parameters, and the physics fit of
+//! [`train`](crate::train::train).
 //!
 //! [`bounded_least_squares`] is Levenberg–Marquardt whose step is the box-constrained quadratic
 //! program `min ½δᵀ(JᵀJ + λ diag(JᵀJ))δ + (Jᵀr)ᵀδ  s.t.  lower ≤ θ + δ ≤ upper`, solved by
