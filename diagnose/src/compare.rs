@@ -23,6 +23,8 @@
 //! [`html::report`] turns it into the HTML page and [`CompareReport::summary`] into the terminal
 //! summary.
 
+#![allow(clippy::needless_range_loop)] // index loops over state dimensions read as the math
+
 pub mod html;
 pub mod online;
 pub mod stats;
@@ -1179,13 +1181,13 @@ impl CompareReport {
             s += &format!("baseline: {} model {}\n", b.eval.kind, b.label);
         }
         s += &self.error_table().to_text();
-        if self.baseline.is_none() {
-            if let Some(t) = &m.eval.tve {
-                s += &format!(
-                    "TVE over {} segments of {:.1} s: {:.4}\n",
-                    t.segments, t.segment_s, t.tve
-                );
-            }
+        if self.baseline.is_none()
+            && let Some(t) = &m.eval.tve
+        {
+            s += &format!(
+                "TVE over {} segments of {:.1} s: {:.4}\n",
+                t.segments, t.segment_s, t.tve
+            );
         }
         for notes in &self.data.notes {
             for n in notes
