@@ -2,11 +2,12 @@
 # The main job on the bundled bags (bags/): the whole loop of finding the missing physics, for
 # each bag with a hidden effect, in a few minutes on 2 cores:
 #   1. baseline: the physics model fitted on the nominal bag (k = 20 open-loop steps);
-#   2. its error on held-out data with the hidden effect (`dynlab eval-model`, other seed);
+#   2. its error on held-out data with the hidden effect, and where it fails (`dynlab compare`);
 #   3. diagnosis (`dynlab diagnose`) on the bag with the hidden effect: which effect of the
 #      library explains the residual, with fitted parameters ± std and a significance test;
 #   4. add the verdict (`dynlab train --effects <verdict>`) and refit on that bag;
-#   5. the error after, on the same held-out data; a before/after table and the report paths.
+#   5. the error after, on the same held-out data (`dynlab compare --baseline`: side by side);
+#      a before/after table and the report paths.
 # Usage: launch_scripts/main.sh [OUT_DIR]   (default out/main; rewritten on each run)
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -15,7 +16,7 @@ cargo build --release -q -p dynlab
 dynlab="${CARGO_TARGET_DIR:-$PWD/target}/release/dynlab"
 scen=launch_scripts/scenarios
 rm -rf "$out"
-mkdir -p "$out/test" "$out/models" "$out/eval" "$out/diagnosis"
+mkdir -p "$out/test" "$out/models" "$out/eval" "$out/diagnosis" "$out/compare"
 
 step() { printf '\n== %s\n' "$*"; }
 verdict_of() { python3 -c 'import json,sys; v=json.load(open(sys.argv[1]))["verdict"]; print(v or "")' "$1"; }
@@ -35,6 +36,10 @@ for effect_bag in car_aero_drag car_steering_offset; do
   "$dynlab" eval-model --model "$out/models/car_physics" --bag "$out/test/$effect_bag" --steps 50 --json \
     > "$out/eval/before@$effect_bag.json"
 
+  step "$effect_bag: where the baseline fails (compare)"
+  "$dynlab" compare --steps 50 --model "$out/models/car_physics" --bag "$out/test/$effect_bag" \
+    --out "$out/compare/baseline@$effect_bag"
+
   step "$effect_bag: diagnosis"
   "$dynlab" diagnose --model "$out/models/car_physics" --bag "bags/$effect_bag" \
     --out "$out/diagnosis/$effect_bag"
@@ -52,10 +57,9 @@ for effect_bag in car_aero_drag car_steering_offset; do
     --json > "$out/eval/after@$effect_bag.json"
   echo "$verdict" > "$out/eval/verdict@$effect_bag.txt"
 
-  # ---- COMPARE (lead: add after the merge) -------------------------------------------------
-  # "$dynlab" compare --model "$out/models/car_physics+$verdict" --bag "$out/test/$effect_bag" \
-  #   --baseline "$out/models/car_physics" --out "$out/compare/$effect_bag"
-  # -------------------------------------------------------------------------------------------
+  step "$effect_bag: where the error fell (compare, side by side with the baseline)"
+  "$dynlab" compare --steps 50 --model "$out/models/car_physics+$verdict" --baseline "$out/models/car_physics" \
+    --bag "$out/test/$effect_bag" --out "$out/compare/$effect_bag"
 done
 
 # Pushing is not in the loop yet: `dynlab train` reads the bundled pushing bags (block pose at
@@ -78,4 +82,4 @@ for before in sorted(d.glob("before@*.json")):
     ta = (a.get("tve") or {}).get("tve", float("nan"))
     print(f"{name:<22} {v:<16} {b['loss']:>12.4e} {a['loss']:>12.4e} {100*(a['loss']/b['loss']-1):>7.0f}% {tb:>11.3f} {ta:>10.3f}")
 PY
-printf '\nDiagnosis reports: %s/diagnosis/*/diagnosis.{json,html}\nModels and errors: %s\n' "$out" "$out"
+printf '\nReports: %s/compare/*/index.html (where it fails, before/after), %s/diagnosis/*/diagnosis.html\nModels and errors: %s\n' "$out" "$out" "$out"
