@@ -56,20 +56,34 @@ if [[ "$mode" != "--eval-only" ]]; then
 fi
 [[ "$mode" == "--train-only" ]] && exit 0
 
-for scene in free obstacle; do
-  for ds in "${datasets[@]}"; do
-    for kind in $KINDS; do
-      for k in $STEPS; do
-        m="$out/models/$ds-$kind-k$k"
-        [[ -e "$m/model.json" ]] || continue
+mkdir -p "$out/episodes" "$out/plots"
+summary="$out/summary.csv"
+for ds in "${datasets[@]}"; do
+  for kind in $KINDS; do
+    for k in $STEPS; do
+      m="$out/models/$ds-$kind-k$k"
+      [[ -e "$m/model.json" ]] || continue
+      for scene in free obstacle; do
         csv="$out/episodes/$scene-$ds-$kind-k$k.csv"
         [[ -e "$csv" ]] && continue
-        mkdir -p "$out/episodes"
         "$bin" eval push --model "$m" --scenario "$scene" --episodes "$EPISODES" --seed "$SEED" \
-          --label "$ds/$kind/k$k" --csv "$csv.tmp" --quiet && mv "$csv.tmp" "$csv"
+          --label "$ds-$kind-k$k" --csv "$csv.tmp" --summary "$summary" \
+          --plot "$out/plots/$scene-$ds-$kind-k$k.png" --quiet > /dev/null && mv "$csv.tmp" "$csv"
+        tail -1 "$summary"
       done
     done
   done
 done
-"$bin" eval push-table --out "$out/table.md" --plot "$out/success.png" "$out"/episodes/*.csv
+# the table: one row per model, free and obstacle side by side
+awk -F, 'NR > 1 { key = $1; kind[key] = $2; k[key] = $3; order[key] = NR
+  cell = sprintf("%.0f %% / %.0f %% / %.1f / %d (n=%d)", 100 * $7, 100 * $9, $12, $10, $5)
+  if ($4 == "free") free[key] = cell; else obst[key] = cell }
+  END {
+    print "| data | kind | k | free: success / strict / steps to success / collisions | obstacle: success / strict / steps to success / collisions |"
+    print "|---|---|---|---|---|"
+    n = 0; for (key in order) keys[++n] = key
+    for (i = 1; i <= n; i++) for (j = i + 1; j <= n; j++) if (order[keys[j]] < order[keys[i]]) { t = keys[i]; keys[i] = keys[j]; keys[j] = t }
+    for (i = 1; i <= n; i++) { key = keys[i]; split(key, a, "-")
+      printf "| %s | %s | %s | %s | %s |\n", a[1], kind[key], k[key], free[key], obst[key] }
+  }' "$summary" > "$out/table.md"
 cat "$out/table.md"

@@ -332,3 +332,28 @@ fn bad_settings_and_inputs_are_errors() {
     assert_eq!(cfg.horizon, MppiConfig::default().horizon);
     assert!(toml::from_str::<MppiConfig>("samplez = 10").is_err());
 }
+
+#[test]
+fn closed_loop_episode_on_the_simulator_is_deterministic_and_judged() {
+    use dynlab_control::mppi::{EpisodeSettings, run_episode};
+    let model = physics();
+    let cfg = MppiConfig {
+        samples: 200,
+        horizon: 6,
+        ..MppiConfig::default()
+    };
+    let scene = PushScenario::free();
+    let settings = EpisodeSettings::default();
+    let a = run_episode(&model, &scene, &cfg, &settings, 4).expect("episode");
+    let b = run_episode(&model, &scene, &cfg, &settings, 4).expect("episode");
+    assert_eq!(a, b, "same seed, same episode");
+    assert!(a.steps <= settings.max_steps && a.steps == a.actions.len());
+    assert_eq!(a.trajectory.len(), a.steps + 1);
+    // the verdict matches the final pose
+    let e = goal_error(a.final_pose, scene.goal);
+    assert_eq!(a.success, e[0].hypot(e[1]) < 0.1 && !a.collision);
+    assert!(
+        a.success,
+        "the analytic model reaches the goal in our simulator: {a:?}"
+    );
+}
