@@ -6,6 +6,7 @@
 mod bag_cmd;
 mod collect_cmd;
 mod eval_cmd;
+mod eval_race_cmd;
 mod train_cmd;
 
 use std::process::ExitCode;
@@ -30,6 +31,16 @@ enum Command {
     EvalModel(eval_cmd::EvalArgs),
     /// Collect simulated data into a bag, headless and far faster than real time.
     Collect(collect_cmd::CollectArgs),
+    /// Evaluate controllers in closed loop against the simulator.
+    #[command(subcommand)]
+    Eval(EvalCommand),
+}
+
+/// `dynlab eval …`: closed-loop controller evaluations.
+#[derive(Debug, Subcommand)]
+enum EvalCommand {
+    /// Laps of the racing optimiser with the learned and the true model, side by side.
+    Race(eval_race_cmd::RaceArgs),
 }
 
 fn main() -> ExitCode {
@@ -40,6 +51,7 @@ fn main() -> ExitCode {
         Command::Train(args) => train_cmd::run(args),
         Command::EvalModel(args) => eval_cmd::run(args),
         Command::Collect(args) => collect_cmd::run(args),
+        Command::Eval(EvalCommand::Race(args)) => eval_race_cmd::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

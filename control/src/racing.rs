@@ -29,18 +29,22 @@
 mod cost;
 mod estimate;
 mod gd;
+mod laps;
 mod manoeuvre;
 mod plant;
 mod race;
 mod sqp;
+mod truth;
 
 pub use cost::{InputLimits, Objective, Regulariser, Target, TrackTerms};
 pub use estimate::CarStateEstimator;
 pub use gd::{GdSettings, gradient, solve_gd};
+pub use laps::{LapReport, LapSettings, TracePoint, run_laps};
 pub use manoeuvre::Manoeuvre;
-pub use plant::{Input, Linearization, Plant, State};
+pub use plant::{CarDynamics, Input, Linearization, Plant, State};
 pub use race::{Optimizer, RaceStep, Racer, RacerSettings};
 pub use sqp::{SqpSettings, solve_sqp};
+pub use truth::{SimCar, true_car_model};
 
 use dynlab_learn::LearnError;
 
@@ -68,6 +72,9 @@ pub enum RacingError {
     /// The model rejected its input (non-finite state or input).
     #[error(transparent)]
     Model(#[from] LearnError),
+    /// The simulator rejected a scenario or a command.
+    #[error(transparent)]
+    Sim(#[from] dynlab_sim::SimError),
 }
 
 impl RacingError {

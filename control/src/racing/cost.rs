@@ -91,6 +91,11 @@ pub struct TrackTerms<'t> {
     /// Weight of `max(0, |lateral| − (half_width − margin))²` at every step (the paper's
     /// excursion cost; the SQP also imposes the borders as hard constraints).
     pub excursion_weight: f64,
+    /// Weight of `(s_k − s₀ − k·reference_step)²` at every step: advance at a reference speed
+    /// over the whole horizon, as the paper's racing cost does (0: off).
+    pub reference_weight: f64,
+    /// Reference progress per control step \[m\] (reference speed × control period).
+    pub reference_step: f64,
 }
 
 /// The total cost `ℓ(x(u), u)`.
@@ -166,6 +171,18 @@ impl<'t> Objective<'t> {
             }
         }
         if let (Some(tt), Some((l0, l))) = (&self.track, loc) {
+            if tt.reference_weight > 0.0 {
+                let r = progress_between(tt.track, l0, l) - k as f64 * tt.reference_step;
+                let c = tt.reference_weight;
+                st.value += c * r * r;
+                st.grad[0] += 2.0 * c * r * l.tangent[0];
+                st.grad[1] += 2.0 * c * r * l.tangent[1];
+                for a in 0..2 {
+                    for b in 0..2 {
+                        st.hess[a * 6 + b] += 2.0 * c * l.tangent[a] * l.tangent[b];
+                    }
+                }
+            }
             if k == n {
                 let prog = progress_between(tt.track, l0, l);
                 st.value -= tt.progress_weight * prog;

@@ -1,6 +1,6 @@
 //! The learned model with a zero-order input hold: rollouts and exact linearisations.
 
-use dynlab_learn::{Model, World};
+use dynlab_learn::{Model, StepJacobians, World};
 
 use super::RacingError;
 
@@ -9,10 +9,48 @@ pub type State = [f64; 6];
 /// Car input `[δ, d]`: steering \[rad\] and throttle.
 pub type Input = [f64; 2];
 
+/// A discrete-time car model `x⁺ = f(x, u)` over one model step `dt`: what the optimiser
+/// needs from a model. Implemented by every learned [`Model`] (exact Jacobians) and by
+/// [`SimCar`](super::SimCar), the simulator itself (the "true model").
+pub trait CarDynamics: std::fmt::Debug + Sync {
+    /// Model step \[s\].
+    fn dt(&self) -> f64;
+    /// Checks that this is a car model.
+    fn check(&self) -> Result<(), RacingError> {
+        Ok(())
+    }
+    /// Rollout as [`Model::rollout`]: `s0` is `m × 6`, `actions` step-major `k × m × 2`, `out`
+    /// receives `k × m × 6`. Non-finite states propagate (no error).
+    fn rollout(&self, s0: &[f64], actions: &[f64], out: &mut [f64]) -> Result<(), RacingError>;
+    /// Next states and step Jacobians for a batch, as [`Model::jacobians`].
+    fn jacobians(&self, s: &[f64], u: &[f64]) -> Result<StepJacobians, RacingError>;
+}
+
+impl CarDynamics for Model {
+    fn dt(&self) -> f64 {
+        Model::dt(self)
+    }
+    fn check(&self) -> Result<(), RacingError> {
+        if self.world() != World::Car {
+            return Err(RacingError::NotACarModel {
+                found: self.world().name().into(),
+            });
+        }
+        Ok(())
+    }
+    fn rollout(&self, s0: &[f64], actions: &[f64], out: &mut [f64]) -> Result<(), RacingError> {
+        Model::rollout(self, s0, actions, out)?;
+        Ok(())
+    }
+    fn jacobians(&self, s: &[f64], u: &[f64]) -> Result<StepJacobians, RacingError> {
+        Ok(Model::jacobians(self, s, u)?)
+    }
+}
+
 /// A car model whose input is held for `hold` model steps: one control step is `hold · dt`.
 #[derive(Debug, Clone, Copy)]
 pub struct Plant<'a> {
-    model: &'a Model,
+    model: &'a dyn CarDynamics,
     hold: usize,
 }
 
@@ -29,12 +67,8 @@ pub struct Linearization {
 
 impl<'a> Plant<'a> {
     /// A plant over a car `model`, holding each input for `hold ≥ 1` model steps.
-    pub fn new(model: &'a Model, hold: usize) -> Result<Self, RacingError> {
-        if model.world() != World::Car {
-            return Err(RacingError::NotACarModel {
-                found: model.world().name().into(),
-            });
-        }
+    pub fn new(model: &'a dyn CarDynamics, hold: usize) -> Result<Self, RacingError> {
+        model.check()?;
         if hold == 0 {
             return Err(RacingError::setting(
                 "hold",
@@ -46,7 +80,7 @@ impl<'a> Plant<'a> {
     }
 
     /// The model.
-    pub fn model(&self) -> &'a Model {
+    pub fn model(&self) -> &'a dyn CarDynamics {
         self.model
     }
 

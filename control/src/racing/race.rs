@@ -1,11 +1,10 @@
 //! Receding-horizon racing: re-solve from the measured state every control cycle.
 
-use dynlab_learn::Model;
 use dynlab_sim::Track;
 
 use super::cost::{InputLimits, Objective, Regulariser, TrackTerms};
 use super::gd::{GdSettings, solve_gd};
-use super::plant::{Input, Plant, State};
+use super::plant::{CarDynamics, Input, Plant, State};
 use super::sqp::{SqpSettings, solve_sqp};
 use super::{Problem, RacingError, SolveStatus};
 
@@ -43,6 +42,11 @@ pub struct RacerSettings {
     pub optimizer: Optimizer,
     /// Reward per metre of progress over the horizon. Default 10.
     pub progress_weight: f64,
+    /// Reference speed along the centre line \[m/s\] (the paper's "predefined high velocity").
+    /// Default 3.
+    pub reference_speed: f64,
+    /// Weight of the reference-progress term per step (0: off). Default 1.
+    pub reference_weight: f64,
     /// Distance kept from the borders \[m\]. Default 0.03 (about half the car's width).
     pub margin: f64,
     /// Excursion cost weight. Default 1000.
@@ -66,6 +70,8 @@ impl Default for RacerSettings {
             hold: 5,
             optimizer: Optimizer::Sqp,
             progress_weight: 10.0,
+            reference_speed: 3.0,
+            reference_weight: 1.0,
             margin: 0.03,
             excursion_weight: 1000.0,
             limits: InputLimits::default(),
@@ -117,7 +123,7 @@ pub struct Racer<'a> {
 impl<'a> Racer<'a> {
     /// A racer; checks the settings.
     pub fn new(
-        model: &'a Model,
+        model: &'a dyn CarDynamics,
         track: &'a Track,
         settings: RacerSettings,
     ) -> Result<Self, RacingError> {
@@ -176,6 +182,8 @@ impl<'a> Racer<'a> {
                     progress_weight: st.progress_weight,
                     margin: st.margin,
                     excursion_weight: st.excursion_weight,
+                    reference_weight: st.reference_weight,
+                    reference_step: st.reference_speed * self.plant.dt(),
                 }),
                 limits: st.limits,
                 reg: st.reg,
