@@ -7,9 +7,11 @@ use std::time::Instant;
 use anyhow::{Context, bail};
 use clap::{Args, ValueEnum};
 use dynlab_control::racing::{
-    LapReport, LapSettings, Optimizer, Racer, RacerSettings, run_laps, true_car_model,
+    CarDynamics, GdSettings, InputLimits, LapReport, LapSettings, Manoeuvre, Optimizer, Plant,
+    Racer, RacerSettings, SimCar, SqpSettings, run_laps, solve_gd, solve_sqp,
 };
 use dynlab_learn::{Model, World, load_model};
+use dynlab_sim::{CarInput, CarWorld, wrap_angle};
 use dynlab_sim::{CarScenario, Track};
 
 /// `dynlab eval race …`
@@ -44,6 +46,10 @@ pub struct RaceArgs {
     /// Skip the run with the simulator's true model.
     #[arg(long)]
     no_true_model: bool,
+    /// Instead of laps: the offline manoeuvres (parallel parking, dynamic reverse, drifting turn)
+    /// solved with GD and SQP on the model and played open-loop on the simulator (Table I).
+    #[arg(long)]
+    offline: bool,
     /// Output directory for report.json and the plots (race_<model>.png).
     #[arg(long, default_value = "race_eval")]
     out: PathBuf,
@@ -58,6 +64,9 @@ enum OptimizerArg {
 pub fn run(args: RaceArgs) -> anyhow::Result<()> {
     let (learned, _) = load_model(&args.model, None, Some(World::Car))
         .with_context(|| format!("loading {}", args.model.display()))?;
+    if args.offline {
+        return offline(&learned, &args);
+    }
     let mut scenario = match &args.scenario {
         Some(p) => CarScenario::from_file(p)?,
         None => CarScenario::floor(),
@@ -100,7 +109,7 @@ pub fn run(args: RaceArgs) -> anyhow::Result<()> {
         drive(&learned, &track, &scenario, settings, &laps)?,
     ));
     if !args.no_true_model {
-        let truth = true_car_model(&scenario.car, learned.dt())?;
+        let truth = SimCar::new(&scenario, learned.dt())?;
         runs.push(("true", drive(&truth, &track, &scenario, settings, &laps)?));
     }
     std::fs::create_dir_all(&args.out)?;
@@ -185,7 +194,7 @@ pub fn run(args: RaceArgs) -> anyhow::Result<()> {
 }
 
 fn drive(
-    model: &Model,
+    model: &dyn CarDynamics,
     track: &Track,
     scenario: &CarScenario,
     settings: RacerSettings,
@@ -249,5 +258,81 @@ fn plot(path: &Path, track: &Track, r: &LapReport, name: &str) -> anyhow::Result
         )
     }))?;
     root.present()?;
+    Ok(())
+}
+
+/// Table I: each manoeuvre solved on the model with GD and SQP, then played open-loop on the
+/// simulator from the same start; end-pose error against the final target.
+fn offline(model: &Model, args: &RaceArgs) -> anyhow::Result<()> {
+    let scenario = match &args.scenario {
+        Some(p) => CarScenario::from_file(p)?,
+        None => CarScenario::floor(),
+    };
+    let limits = InputLimits {
+        steering_max: scenario.car.steering_max,
+        throttle_min: scenario.car.throttle_min,
+        throttle_max: scenario.car.throttle_max,
+    };
+    let plant = Plant::new(model, 5)?;
+    println!(
+        "{:<18} {:<4} {:>12} {:>6} {:>15} {:>9} {:>12} {:>12} {:>10}",
+        "scenario",
+        "opt",
+        "cost",
+        "iter",
+        "status",
+        "time (s)",
+        "end err (m)",
+        "yaw err (°)",
+        "model (m)"
+    );
+    let mut rows = Vec::new();
+    for m in Manoeuvre::all() {
+        let problem = m.problem(plant, [0.0; 6], limits);
+        for opt in ["gd", "sqp"] {
+            let t0 = Instant::now();
+            let sol = if opt == "gd" {
+                solve_gd(&problem, &m.initial_inputs(), &GdSettings::default())?
+            } else {
+                solve_sqp(&problem, &m.initial_inputs(), &SqpSettings::default())?
+            };
+            let secs = t0.elapsed().as_secs_f64();
+            let mut world = CarWorld::new(&scenario)?;
+            world.reset(dynlab_sim::CarState::default())?;
+            for u in &sol.inputs {
+                world.step(CarInput::new(u[0], u[1]), plant.dt())?;
+            }
+            let end = world.state();
+            let target = m.end_target();
+            let pos_err = (end.x - target[0]).hypot(end.y - target[1]);
+            let yaw_err = wrap_angle(end.psi - target[2]).abs().to_degrees();
+            let pred = sol.states.last().copied().unwrap_or([0.0; 6]);
+            let model_err = (pred[0] - target[0]).hypot(pred[1] - target[1]);
+            println!(
+                "{:<18} {:<4} {:>12.4} {:>6} {:>15} {:>9.2} {:>12.3} {:>12.1} {:>10.3}",
+                m.name,
+                opt,
+                sol.cost,
+                sol.iterations,
+                sol.status.to_string(),
+                secs,
+                pos_err,
+                yaw_err,
+                model_err
+            );
+            rows.push(serde_json::json!({
+                "scenario": m.name, "optimizer": opt, "cost": sol.cost,
+                "iterations": sol.iterations, "status": sol.status.to_string(),
+                "seconds": secs, "end_position_error_m": pos_err,
+                "end_yaw_error_deg": yaw_err, "model_end_error_m": model_err,
+            }));
+        }
+    }
+    std::fs::create_dir_all(&args.out)?;
+    std::fs::write(
+        args.out.join("offline.json"),
+        serde_json::to_string_pretty(&rows)?,
+    )?;
+    println!("wrote {}", args.out.join("offline.json").display());
     Ok(())
 }

@@ -40,10 +40,10 @@ pub struct RacerSettings {
     pub hold: usize,
     /// Optimiser. Default SQP.
     pub optimizer: Optimizer,
-    /// Reward per metre of progress over the horizon. Default 10.
+    /// Reward per metre of progress of `x_n` (linear; 0: off). Default 0.
     pub progress_weight: f64,
     /// Reference speed along the centre line \[m/s\] (the paper's "predefined high velocity").
-    /// Default 3.
+    /// Default 2 (faster reference speeds spin the ORCA car in the default track's bends).
     pub reference_speed: f64,
     /// Weight of the reference-progress term per step (0: off). Default 1.
     pub reference_weight: f64,
@@ -69,8 +69,8 @@ impl Default for RacerSettings {
             horizon: 20,
             hold: 5,
             optimizer: Optimizer::Sqp,
-            progress_weight: 10.0,
-            reference_speed: 3.0,
+            progress_weight: 0.0,
+            reference_speed: 2.0,
             reference_weight: 1.0,
             margin: 0.03,
             excursion_weight: 1000.0,

@@ -278,9 +278,14 @@ pub fn solve_sqp(
     let mut scale = 1.0f64;
     let mut status = SolveStatus::MaxIterations;
     let mut iterations = 0;
+    let mut stale = false;
     while iterations < settings.iterations {
         iterations += 1;
         let radius = [r0[0] * scale, r0[1] * scale];
+        if stale {
+            lin = problem.plant.linearize(&problem.s0, &u)?;
+            stale = false;
+        }
         let mut out = solve_qp(problem, &u, &lin, radius, settings, false);
         if matches!(out, QpOutcome::Infeasible) && settings.elastic_penalty.is_some() {
             out = solve_qp(problem, &u, &lin, radius, settings, true);
@@ -318,8 +323,10 @@ pub fn solve_sqp(
         let rho = actual / predicted;
         if new_cost.is_finite() && rho >= 0.1 {
             u = cand;
-            lin = problem.plant.linearize(&problem.s0, &u)?;
-            cost = gradient_from(problem, &u, &lin).0;
+            // linearise lazily: the last accepted step needs only its states
+            lin.states = states;
+            stale = true;
+            cost = new_cost;
             history.push(cost);
             let at_edge = du
                 .chunks(2)
