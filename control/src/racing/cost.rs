@@ -147,6 +147,7 @@ impl<'t> Objective<'t> {
     }
 
     /// Cost of state `x_k` (k ≥ 1) with its gradient and Gauss–Newton Hessian.
+    #[allow(clippy::needless_range_loop)] // index loops mirror the equations
     pub(crate) fn state_term(
         &self,
         k: usize,

@@ -46,6 +46,7 @@ pub fn gradient(
     Ok((cost, grad, lin))
 }
 
+#[allow(clippy::needless_range_loop)] // index loops mirror the equations
 pub(crate) fn gradient_from(
     problem: &Problem<'_>,
     inputs: &[Input],

@@ -78,7 +78,8 @@ fn csc(rows: usize, cols: usize, dense: &[f64], upper: bool) -> CscMatrix<f64> {
 }
 
 /// Builds and solves the QP of one SQP iteration.
-#[allow(non_snake_case)]
+// index loops mirror the block equations of the QP
+#[allow(non_snake_case, clippy::needless_range_loop)]
 fn solve_qp(
     problem: &Problem<'_>,
     u: &[Input],
