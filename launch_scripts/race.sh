@@ -10,7 +10,8 @@
 #              launch_scripts/tracks/default.json; /car/pose in, /car/cmd out, following /clock),
 #   recorder  (only if OUT_BAG is given: /car/pose /car/cmd /car/odom /clock) —
 # lets them run for SECONDS of wall time (default 20), then stops them with SIGINT.
-# Extra arguments go to the racer's --ros-args, e.g. `-p optimizer:=gd`.
+# Extra arguments go to the racer's --ros-args, e.g. `-p optimizer:=gd`. $SIM_RATE (default 1)
+# slows the simulation (`0.25`: quarter real time) when solves take longer than the 50 ms period.
 #
 # Binaries from $DYNLAB_BIN_DIR (default: target/release; build them with
 # `cargo build --release -p dynlab-nodes --bins`).
@@ -35,7 +36,7 @@ if [[ -n "$out" ]]; then
   "$bin/recorder" -o "$out" /car/pose /car/cmd /car/odom /clock --ros-args -p use_sim_time:=true &
   pids+=("$!")
 fi
-"$bin/sim_node" --ros-args -p world:=car -p "scenario:=$scenario" &
+"$bin/sim_node" --ros-args -p world:=car -p "scenario:=$scenario" -p "rate:=${SIM_RATE:-1.0}" &
 pids+=("$!")
 "$bin/racer" --ros-args -p "model:=$model" -p "track:=$track" -p use_sim_time:=true "$@" &
 pids+=("$!")
