@@ -78,6 +78,7 @@ fn target_problem(plant: Plant<'_>) -> Problem<'_> {
             limits: InputLimits::default(),
             reg: Regulariser::default(),
             u_prev: Some([0.0, 0.3]),
+            start_segment: None,
         },
     }
 }
@@ -176,6 +177,7 @@ fn racing_gradient_with_progress_and_excursion_matches_finite_differences() {
             limits: InputLimits::default(),
             reg: Regulariser::default(),
             u_prev: None,
+            start_segment: None,
         },
     };
     let u = vec![[0.05, 0.6]; 6];
@@ -262,6 +264,7 @@ fn infeasible_track_qp_is_reported_as_a_status() {
             limits: InputLimits::default(),
             reg: Regulariser::default(),
             u_prev: None,
+            start_segment: None,
         },
     };
     let hard = SqpSettings {

@@ -111,6 +111,10 @@ pub struct Objective<'t> {
     pub reg: Regulariser,
     /// The input applied before step 0 (for the rate term of `u₀`); `None`: no rate term on u₀.
     pub u_prev: Option<Input>,
+    /// Track segment near `x₀` (from the previous cycle): `x₀` is then located by a local search
+    /// around it, so that a track whose parts run close together is not confused; `None`: a
+    /// full search.
+    pub start_segment: Option<usize>,
 }
 
 /// Per-step state cost: value, gradient and Gauss–Newton Hessian wrt the state.
@@ -127,11 +131,11 @@ impl<'t> Objective<'t> {
             return Vec::new();
         };
         let mut out = Vec::with_capacity(states.len());
-        let mut hint = None;
+        let mut hint = self.start_segment;
         for s in states {
             let loc = match hint {
                 None => t.track.locate([s[0], s[1]]),
-                Some(h) => t.track.locate_near([s[0], s[1]], h, 40),
+                Some(h) => t.track.locate_near([s[0], s[1]], h, 12),
             };
             hint = Some(loc.segment);
             out.push(loc);

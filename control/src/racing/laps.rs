@@ -148,7 +148,7 @@ pub fn run_laps(
         }
         let next = world.step(input, dt)?;
         step += 1;
-        let nl = track.locate_near([next.x, next.y], loc.segment, 40);
+        let nl = track.locate_near([next.x, next.y], loc.segment, 12);
         let mut d = nl.arc - loc.arc;
         if d > 0.5 * len {
             d -= len;

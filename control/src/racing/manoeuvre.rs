@@ -114,6 +114,7 @@ impl Manoeuvre {
                 limits,
                 reg: Regulariser::default(),
                 u_prev: None,
+                start_segment: None,
             },
         }
     }

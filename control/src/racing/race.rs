@@ -118,6 +118,7 @@ pub struct Racer<'a> {
     settings: RacerSettings,
     warm: Vec<Input>,
     last: Option<Input>,
+    segment: Option<usize>,
 }
 
 impl<'a> Racer<'a> {
@@ -148,6 +149,7 @@ impl<'a> Racer<'a> {
             warm: vec![settings.limits.clamp(settings.initial); settings.horizon],
             settings,
             last: None,
+            segment: None,
         })
     }
 
@@ -165,6 +167,7 @@ impl<'a> Racer<'a> {
     pub fn reset(&mut self) {
         self.warm = vec![self.settings.limits.clamp(self.settings.initial); self.settings.horizon];
         self.last = None;
+        self.segment = None;
     }
 
     /// One control cycle from the measured state `s`: solve from the shifted previous solution
@@ -188,6 +191,7 @@ impl<'a> Racer<'a> {
                 limits: st.limits,
                 reg: st.reg,
                 u_prev: self.last,
+                start_segment: self.segment,
             },
         };
         let sol = match st.optimizer {
@@ -200,6 +204,10 @@ impl<'a> Racer<'a> {
         warm.push(*sol.inputs.last().unwrap_or(&input));
         self.warm = warm;
         self.last = Some(input);
+        self.segment = Some(match self.segment {
+            Some(h) => self.track.locate_near([s[0], s[1]], h, 12).segment,
+            None => self.track.locate([s[0], s[1]]).segment,
+        });
         Ok(RaceStep {
             input,
             status: sol.status,
