@@ -10,6 +10,7 @@ mod diagnose_cmd;
 mod eval_cmd;
 mod eval_group;
 mod eval_push_cmd;
+mod eval_race_cmd;
 mod train_cmd;
 
 use std::process::ExitCode;
@@ -40,7 +41,7 @@ enum Command {
     /// Which physical effect is missing: fit each effect of the library to a model's residual on
     /// a bag, score it on held-out data, rank (diagnosis.json, diagnosis.html).
     Diagnose(diagnose_cmd::DiagnoseArgs),
-    /// Closed-loop evaluations: `eval push` (MPPI pushing episodes).
+    /// Closed-loop evaluations: `eval push` (MPPI pushing episodes), `eval race` (racing laps).
     #[command(subcommand)]
     Eval(eval_group::EvalCommand),
 }

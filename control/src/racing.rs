@@ -1,1 +1,152 @@
-//! Trajectory optimisation through the learned car model.
+//! Trajectory optimisation through the learned car model (Kohler et al.): offline manoeuvres and
+//! receding-horizon racing.
+//!
+//! The car state is `[x, y, ψ, vx, vy, ω]` (pose plus body-frame velocities), the input
+//! `[δ, d]` (steering \[rad\], throttle). A [`Plant`] holds each input for `hold` model steps
+//! (a control step of `hold · dt`), rolls the model out and linearises it about a trajectory
+//! with the model's exact step Jacobians (`learn::Model::jacobians`, one batched call).
+//!
+//! The cost ([`Objective`]) is the paper's: quadratic target terms at chosen steps (their
+//! eq. 4), an input magnitude and rate regulariser (eq. 5), one-sided quadratic barriers on the
+//! input limits (eq. 6), and for racing the progress along a [`Track`] centre line with the
+//! paper's quadratic excursion cost beyond the borders. Two optimisers minimise it:
+//!
+//! * [`solve_gd`]: the paper's batch gradient descent — the exact gradient `dℓ/du` by reverse
+//!   mode (the adjoint recursion of eqs. 7–9), scaled by 512 step sizes in `[10⁻⁶, 1]`, all
+//!   candidates rolled out in one batch, the best kept;
+//! * [`solve_sqp`]: a trust-region SQP on Clarabel — the model linearised about the current
+//!   trajectory with exact Jacobians, a Gauss–Newton QP in the input steps, input limits and the
+//!   track borders as hard constraints (an elastic fallback when the linearised borders are
+//!   infeasible), and a ratio test on the true cost.
+//!
+//! Outcomes are data: a [`Solution`] carries a [`SolveStatus`]; errors are only for bad input.
+//! [`Racer`] re-solves every control cycle from a measured state with a shifted warm start;
+//! [`CarStateEstimator`] turns measured poses into that state with a causal Savitzky–Golay fit;
+//! [`Manoeuvre`] holds the offline scenarios (parallel parking, dynamic reverse, drifting turn).
+//!
+//! [`Track`]: dynlab_sim::Track
+
+mod cost;
+mod estimate;
+mod gd;
+mod laps;
+mod manoeuvre;
+mod plant;
+mod race;
+mod sqp;
+mod truth;
+
+pub use cost::{InputLimits, Objective, Regulariser, Target, TrackTerms};
+pub use estimate::CarStateEstimator;
+pub use gd::{GdSettings, gradient, solve_gd};
+pub use laps::{LapReport, LapSettings, TracePoint, run_laps};
+pub use manoeuvre::Manoeuvre;
+pub use plant::{CarDynamics, Input, Linearization, Plant, State};
+pub use race::{Optimizer, RaceStep, Racer, RacerSettings};
+pub use sqp::{SqpSettings, solve_sqp};
+pub use truth::{SimCar, true_car_model};
+
+use dynlab_learn::LearnError;
+
+/// Construction errors of the racing optimiser (outcomes of a solve are [`SolveStatus`]).
+#[derive(Debug, thiserror::Error)]
+pub enum RacingError {
+    /// The model is not a car model.
+    #[error(
+        "the model is a {found} model; the racing optimiser needs a car model (train one on car bags: `dynlab train --world car`)"
+    )]
+    NotACarModel {
+        /// The model's world.
+        found: String,
+    },
+    /// A setting is out of range.
+    #[error("invalid setting {name} = {value}: {hint}")]
+    Setting {
+        /// Setting name.
+        name: &'static str,
+        /// The value given.
+        value: String,
+        /// What to set instead.
+        hint: String,
+    },
+    /// The model rejected its input (non-finite state or input).
+    #[error(transparent)]
+    Model(#[from] LearnError),
+    /// The simulator rejected a scenario or a command.
+    #[error(transparent)]
+    Sim(#[from] dynlab_sim::SimError),
+}
+
+impl RacingError {
+    pub(crate) fn setting(name: &'static str, value: impl ToString, hint: impl ToString) -> Self {
+        Self::Setting {
+            name,
+            value: value.to_string(),
+            hint: hint.to_string(),
+        }
+    }
+}
+
+/// How a solve ended. Every status comes with the best inputs found so far.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub enum SolveStatus {
+    /// Converged: no step improves the cost by more than the tolerance.
+    Solved,
+    /// Stopped at the iteration limit (the inputs are the best found).
+    MaxIterations,
+    /// The QP with hard track constraints is infeasible (and no elastic fallback was allowed).
+    Infeasible,
+    /// The QP solver failed numerically.
+    NumericalError,
+    /// The model produced non-finite states along the initial guess.
+    ModelFailure,
+}
+
+impl SolveStatus {
+    /// Whether the result can be used as a converged solution.
+    pub fn is_solved(self) -> bool {
+        self == SolveStatus::Solved
+    }
+}
+
+impl std::fmt::Display for SolveStatus {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            SolveStatus::Solved => "solved",
+            SolveStatus::MaxIterations => "max-iterations",
+            SolveStatus::Infeasible => "infeasible",
+            SolveStatus::NumericalError => "numerical-error",
+            SolveStatus::ModelFailure => "model-failure",
+        })
+    }
+}
+
+/// The optimisation problem: a plant, its initial state and the cost.
+#[derive(Debug, Clone)]
+pub struct Problem<'a> {
+    /// The model with its input hold.
+    pub plant: Plant<'a>,
+    /// Initial state `x₀`.
+    pub s0: State,
+    /// The cost.
+    pub objective: Objective<'a>,
+}
+
+/// The result of a solve.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Solution {
+    /// Optimised inputs, one per control step.
+    pub inputs: Vec<Input>,
+    /// Predicted states `x₀ … x_n`.
+    pub states: Vec<State>,
+    /// Cost `ℓ` of the inputs.
+    pub cost: f64,
+    /// How the solve ended.
+    pub status: SolveStatus,
+    /// Iterations taken.
+    pub iterations: usize,
+    /// Cost after each iteration (the first entry is the initial guess).
+    pub history: Vec<f64>,
+    /// QPs that needed the elastic fallback (SQP only).
+    pub elastic_qps: usize,
+}

@@ -44,4 +44,4 @@ pub use episode::{
     generate_push_episodes, push_episode,
 };
 pub use explore::{CarDriver, CarExplorer, PushExplorer};
-pub use track::Track;
+pub use track::{Track, TrackLocation};

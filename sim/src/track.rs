@@ -10,6 +10,8 @@ use crate::geometry::{Pose2, wrap_angle};
 pub struct Track {
     centre: Vec<[f64; 2]>,
     half_width: Vec<f64>,
+    /// Cumulative arc length at each centre point.
+    cum: Vec<f64>,
 }
 
 #[derive(Deserialize)]
@@ -61,7 +63,13 @@ impl Track {
                 "every coordinate must be finite and every width > 0".into()
             ));
         }
-        Ok(Self { centre, half_width })
+        let mut t = Self {
+            centre,
+            half_width,
+            cum: Vec::new(),
+        };
+        t.cum = t.arc_lengths();
+        Ok(t)
     }
 
     /// Parses the MPCC JSON layout (`X, Y, X_i, Y_i, X_o, Y_o` arrays, metres).
@@ -251,5 +259,155 @@ impl Track {
             i = (i + 1) % n;
         }
         self.centre[i]
+    }
+}
+
+/// Where a point is along the track, with arc length and the local frame (see [`Track::locate`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TrackLocation {
+    /// Index of the centre-line segment the point projects onto.
+    pub segment: usize,
+    /// Arc length of the projection along the centre line from point 0 \[m\], in `[0, length)`.
+    pub arc: f64,
+    /// Unit tangent of the centre line there (direction of travel).
+    pub tangent: [f64; 2],
+    /// Unit left normal of the centre line there.
+    pub normal: [f64; 2],
+    /// Signed lateral offset from the centre line \[m\] (left positive).
+    pub lateral: f64,
+    /// Half width of the track there \[m\].
+    pub half_width: f64,
+}
+
+impl Track {
+    /// Length of the closed centre line \[m\].
+    pub fn length(&self) -> f64 {
+        let n = self.centre.len();
+        (0..n)
+            .map(|i| {
+                let a = self.centre[i];
+                let b = self.centre[(i + 1) % n];
+                (b[0] - a[0]).hypot(b[1] - a[1])
+            })
+            .sum()
+    }
+
+    /// Arc length from point 0 to centre point `i` \[m\] (cumulative, `i < len()`).
+    fn arc_at(&self, i: usize) -> f64 {
+        self.cum[i]
+    }
+
+    /// Cumulative arc length at every centre point \[m\] (`len()` values, the first 0).
+    pub fn arc_lengths(&self) -> Vec<f64> {
+        let mut out = Vec::with_capacity(self.centre.len());
+        let mut acc = 0.0;
+        for i in 0..self.centre.len() {
+            out.push(acc);
+            let a = self.centre[i];
+            let b = self.centre[(i + 1) % self.centre.len()];
+            acc += (b[0] - a[0]).hypot(b[1] - a[1]);
+        }
+        out
+    }
+
+    /// Inner and outer border points at centre point `i` (centre ∓ half width along the normal;
+    /// inner = right of the direction of travel is not assumed: `[left, right]`).
+    pub fn borders(&self, i: usize) -> [[f64; 2]; 2] {
+        let n = self.centre.len();
+        let a = self.centre[i % n];
+        let b = self.centre[(i + 1) % n];
+        let l = (b[0] - a[0]).hypot(b[1] - a[1]).max(1e-12);
+        let nrm = [-(b[1] - a[1]) / l, (b[0] - a[0]) / l];
+        let w = self.half_width[i % n];
+        [
+            [a[0] + w * nrm[0], a[1] + w * nrm[1]],
+            [a[0] - w * nrm[0], a[1] - w * nrm[1]],
+        ]
+    }
+
+    /// Projects a point onto the closest centre-line segment, with arc length and local frame.
+    pub fn locate(&self, p: [f64; 2]) -> TrackLocation {
+        let n = self.centre.len();
+        self.locate_among(p, 0, n)
+    }
+
+    /// As [`Track::locate`], searching only the `window` segments on either side of `hint`
+    /// (cheap tracking of a moving point; falls back to a full search when the best segment is
+    /// at the edge of the window).
+    pub fn locate_near(&self, p: [f64; 2], hint: usize, window: usize) -> TrackLocation {
+        let n = self.centre.len();
+        if 2 * window + 1 >= n {
+            return self.locate(p);
+        }
+        let start = (hint % n + n - window) % n;
+        let loc = self.locate_among(p, start, 2 * window + 1);
+        let off = (loc.segment + n - start) % n;
+        if off == 0 || off == 2 * window {
+            self.locate(p)
+        } else {
+            loc
+        }
+    }
+
+    fn locate_among(&self, p: [f64; 2], start: usize, count: usize) -> TrackLocation {
+        let n = self.centre.len();
+        let mut best = (f64::INFINITY, start % n, 0.0f64);
+        for k in 0..count {
+            let i = (start + k) % n;
+            let a = self.centre[i];
+            let b = self.centre[(i + 1) % n];
+            let d = [b[0] - a[0], b[1] - a[1]];
+            let l2 = d[0] * d[0] + d[1] * d[1];
+            let t = if l2 > 0.0 {
+                (((p[0] - a[0]) * d[0] + (p[1] - a[1]) * d[1]) / l2).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
+            let q = [a[0] + t * d[0], a[1] + t * d[1]];
+            let dist2 = (p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2);
+            if dist2 < best.0 {
+                best = (dist2, i, t);
+            }
+        }
+        let (i, t) = (best.1, best.2);
+        let a = self.centre[i];
+        let b = self.centre[(i + 1) % n];
+        let seg = (b[0] - a[0]).hypot(b[1] - a[1]);
+        let l = seg.max(1e-12);
+        let tangent = [(b[0] - a[0]) / l, (b[1] - a[1]) / l];
+        let normal = [-tangent[1], tangent[0]];
+        let lateral = (p[0] - a[0]) * normal[0] + (p[1] - a[1]) * normal[1];
+        let half_width =
+            self.half_width[i] + t * (self.half_width[(i + 1) % n] - self.half_width[i]);
+        TrackLocation {
+            segment: i,
+            arc: self.arc_at(i) + t * seg,
+            tangent,
+            normal,
+            lateral,
+            half_width,
+        }
+    }
+}
+
+#[cfg(test)]
+mod locate_tests {
+    use super::*;
+
+    #[test]
+    fn locate_gives_arc_length_and_lateral_offset_on_an_oval() {
+        let t = Track::oval(2.0, 0.5, 0.2, 200).unwrap();
+        let len = 4.0 + std::f64::consts::TAU * 0.5;
+        assert!((t.length() - len).abs() < 0.01, "{}", t.length());
+        // on the first straight, 0.5 m along and 0.1 m to the left
+        let loc = t.locate([-0.5, -0.4]);
+        assert!((loc.arc - 0.5).abs() < 1e-9, "{loc:?}");
+        assert!((loc.lateral - 0.1).abs() < 1e-9);
+        assert!((loc.tangent[0] - 1.0).abs() < 1e-12);
+        let near = t.locate_near([-0.5, -0.4], loc.segment + 3, 10);
+        assert_eq!(near, loc);
+        // a hint far away falls back to the full search
+        let far = t.locate_near([-0.5, -0.4], loc.segment + 100, 5);
+        assert_eq!(far, loc);
     }
 }

@@ -1,0 +1,220 @@
+//! Receding-horizon racing: re-solve from the measured state every control cycle.
+
+use dynlab_sim::Track;
+
+use super::cost::{InputLimits, Objective, Regulariser, TrackTerms};
+use super::gd::{GdSettings, solve_gd};
+use super::plant::{CarDynamics, Input, Plant, State};
+use super::sqp::{SqpSettings, solve_sqp};
+use super::{Problem, RacingError, SolveStatus};
+
+/// Which optimiser the racer runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Optimizer {
+    /// Trust-region SQP on Clarabel, track borders as hard constraints.
+    Sqp,
+    /// The paper's batch gradient descent with the excursion cost.
+    Gd,
+}
+
+impl std::str::FromStr for Optimizer {
+    type Err = RacingError;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "sqp" => Ok(Self::Sqp),
+            "gd" => Ok(Self::Gd),
+            other => Err(RacingError::setting("optimizer", other, "use sqp or gd")),
+        }
+    }
+}
+
+/// Settings of the racer. Defaults: the paper's n = 20 at 20 Hz.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default)]
+pub struct RacerSettings {
+    /// Control steps n in the horizon. Default 20.
+    pub horizon: usize,
+    /// Model steps per control step (control period = `hold · dt`; 5 × 10 ms = 20 Hz).
+    /// Default 5.
+    pub hold: usize,
+    /// Optimiser. Default SQP.
+    pub optimizer: Optimizer,
+    /// Reward per metre of progress of `x_n` (linear; 0: off). Default 0.
+    pub progress_weight: f64,
+    /// Reference speed along the centre line \[m/s\] (the paper's "predefined high velocity").
+    /// Default 2 (faster reference speeds spin the ORCA car in the default track's bends).
+    pub reference_speed: f64,
+    /// Weight of the reference-progress term per step (0: off). Default 1.
+    pub reference_weight: f64,
+    /// Distance kept from the borders \[m\]. Default 0.03 (about half the car's width).
+    pub margin: f64,
+    /// Excursion cost weight. Default 1000.
+    pub excursion_weight: f64,
+    /// Input limits.
+    pub limits: InputLimits,
+    /// Regulariser.
+    pub reg: Regulariser,
+    /// SQP settings per cycle (few iterations: the warm start is close). Default 3 iterations.
+    pub sqp: SqpSettings,
+    /// GD settings per cycle. Default 5 iterations.
+    pub gd: GdSettings,
+    /// Initial guess on the first cycle: `[δ, d]` held. Default `[0, 0.5]`.
+    pub initial: Input,
+}
+
+impl Default for RacerSettings {
+    fn default() -> Self {
+        Self {
+            horizon: 20,
+            hold: 5,
+            optimizer: Optimizer::Sqp,
+            progress_weight: 0.0,
+            reference_speed: 2.0,
+            reference_weight: 1.0,
+            margin: 0.03,
+            excursion_weight: 1000.0,
+            limits: InputLimits::default(),
+            reg: Regulariser {
+                magnitude: [0.0, 0.0],
+                rate: [0.05, 0.01],
+                barrier: 1000.0,
+            },
+            sqp: SqpSettings {
+                iterations: 3,
+                ..SqpSettings::default()
+            },
+            gd: GdSettings {
+                iterations: 5,
+                ..GdSettings::default()
+            },
+            initial: [0.0, 0.5],
+        }
+    }
+}
+
+/// One control cycle's result.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RaceStep {
+    /// The input to apply now.
+    pub input: Input,
+    /// How the solve ended.
+    pub status: SolveStatus,
+    /// Optimiser iterations.
+    pub iterations: usize,
+    /// Cost reached.
+    pub cost: f64,
+    /// Predicted states over the horizon (`x₀ … x_n`).
+    pub predicted: Vec<State>,
+    /// QPs that needed the elastic fallback.
+    pub elastic_qps: usize,
+}
+
+/// Receding-horizon racer over a car model on a track.
+#[derive(Debug, Clone)]
+pub struct Racer<'a> {
+    plant: Plant<'a>,
+    track: &'a Track,
+    settings: RacerSettings,
+    warm: Vec<Input>,
+    last: Option<Input>,
+    segment: Option<usize>,
+}
+
+impl<'a> Racer<'a> {
+    /// A racer; checks the settings.
+    pub fn new(
+        model: &'a dyn CarDynamics,
+        track: &'a Track,
+        settings: RacerSettings,
+    ) -> Result<Self, RacingError> {
+        if settings.horizon == 0 {
+            return Err(RacingError::setting(
+                "horizon",
+                settings.horizon,
+                "need at least one control step",
+            ));
+        }
+        if !(settings.margin >= 0.0 && settings.progress_weight.is_finite()) {
+            return Err(RacingError::setting(
+                "margin",
+                settings.margin,
+                "margin must be ≥ 0 and progress_weight finite",
+            ));
+        }
+        let plant = Plant::new(model, settings.hold)?;
+        Ok(Self {
+            plant,
+            track,
+            warm: vec![settings.limits.clamp(settings.initial); settings.horizon],
+            settings,
+            last: None,
+            segment: None,
+        })
+    }
+
+    /// Control period \[s\].
+    pub fn period(&self) -> f64 {
+        self.plant.dt()
+    }
+
+    /// The settings.
+    pub fn settings(&self) -> &RacerSettings {
+        &self.settings
+    }
+
+    /// Forgets the warm start.
+    pub fn reset(&mut self) {
+        self.warm = vec![self.settings.limits.clamp(self.settings.initial); self.settings.horizon];
+        self.last = None;
+        self.segment = None;
+    }
+
+    /// One control cycle from the measured state `s`: solve from the shifted previous solution
+    /// and return the first input. A failed solve returns the warm start's first input with its
+    /// status.
+    pub fn step(&mut self, s: State) -> Result<RaceStep, RacingError> {
+        let st = &self.settings;
+        let problem = Problem {
+            plant: self.plant,
+            s0: s,
+            objective: Objective {
+                targets: Vec::new(),
+                track: Some(TrackTerms {
+                    track: self.track,
+                    progress_weight: st.progress_weight,
+                    margin: st.margin,
+                    excursion_weight: st.excursion_weight,
+                    reference_weight: st.reference_weight,
+                    reference_step: st.reference_speed * self.plant.dt(),
+                }),
+                limits: st.limits,
+                reg: st.reg,
+                u_prev: self.last,
+                start_segment: self.segment,
+            },
+        };
+        let sol = match st.optimizer {
+            Optimizer::Sqp => solve_sqp(&problem, &self.warm, &st.sqp)?,
+            Optimizer::Gd => solve_gd(&problem, &self.warm, &st.gd)?,
+        };
+        let input = st.limits.clamp(sol.inputs[0]);
+        // shift: drop the applied input, repeat the last
+        let mut warm = sol.inputs[1..].to_vec();
+        warm.push(*sol.inputs.last().unwrap_or(&input));
+        self.warm = warm;
+        self.last = Some(input);
+        self.segment = Some(match self.segment {
+            Some(h) => self.track.locate_near([s[0], s[1]], h, 12).segment,
+            None => self.track.locate([s[0], s[1]]).segment,
+        });
+        Ok(RaceStep {
+            input,
+            status: sol.status,
+            iterations: sol.iterations,
+            cost: sol.cost,
+            predicted: sol.states,
+            elastic_qps: sol.elastic_qps,
+        })
+    }
+}

@@ -1,0 +1,321 @@
+//! The racing optimiser: exact gradients and Jacobians against finite differences, SQP against
+//! gradient descent, an infeasible QP reported as a status.
+
+use dynlab_control::racing::{
+    GdSettings, Input, InputLimits, Manoeuvre, Objective, Optimizer, Plant, Problem, Racer,
+    RacerSettings, Regulariser, SolveStatus, SqpSettings, State, Target, TrackTerms, gradient,
+    solve_gd, solve_sqp,
+};
+use dynlab_learn::dynamics::ode::Solver;
+use dynlab_learn::dynamics::physics::PhysicsModel;
+use dynlab_learn::{Model, ModelKind, Network, Normalization, World};
+use dynlab_nn::{Activation, Init, Mlp, MlpSpec};
+use dynlab_sim::Track;
+
+fn physics_car() -> Model {
+    Model::new(
+        ModelKind::Physics,
+        World::Car,
+        0.01,
+        None,
+        None,
+        Some(PhysicsModel::car(&[]).unwrap()),
+        Solver::rk4(),
+    )
+    .unwrap()
+}
+
+fn residual_car() -> Model {
+    let spec = MlpSpec::uniform(5, &[16, 16], 3, Activation::Gelu).unwrap();
+    let mlp = Mlp::new(spec, Init::Auto, 3);
+    let mut norm = Normalization::identity(5, 3);
+    norm.output_std = vec![0.01; 3];
+    Model::new(
+        ModelKind::Residual,
+        World::Car,
+        0.01,
+        None,
+        Some(Network::new(mlp, norm)),
+        None,
+        Solver::rk4(),
+    )
+    .unwrap()
+}
+
+fn moving() -> State {
+    [0.1, -0.05, 0.2, 1.2, 0.05, 0.3]
+}
+
+fn inputs(n: usize) -> Vec<Input> {
+    (0..n)
+        .map(|k| {
+            [
+                0.2 * (k as f64 * 0.7).sin(),
+                0.4 + 0.2 * (k as f64 * 0.3).cos(),
+            ]
+        })
+        .collect()
+}
+
+fn target_problem(plant: Plant<'_>) -> Problem<'_> {
+    Problem {
+        plant,
+        s0: moving(),
+        objective: Objective {
+            targets: vec![
+                Target {
+                    step: 4,
+                    state: [0.4, 0.1, 0.5, 1.0, 0.0, 0.0],
+                    weight: [10.0, 10.0, 1.0, 0.1, 0.1, 0.01],
+                },
+                Target {
+                    step: 8,
+                    state: [0.8, 0.3, 1.0, 0.0, 0.0, 0.0],
+                    weight: [10.0, 10.0, 1.0, 0.1, 0.1, 0.01],
+                },
+            ],
+            track: None,
+            limits: InputLimits::default(),
+            reg: Regulariser::default(),
+            u_prev: Some([0.0, 0.3]),
+            start_segment: None,
+        },
+    }
+}
+
+/// Central differences of the plant's control-step map against the composed exact Jacobians.
+fn check_linearization(model: &Model, tol: f64, h: f64) {
+    let plant = Plant::new(model, 3).unwrap();
+    let u = inputs(4);
+    let s0 = moving();
+    let lin = plant.linearize(&s0, &u).unwrap();
+    let k = 2;
+    let xk = lin.states[k];
+    let f = |x: State, uk: Input| plant.rollout(&x, &[uk]).unwrap()[1];
+    let mut worst: f64 = 0.0;
+    for c in 0..6 {
+        let (mut p, mut m) = (xk, xk);
+        p[c] += h;
+        m[c] -= h;
+        let (fp, fm) = (f(p, u[k]), f(m, u[k]));
+        for r in 0..6 {
+            let fd = (fp[r] - fm[r]) / (2.0 * h);
+            let ex = lin.a[k][r * 6 + c];
+            worst = worst.max((fd - ex).abs() / (1.0 + ex.abs()));
+        }
+    }
+    for c in 0..2 {
+        let (mut p, mut m) = (u[k], u[k]);
+        p[c] += h;
+        m[c] -= h;
+        let (fp, fm) = (f(xk, p), f(xk, m));
+        for r in 0..6 {
+            let fd = (fp[r] - fm[r]) / (2.0 * h);
+            let ex = lin.b[k][r * 2 + c];
+            worst = worst.max((fd - ex).abs() / (1.0 + ex.abs()));
+        }
+    }
+    assert!(worst < tol, "worst relative Jacobian error {worst:e}");
+}
+
+#[test]
+fn composed_step_jacobians_match_finite_differences() {
+    check_linearization(&physics_car(), 1e-6, 1e-6);
+    // the network runs in f32: looser step and tolerance
+    check_linearization(&residual_car(), 2e-2, 1e-3);
+}
+
+fn check_gradient(model: &Model, tol: f64, h: f64) {
+    let plant = Plant::new(model, 2).unwrap();
+    let problem = target_problem(plant);
+    let u = inputs(8);
+    let (cost, grad, lin) = gradient(&problem, &u).unwrap();
+    let direct = problem.objective.cost(&lin.states, &u);
+    assert!((cost - direct).abs() <= 1e-9 * (1.0 + cost.abs()));
+    let mut worst: f64 = 0.0;
+    for k in 0..u.len() {
+        for c in 0..2 {
+            let eval = |d: f64| {
+                let mut v = u.clone();
+                v[k][c] += d;
+                let s = plant.rollout(&problem.s0, &v).unwrap();
+                problem.objective.cost(&s, &v)
+            };
+            let fd = (eval(h) - eval(-h)) / (2.0 * h);
+            let scale = 1.0 + fd.abs().max(grad[k][c].abs());
+            worst = worst.max((fd - grad[k][c]).abs() / scale);
+        }
+    }
+    assert!(worst < tol, "worst relative gradient error {worst:e}");
+}
+
+#[test]
+fn reverse_mode_gradient_matches_finite_differences() {
+    check_gradient(&physics_car(), 1e-6, 1e-6);
+    check_gradient(&residual_car(), 2e-2, 1e-3);
+}
+
+#[test]
+fn racing_gradient_with_progress_and_excursion_matches_finite_differences() {
+    let model = physics_car();
+    let track = Track::oval(1.0, 0.5, 0.15, 120).unwrap();
+    let plant = Plant::new(&model, 5).unwrap();
+    // start near the border so that excursion terms are active
+    let problem = Problem {
+        plant,
+        s0: [0.0, -0.4, 0.3, 1.5, 0.0, 0.0],
+        objective: Objective {
+            targets: Vec::new(),
+            track: Some(TrackTerms {
+                track: &track,
+                progress_weight: 10.0,
+                margin: 0.03,
+                excursion_weight: 100.0,
+                reference_weight: 1.0,
+                reference_step: 0.1,
+            }),
+            limits: InputLimits::default(),
+            reg: Regulariser::default(),
+            u_prev: None,
+            start_segment: None,
+        },
+    };
+    let u = vec![[0.05, 0.6]; 6];
+    let (_, grad, lin) = gradient(&problem, &u).unwrap();
+    let excursions = lin.states[1..]
+        .iter()
+        .filter(|s| !track.contains([s[0], s[1]]))
+        .count();
+    assert!(excursions > 0, "the fixture should leave the track");
+    let h = 1e-6;
+    for k in 0..u.len() {
+        for c in 0..2 {
+            let eval = |d: f64| {
+                let mut v = u.clone();
+                v[k][c] += d;
+                let s = plant.rollout(&problem.s0, &v).unwrap();
+                problem.objective.cost(&s, &v)
+            };
+            let fd = (eval(h) - eval(-h)) / (2.0 * h);
+            assert!(
+                (fd - grad[k][c]).abs() <= 1e-4 * (1.0 + fd.abs()),
+                "step {k} input {c}: fd {fd} exact {}",
+                grad[k][c]
+            );
+        }
+    }
+}
+
+#[test]
+fn sqp_reaches_the_cost_of_gradient_descent_on_the_drifting_turn() {
+    let model = physics_car();
+    let plant = Plant::new(&model, 5).unwrap();
+    let m = Manoeuvre::drifting_turn();
+    let problem = m.problem(plant, [0.0; 6], InputLimits::default());
+    let gd = solve_gd(
+        &problem,
+        &m.initial_inputs(),
+        &GdSettings {
+            iterations: 150,
+            step_sizes: 64,
+            ..GdSettings::default()
+        },
+    )
+    .unwrap();
+    let sqp = solve_sqp(&problem, &m.initial_inputs(), &SqpSettings::default()).unwrap();
+    let initial = gd.history[0];
+    assert!(gd.cost < initial, "gd {} initial {initial}", gd.cost);
+    assert!(
+        sqp.cost <= gd.cost * 1.001 + 1e-9,
+        "sqp {} ({:?}, {} it) vs gd {} ({:?}, {} it)",
+        sqp.cost,
+        sqp.status,
+        sqp.iterations,
+        gd.cost,
+        gd.status,
+        gd.iterations
+    );
+    assert!(
+        sqp.inputs
+            .iter()
+            .all(|u| u[0].abs() <= 0.35 + 1e-9 && (-0.1 - 1e-9..=1.0 + 1e-9).contains(&u[1]))
+    );
+}
+
+#[test]
+fn infeasible_track_qp_is_reported_as_a_status() {
+    let model = physics_car();
+    let track = Track::oval(1.0, 0.5, 0.15, 120).unwrap();
+    let plant = Plant::new(&model, 5).unwrap();
+    // 1 m outside the track, nearly at rest: no input can reach the corridor in 0.25 s
+    let problem = Problem {
+        plant,
+        s0: [0.0, -1.6, 0.0, 0.1, 0.0, 0.0],
+        objective: Objective {
+            targets: Vec::new(),
+            track: Some(TrackTerms {
+                track: &track,
+                progress_weight: 1.0,
+                margin: 0.0,
+                excursion_weight: 100.0,
+                reference_weight: 1.0,
+                reference_step: 0.1,
+            }),
+            limits: InputLimits::default(),
+            reg: Regulariser::default(),
+            u_prev: None,
+            start_segment: None,
+        },
+    };
+    let hard = SqpSettings {
+        elastic_penalty: None,
+        ..SqpSettings::default()
+    };
+    let sol = solve_sqp(&problem, &[[0.0, 0.5]; 5], &hard).unwrap();
+    assert_eq!(sol.status, SolveStatus::Infeasible);
+    assert_eq!(sol.iterations, 1);
+    // with the elastic fallback the same problem solves, using slacks
+    let sol = solve_sqp(&problem, &[[0.0, 0.5]; 5], &SqpSettings::default()).unwrap();
+    assert_ne!(sol.status, SolveStatus::Infeasible);
+    assert!(sol.elastic_qps > 0);
+}
+
+#[test]
+fn racer_drives_forward_on_an_oval_without_leaving_it() {
+    let model = physics_car();
+    let track = Track::oval(1.0, 0.5, 0.2, 120).unwrap();
+    for optimizer in [Optimizer::Sqp, Optimizer::Gd] {
+        let mut racer = Racer::new(
+            &model,
+            &track,
+            RacerSettings {
+                optimizer,
+                gd: GdSettings {
+                    iterations: 3,
+                    step_sizes: 64,
+                    ..GdSettings::default()
+                },
+                ..RacerSettings::default()
+            },
+        )
+        .unwrap();
+        let plant = Plant::new(&model, 5).unwrap();
+        let mut s = {
+            let p = track.start_pose();
+            [p.x, p.y, p.theta, 0.0, 0.0, 0.0]
+        };
+        for _ in 0..20 {
+            let step = racer.step(s).unwrap();
+            s = plant.rollout(&s, &[step.input]).unwrap()[1];
+            assert!(
+                track.contains([s[0], s[1]]),
+                "{optimizer:?} left the track at {s:?}"
+            );
+        }
+        let progress = track.locate([s[0], s[1]]).arc;
+        assert!(
+            progress > 0.5,
+            "{optimizer:?} progressed only {progress} m in 1 s"
+        );
+    }
+}

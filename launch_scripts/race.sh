@@ -1,0 +1,47 @@
+#!/usr/bin/env bash
+# Races the simulated car with the receding-horizon racer over DDS:
+#
+#   launch_scripts/race.sh MODEL_DIR [SECONDS] [OUT_BAG] [racer ROS args …]
+#
+# starts separate processes on the ROS_DOMAIN_ID domain (default 0) —
+#   sim_node  (world car, real time, the car on a track: $SCENARIO, default
+#              launch_scripts/scenarios/car_track.toml),
+#   racer     (model MODEL_DIR, the scenario's track file $TRACK, default
+#              launch_scripts/tracks/default.json; /car/pose in, /car/cmd out, following /clock),
+#   recorder  (only if OUT_BAG is given: /car/pose /car/cmd /car/odom /clock) —
+# lets them run for SECONDS of wall time (default 20), then stops them with SIGINT.
+# Extra arguments go to the racer's --ros-args, e.g. `-p optimizer:=gd`. $SIM_RATE (default 1)
+# slows the simulation (`0.25`: quarter real time) when solves take longer than the 50 ms period.
+#
+# Binaries from $DYNLAB_BIN_DIR (default: target/release; build them with
+# `cargo build --release -p dynlab-nodes --bins`).
+set -euo pipefail
+here="$(cd "$(dirname "$0")/.." && pwd)"
+bin="${DYNLAB_BIN_DIR:-${CARGO_TARGET_DIR:-$here/target}/release}"
+model="${1:?usage: race.sh MODEL_DIR [SECONDS] [OUT_BAG] [racer ROS args …]}"
+seconds="${2:-20}"
+out="${3:-}"
+shift $(( $# < 3 ? $# : 3 ))
+scenario="${SCENARIO:-$here/launch_scripts/scenarios/car_track.toml}"
+track="${TRACK:-$here/launch_scripts/tracks/default.json}"
+for b in sim_node racer recorder; do
+  [[ -x "$bin/$b" ]] || { echo "race.sh: $bin/$b not found; run cargo build --release -p dynlab-nodes --bins" >&2; exit 2; }
+done
+
+pids=()
+cleanup() { for p in "${pids[@]}"; do kill -INT "$p" 2>/dev/null || true; done; }
+trap cleanup EXIT
+
+if [[ -n "$out" ]]; then
+  "$bin/recorder" -o "$out" /car/pose /car/cmd /car/odom /clock --ros-args -p use_sim_time:=true &
+  pids+=("$!")
+fi
+"$bin/sim_node" --ros-args -p world:=car -p "scenario:=$scenario" -p "rate:=${SIM_RATE:-1.0}" &
+pids+=("$!")
+"$bin/racer" --ros-args -p "model:=$model" -p "track:=$track" -p use_sim_time:=true "$@" &
+pids+=("$!")
+
+sleep "$seconds"
+trap - EXIT
+# recorder first so the bag ends cleanly
+for p in "${pids[@]}"; do kill -INT "$p" 2>/dev/null || true; wait "$p" || true; done
