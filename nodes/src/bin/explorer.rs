@@ -17,9 +17,10 @@
 
 use std::time::Duration;
 
-use anyhow::{Context, bail};
+use anyhow::Context;
 use dynlab_msgs::nav_msgs::Odometry;
-use dynlab_ros::{Node, NodeArgs, Shutdown, WaitSet, qos};
+use dynlab_nodes::{Started, start_node};
+use dynlab_ros::{Shutdown, WaitSet, qos};
 use dynlab_sim::{CarExplorer, CarScenario, CarState, PushExplorer, PushScenario, SimRng};
 use dynlab_simbridge::messages::{self as m, SimWorld};
 
@@ -50,14 +51,6 @@ fn wait_for(shutdown: &Shutdown, ready: impl Fn() -> bool, topic: &str) -> bool 
 }
 
 fn main() -> anyhow::Result<()> {
-    let args = NodeArgs::from_env()?;
-    if let Some(extra) = args.program_args.first() {
-        bail!("explorer takes no arguments outside --ros-args (got `{extra}`)");
-    }
-    dynlab_ros::init_logging(args.log_level);
-    let shutdown = Shutdown::install()?;
-    let mut node = Node::new("explorer", &args)?;
-    let p = node.params();
     let known = [
         "world",
         "scenario",
@@ -67,12 +60,8 @@ fn main() -> anyhow::Result<()> {
         "subscribers",
         "use_sim_time",
     ];
-    for key in p.unknown_keys(&known) {
-        tracing::warn!(
-            "unknown parameter `{key}` ignored (known: {})",
-            known.join(", ")
-        );
-    }
+    let Started { mut node, shutdown } = start_node("explorer", &known)?;
+    let p = node.params();
     let world_name: String = p.get_or("world", "push".to_string())?;
     let world = SimWorld::parse(&world_name).with_context(|| {
         format!("parameter world: `{world_name}` is not a world; use push or car")

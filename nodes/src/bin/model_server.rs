@@ -32,7 +32,8 @@ use dynlab_msgs::dynlab_msgs::PushAction;
 use dynlab_msgs::geometry_msgs::{Pose, PoseStamped, Quaternion};
 use dynlab_msgs::nav_msgs::{Odometry, Path};
 use dynlab_msgs::std_msgs::Header;
-use dynlab_ros::{Node, NodeArgs, Publisher, QosProfile, Shutdown, WaitSet, qos};
+use dynlab_nodes::{Started, start_node};
+use dynlab_ros::{Publisher, QosProfile, WaitSet, qos};
 
 const POLL: Duration = Duration::from_millis(20);
 
@@ -88,14 +89,6 @@ fn publish(
 }
 
 fn main() -> anyhow::Result<()> {
-    let args = NodeArgs::from_env()?;
-    if let Some(extra) = args.program_args.first() {
-        bail!("model_server takes no arguments outside --ros-args (got `{extra}`)");
-    }
-    dynlab_ros::init_logging(args.log_level);
-    let shutdown = Shutdown::install()?;
-    let mut node = Node::new("model_server", &args)?;
-    let p = node.params();
     let known = [
         "model",
         "steps",
@@ -103,12 +96,8 @@ fn main() -> anyhow::Result<()> {
         "pose_qos",
         "use_sim_time",
     ];
-    for key in p.unknown_keys(&known) {
-        tracing::warn!(
-            "unknown parameter `{key}` ignored (known: {})",
-            known.join(", ")
-        );
-    }
+    let Started { mut node, shutdown } = start_node("model_server", &known)?;
+    let p = node.params();
     let model_dir: String = p.get_or("model", String::new())?;
     if model_dir.is_empty() {
         bail!("parameter model: give the model directory (-p model:=out/car_rk4)");

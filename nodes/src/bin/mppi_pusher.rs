@@ -28,7 +28,8 @@ use dynlab_control::mppi::{Mppi, MppiConfig, PushTask, Rect};
 use dynlab_learn::{World, load_model};
 use dynlab_msgs::geometry_msgs::PoseStamped;
 use dynlab_nodes::mppi_pusher::{Decision, PusherLogic, PusherSettings};
-use dynlab_ros::{Node, NodeArgs, Shutdown, WaitSet, qos};
+use dynlab_nodes::{Started, start_node};
+use dynlab_ros::{WaitSet, qos};
 use dynlab_sim::PushAction;
 use dynlab_simbridge::messages as m;
 
@@ -49,14 +50,6 @@ fn planar(msg: &PoseStamped) -> ([f64; 3], f64) {
 }
 
 fn main() -> anyhow::Result<()> {
-    let args = NodeArgs::from_env()?;
-    if let Some(extra) = args.program_args.first() {
-        bail!("mppi_pusher takes no arguments outside --ros-args (got `{extra}`)");
-    }
-    dynlab_ros::init_logging(args.log_level);
-    let shutdown = Shutdown::install()?;
-    let mut node = Node::new("mppi_pusher", &args)?;
-    let p = node.params();
     let known = [
         "model",
         "mppi",
@@ -74,12 +67,8 @@ fn main() -> anyhow::Result<()> {
         "goal",
         "use_sim_time",
     ];
-    for key in p.unknown_keys(&known) {
-        tracing::warn!(
-            "unknown parameter `{key}` ignored (known: {})",
-            known.join(", ")
-        );
-    }
+    let Started { mut node, shutdown } = start_node("mppi_pusher", &known)?;
+    let p = node.params();
     let model_dir: String = p.get_or("model", String::new())?;
     if model_dir.is_empty() {
         bail!("parameter model: required; pass -p model:=DIR (a pushing model from dynlab train)");

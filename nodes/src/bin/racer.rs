@@ -18,21 +18,14 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, bail};
 use dynlab_control::racing::{CarStateEstimator, Optimizer, Racer, RacerSettings};
 use dynlab_msgs::geometry_msgs::PoseStamped;
-use dynlab_ros::{Node, NodeArgs, Shutdown, WaitSet, qos};
+use dynlab_nodes::{Started, start_node};
+use dynlab_ros::{WaitSet, qos};
 use dynlab_sim::{CarInput, Track};
 use dynlab_simbridge::messages as m;
 
 const POLL: Duration = Duration::from_millis(2);
 
 fn main() -> anyhow::Result<()> {
-    let args = NodeArgs::from_env()?;
-    if let Some(extra) = args.program_args.first() {
-        bail!("racer takes no arguments outside --ros-args (got `{extra}`)");
-    }
-    dynlab_ros::init_logging(args.log_level);
-    let shutdown = Shutdown::install()?;
-    let mut node = Node::new("racer", &args)?;
-    let p = node.params();
     let known = [
         "model",
         "track",
@@ -42,12 +35,8 @@ fn main() -> anyhow::Result<()> {
         "hold",
         "use_sim_time",
     ];
-    for key in p.unknown_keys(&known) {
-        tracing::warn!(
-            "unknown parameter `{key}` ignored (known: {})",
-            known.join(", ")
-        );
-    }
+    let Started { mut node, shutdown } = start_node("racer", &known)?;
+    let p = node.params();
     let model_dir: String = p.get_or("model", String::new())?;
     if model_dir.is_empty() {
         bail!("parameter model is required: -p model:=DIR (a car model from `dynlab train`)");

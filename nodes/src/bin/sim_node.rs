@@ -34,8 +34,9 @@ use dynlab_msgs::dynlab_msgs::PushAction as PushActionMsg;
 use dynlab_msgs::geometry_msgs::PoseStamped;
 use dynlab_msgs::nav_msgs::Odometry;
 use dynlab_msgs::rosgraph_msgs::Clock as ClockMsg;
+use dynlab_nodes::{Started, start_node};
 use dynlab_ros::qos::{self, History, QosProfile};
-use dynlab_ros::{Node, NodeArgs, Publisher, Shutdown, Subscription, WaitSet};
+use dynlab_ros::{Publisher, Subscription, WaitSet};
 use dynlab_sim::{CarScenario, PushScenario};
 use dynlab_simbridge::engine::{Emit, EngineConfig, Mode, SimEngine};
 use dynlab_simbridge::messages::{
@@ -164,23 +165,8 @@ fn take_commands(
 }
 
 fn main() -> anyhow::Result<()> {
-    let args = NodeArgs::from_env()?;
-    if let Some(extra) = args.program_args.first() {
-        bail!(
-            "sim_node takes no arguments outside --ros-args (got `{extra}`); set parameters with \
-             --ros-args -p world:=car -p scenario:=FILE or --params-file FILE"
-        );
-    }
-    dynlab_ros::init_logging(args.log_level);
-    let shutdown = Shutdown::install()?;
-    let mut node = Node::new("sim_node", &args)?;
+    let Started { mut node, shutdown } = start_node("sim_node", KNOWN_PARAMS)?;
     let p = node.params();
-    for key in p.unknown_keys(KNOWN_PARAMS) {
-        tracing::warn!(
-            "unknown parameter `{key}` ignored (known: {})",
-            KNOWN_PARAMS.join(", ")
-        );
-    }
     if p.get_or("use_sim_time", false)? {
         tracing::warn!("use_sim_time is ignored: sim_node is the source of /clock");
     }
