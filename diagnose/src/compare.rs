@@ -516,16 +516,7 @@ fn eval_report(
                 ab[d] += row[d].abs();
             }
         }
-        world
-            .state_names()
-            .iter()
-            .enumerate()
-            .map(|(d, name)| DimError {
-                name: name.to_string(),
-                rmse: (sq[d] / n.max(1) as f64).sqrt(),
-                mae: ab[d] / n.max(1) as f64,
-            })
-            .collect()
+        dynlab_learn::eval::dim_errors(world, &sq, &ab, n)
     };
     let tve_report = if world == World::Car {
         let seg_len = (cfg.segment_s / data.data.pose_dt_s).round().max(1.0) as usize + 1;

@@ -56,7 +56,9 @@ pub struct EvalReport {
     pub failed_rollouts: usize,
 }
 
-fn dim_errors(world: World, sq: &[f64], abs: &[f64], n: usize) -> Vec<DimError> {
+/// Per-dimension RMSE and mean absolute error from the sums of squared (`sq`) and absolute (`abs`)
+/// errors over `n` samples.
+pub fn dim_errors(world: World, sq: &[f64], abs: &[f64], n: usize) -> Vec<DimError> {
     world
         .state_names()
         .iter()
