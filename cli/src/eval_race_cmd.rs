@@ -50,7 +50,7 @@ pub struct RaceArgs {
     /// solved with GD and SQP on the model and played open-loop on the simulator (Table I).
     #[arg(long)]
     offline: bool,
-    /// Output directory for report.json and the plots (race_<model>.png).
+    /// Output directory for report.json and the plots (race_MODEL.png).
     #[arg(long, default_value = "race_eval")]
     out: PathBuf,
 }
