@@ -204,23 +204,7 @@ impl Track {
     /// Projects a point onto the closest centre-line segment.
     pub fn project(&self, p: [f64; 2]) -> TrackProjection {
         let n = self.centre.len();
-        let mut best = (f64::INFINITY, 0usize, 0.0f64);
-        for i in 0..n {
-            let a = self.centre[i];
-            let b = self.centre[(i + 1) % n];
-            let d = [b[0] - a[0], b[1] - a[1]];
-            let l2 = d[0] * d[0] + d[1] * d[1];
-            let t = if l2 > 0.0 {
-                (((p[0] - a[0]) * d[0] + (p[1] - a[1]) * d[1]) / l2).clamp(0.0, 1.0)
-            } else {
-                0.0
-            };
-            let q = [a[0] + t * d[0], a[1] + t * d[1]];
-            let dist2 = (p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2);
-            if dist2 < best.0 {
-                best = (dist2, i, t);
-            }
-        }
+        let best = self.nearest_segment(p, 0, n);
         let i = best.1;
         let a = self.centre[i];
         let b = self.centre[(i + 1) % n];
@@ -349,7 +333,9 @@ impl Track {
         }
     }
 
-    fn locate_among(&self, p: [f64; 2], start: usize, count: usize) -> TrackLocation {
+    /// The centre-line segment nearest to `p` among `count` segments from `start` (wrapping):
+    /// (squared distance, segment index, parameter t ∈ \[0, 1\] along it).
+    fn nearest_segment(&self, p: [f64; 2], start: usize, count: usize) -> (f64, usize, f64) {
         let n = self.centre.len();
         let mut best = (f64::INFINITY, start % n, 0.0f64);
         for k in 0..count {
@@ -369,6 +355,12 @@ impl Track {
                 best = (dist2, i, t);
             }
         }
+        best
+    }
+
+    fn locate_among(&self, p: [f64; 2], start: usize, count: usize) -> TrackLocation {
+        let n = self.centre.len();
+        let best = self.nearest_segment(p, start, count);
         let (i, t) = (best.1, best.2);
         let a = self.centre[i];
         let b = self.centre[(i + 1) % n];
