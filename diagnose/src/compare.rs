@@ -29,7 +29,7 @@ pub mod html;
 pub mod online;
 pub mod stats;
 
-use dynlab_learn::dynamics::conventions::{l_rel, tve, wrap_angle};
+use dynlab_learn::dynamics::conventions::{tve, wrap_angle};
 use dynlab_learn::dynamics::data::{gather, windows};
 use dynlab_learn::dynamics::ode::OdeStatus;
 use dynlab_learn::eval::{DimError, EvalReport, TveReport};
@@ -405,14 +405,7 @@ fn batch_errors(
             if j + 1 == k {
                 ek[i * ds..(i + 1) * ds].copy_from_slice(&e);
             }
-            l += g * match &loss {
-                Loss::PoseMse { weights } => weights
-                    .iter()
-                    .enumerate()
-                    .map(|(q, w)| w * e[lr.start + q] * e[lr.start + q])
-                    .sum::<f64>(),
-                Loss::LRel { norm, eps } => l_rel(&p[lr.clone()], &t[lr.clone()], *eps, *norm),
-            };
+            l += g * loss.step_term(p, t, &e, lr.clone());
             g *= 0.9;
         }
         loss_w[i] = l;

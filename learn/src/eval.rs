@@ -2,7 +2,9 @@
 //! (RMSE and MAE, angles wrapped), the training-loss metric at k steps, and for the car the
 //! trajectory validation error TVE (Kohler et al. eq. 10) over segments.
 
-use dynlab_dynamics::conventions::{LossNorm, l_rel, tve, wrap_angle};
+use std::ops::Range;
+
+use dynlab_dynamics::conventions::{l_rel, tve, wrap_angle};
 use dynlab_dynamics::data::{Window, gather, windows};
 use dynlab_dynamics::ode::OdeStatus;
 use serde::{Deserialize, Serialize};
@@ -54,6 +56,29 @@ pub struct EvalReport {
     pub tve: Option<TveReport>,
     /// Model steps whose solver did not succeed.
     pub failed_rollouts: usize,
+}
+
+impl Loss {
+    /// One rollout step's loss term: `pred` and `target` are full states, `err` their difference
+    /// (angles wrapped), `learned` the dimensions the loss covers.
+    pub fn step_term(
+        &self,
+        pred: &[f64],
+        target: &[f64],
+        err: &[f64],
+        learned: Range<usize>,
+    ) -> f64 {
+        match self {
+            Loss::PoseMse { weights } => weights
+                .iter()
+                .enumerate()
+                .map(|(q, w)| w * err[learned.start + q] * err[learned.start + q])
+                .sum::<f64>(),
+            Loss::LRel { norm, eps } => {
+                l_rel(&pred[learned.clone()], &target[learned], *eps, *norm)
+            }
+        }
+    }
 }
 
 /// Per-dimension RMSE and mean absolute error from the sums of squared (`sq`) and absolute (`abs`)
@@ -135,14 +160,7 @@ pub fn evaluate(
                         abk[d] += e[d].abs();
                     }
                 }
-                total_loss += g * match &loss {
-                    Loss::PoseMse { weights } => weights
-                        .iter()
-                        .enumerate()
-                        .map(|(q, w)| w * e[lr.start + q] * e[lr.start + q])
-                        .sum::<f64>(),
-                    Loss::LRel { norm, eps } => l_rel(&p[lr.clone()], &t[lr.clone()], *eps, *norm),
-                };
+                total_loss += g * loss.step_term(p, t, &e, lr.clone());
                 g *= 0.9;
             }
         }
@@ -168,7 +186,6 @@ pub fn evaluate(
     } else {
         None
     };
-    let _ = LossNorm::L1;
     Ok(EvalReport {
         world,
         kind: model.kind().name().to_string(),
