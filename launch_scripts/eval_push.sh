@@ -58,17 +58,26 @@ fi
 
 mkdir -p "$out/episodes" "$out/plots"
 summary="$out/summary.csv"
-for ds in "${datasets[@]}"; do
+# Plants: our simulator's default block (support grid) for every model; Tu & Lin's models also
+# on the block resting on its four corners (PyBullet's box-on-plane contact, which their data
+# come from), row label "tulin@corners".
+plants=(sim:grid)
+[[ " ${datasets[*]} " == *" tulin "* ]] && plants+=(tulin:grid tulin:corners)
+for plant in "${plants[@]}"; do
+  ds="${plant%%:*}"; support="${plant#*:}"
+  row="$ds"; [[ "$support" == corners ]] && row="$ds@corners"
   for kind in $KINDS; do
     for k in $STEPS; do
       m="$out/models/$ds-$kind-k$k"
       [[ -e "$m/model.json" ]] || continue
       for scene in free obstacle; do
-        csv="$out/episodes/$scene-$ds-$kind-k$k.csv"
+        arg="$scene"
+        [[ "$support" == corners ]] && arg="$root/launch_scripts/scenarios/push_${scene}_corners.toml"
+        csv="$out/episodes/$scene-$row-$kind-k$k.csv"
         [[ -e "$csv" ]] && continue
-        "$bin" eval push --model "$m" --scenario "$scene" --episodes "$EPISODES" --seed "$SEED" \
-          --label "$ds-$kind-k$k" --csv "$csv.tmp" --summary "$summary" \
-          --plot "$out/plots/$scene-$ds-$kind-k$k.png" --quiet > /dev/null && mv "$csv.tmp" "$csv"
+        "$bin" eval push --model "$m" --scenario "$arg" --episodes "$EPISODES" --seed "$SEED" \
+          --label "$row-$kind-k$k" --csv "$csv.tmp" --summary "$summary" \
+          --plot "$out/plots/$scene-$row-$kind-k$k.png" --quiet > /dev/null && mv "$csv.tmp" "$csv"
         tail -1 "$summary"
       done
     done

@@ -32,7 +32,9 @@ mod scenario_file;
 pub use error::SimError;
 pub use geometry::{OrientedBox, Pose2, Region, RegionShape, wrap_angle};
 pub use noise::MeasurementNoise;
-pub use push::{PushAction, PushEffects, PushOutcome, PushScenario, PushWorld, TimedPose};
+pub use push::{
+    PushAction, PushEffects, PushOutcome, PushScenario, PushWorld, SupportLayout, TimedPose,
+};
 pub use rng::{SimRng, derive_seed};
 pub mod car;
 pub mod episode;

@@ -1,6 +1,6 @@
 //! Physics sanity of the pushing world (Tu & Lin's action convention).
 
-use dynlab_sim::{Pose2, PushAction, PushScenario, PushWorld, wrap_angle};
+use dynlab_sim::{Pose2, PushAction, PushScenario, PushWorld, SupportLayout, wrap_angle};
 
 fn push_from(scenario: &PushScenario, start: Pose2, action: PushAction) -> dynlab_sim::PushOutcome {
     let mut w = PushWorld::new(scenario).expect("valid scenario");
@@ -61,6 +61,23 @@ fn off_centre_push_rotates_the_right_way() {
     assert!((left.final_pose.x - right.final_pose.x).abs() < 1e-4);
     // The block still moves forward.
     assert!(left.final_pose.x > 0.42);
+}
+
+#[test]
+fn block_on_its_corners_turns_less_than_on_a_grid() {
+    // The frictional torque about the centre grows with the support points' distance from it:
+    // on its four corners (c ≈ 0.71 a) the block resists turning more than on the uniform grid
+    // (c ≈ 0.38 a), so the same off-centre push turns it less and moves it further.
+    let start = Pose2::new(0.4, 0.0, 0.0);
+    let push = PushAction::new(0.8, 0.0, 1.0);
+    let grid = push_from(&PushScenario::free(), start, push);
+    let mut corners = PushScenario::free();
+    corners.block.support = SupportLayout::Corners;
+    let on_corners = push_from(&corners, start, push);
+    let (tg, tc) = (grid.final_pose.theta, on_corners.final_pose.theta);
+    assert!(tc < -0.05 && tg < tc, "θ grid {tg}, corners {tc}");
+    assert!(tc / tg < 0.8, "corners turn {:.2}× as much as the grid", tc / tg);
+    assert!(on_corners.final_pose.x > grid.final_pose.x);
 }
 
 #[test]
