@@ -27,8 +27,13 @@ cargo build --release -q -p dynlab
 bin="${CARGO_TARGET_DIR:-$root/target}/release/dynlab"
 mkdir -p "$out/models"
 
+# Data sets: "sim" = our simulator's data; "tulin" = Tu & Lin's PyBullet data, trained with the
+# budget of their comparison table (batch 100, 250 epochs: ≈ 2000 Adam steps on 800 windows);
+# "tulin_se2" = the same data with 10 rigidly moved and turned copies of every training trajectory
+# (`train --augment-se2 10`, batch 100, 23 epochs: the same ≈ 2000 Adam steps), network kinds only
+# (the physics model is pose-invariant by construction).
 datasets=(sim)
-if [[ -e "$TU_LIN" ]]; then datasets+=(tulin); else echo "note: $TU_LIN not found; Tu & Lin's data skipped" >&2; fi
+if [[ -e "$TU_LIN" ]]; then datasets+=(tulin tulin_se2); else echo "note: $TU_LIN not found; Tu & Lin's data skipped" >&2; fi
 
 if [[ "$mode" != "--eval-only" ]]; then
   if [[ ! -e "$out/sim_bag/metadata.yaml" ]]; then
@@ -39,14 +44,20 @@ if [[ "$mode" != "--eval-only" ]]; then
       --episodes 500 --seed 7 --episode-gap 30 --out "$out/sim_bag"
   fi
   for ds in "${datasets[@]}"; do
-    bag="$out/sim_bag"; [[ "$ds" == tulin ]] && bag="$TU_LIN"
+    bag="$out/sim_bag"; [[ "$ds" == tulin* ]] && bag="$TU_LIN"
     for kind in $KINDS; do
+      [[ "$ds" == tulin_se2 && "$kind" == physics ]] && continue
       for k in $STEPS; do
         m="$out/models/$ds-$kind-k$k"
         [[ -e "$m/model.json" ]] && continue
         extra=()
-        [[ "$kind" == hybrid ]] && extra=(--epochs $(( EPOCHS / 3 > 0 ? EPOCHS / 3 : 1 )))
-        [[ "$kind" != hybrid && "$kind" != physics ]] && extra=(--epochs "$EPOCHS")
+        case "$ds:$kind" in
+          *:physics) ;;
+          tulin:*) extra=(--batch 100 --epochs 250) ;;
+          tulin_se2:*) extra=(--augment-se2 10 --batch 100 --epochs 23) ;;
+          sim:hybrid) extra=(--epochs $(( EPOCHS / 3 > 0 ? EPOCHS / 3 : 1 ))) ;;
+          *) extra=(--epochs "$EPOCHS") ;;
+        esac
         echo "== train $ds $kind k=$k"
         "$bin" train --bag "$bag" --kind "$kind" --steps "$k" "${extra[@]}" --threads "$THREADS" \
           --out "$m" --quiet 2>&1 | tail -1
@@ -60,9 +71,9 @@ mkdir -p "$out/episodes" "$out/plots"
 summary="$out/summary.csv"
 # Plants: our simulator's default block (support grid) for every model; Tu & Lin's models also
 # on the block resting on its four corners (PyBullet's box-on-plane contact, which their data
-# come from), row label "tulin@corners".
+# come from: the matched plant), row label "<data>@corners".
 plants=(sim:grid)
-[[ " ${datasets[*]} " == *" tulin "* ]] && plants+=(tulin:grid tulin:corners)
+for ds in "${datasets[@]}"; do [[ "$ds" == tulin* ]] && plants+=("$ds:corners" "$ds:grid"); done
 for plant in "${plants[@]}"; do
   ds="${plant%%:*}"; support="${plant#*:}"
   row="$ds"; [[ "$support" == corners ]] && row="$ds@corners"

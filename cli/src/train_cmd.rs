@@ -62,6 +62,10 @@ pub struct TrainArgs {
     /// Validation split.
     #[arg(long, value_enum, default_value_t = SplitArg::Trajectories)]
     split: SplitArg,
+    /// Pushing: add N rigidly moved and turned copies of every training trajectory (pushing on a
+    /// homogeneous table does not depend on the block's pose; validation data stay as recorded).
+    #[arg(long, default_value_t = 0, value_name = "N")]
+    augment_se2: usize,
     /// Threads (results do not depend on it).
     #[arg(long, default_value_t = 2)]
     threads: usize,
@@ -124,6 +128,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         effects: args.effects.clone(),
         threads: args.threads.max(1),
         max_samples: args.max_samples,
+        augment_se2: args.augment_se2,
         split: match args.split {
             SplitArg::Trajectories => Split::Trajectories,
             SplitArg::Overlapping => Split::OverlappingWindows,

@@ -16,6 +16,7 @@
 #![warn(missing_docs)]
 #![allow(clippy::needless_range_loop)]
 
+pub mod augment;
 pub mod dataset;
 mod error;
 pub mod eval;

@@ -121,6 +121,9 @@ pub struct TrainConfig {
     pub physics_free: Option<Vec<String>>,
     /// Physics parameter values set before the fit (measured mass, geometry, …; default none).
     pub physics_values: std::collections::BTreeMap<String, f64>,
+    /// Pushing: rigidly moved and turned copies of every training trajectory added after the
+    /// split ([`crate::augment::augment_se2`]; default 0, none). Validation data stay as recorded.
+    pub augment_se2: usize,
 }
 
 impl Default for TrainConfig {
@@ -149,6 +152,7 @@ impl Default for TrainConfig {
             physics_max_windows: 2000,
             physics_free: None,
             physics_values: std::collections::BTreeMap::new(),
+            augment_se2: 0,
         }
     }
 }
@@ -835,7 +839,7 @@ pub fn train(
         ));
     }
     // split
-    let trajs = match (world, cfg.split) {
+    let mut trajs = match (world, cfg.split) {
         (World::Car, _) => segment(
             &data.trajectories,
             (cfg.segment_s / dt).round().max(2.0) as usize + 1,
@@ -844,7 +848,7 @@ pub fn train(
     };
     let lengths: Vec<usize> = trajs.iter().map(|t| t.len()).collect();
     let all = windows(&lengths, k)?;
-    let (train_w, val_w, val_segments) = match cfg.split {
+    let (mut train_w, val_w, val_segments) = match cfg.split {
         Split::Trajectories => {
             let sp = split_trajectories(trajs.len(), cfg.validation_fraction, cfg.seed)?;
             let is_val: Vec<bool> = (0..trajs.len())
@@ -868,6 +872,27 @@ pub fn train(
                 trajectories: trajs.len(),
             },
         ));
+    }
+    if cfg.augment_se2 > 0 {
+        if world != World::Push || cfg.split != Split::Trajectories {
+            return Err(LearnError::setting(
+                "augment_se2",
+                cfg.augment_se2,
+                "symmetry augmentation is for pushing data with the split by trajectories \
+                 (copies of a trajectory must not reach the validation set)",
+            ));
+        }
+        let mut train_idx: Vec<usize> = train_w.iter().map(|w| w.trajectory).collect();
+        train_idx.dedup();
+        let originals: Vec<StateTrajectory> = train_idx.iter().map(|&i| trajs[i].clone()).collect();
+        let copies = crate::augment::augment_se2(&originals, cfg.augment_se2, cfg.seed);
+        let first = trajs.len();
+        let lens: Vec<usize> = copies.iter().map(|t| t.len()).collect();
+        train_w.extend(windows(&lens, k)?.into_iter().map(|w| Window {
+            trajectory: first + w.trajectory,
+            start: w.start,
+        }));
+        trajs.extend(copies);
     }
     let data_f = Data::new(trajs, world);
     let loss = cfg.loss_for(world);

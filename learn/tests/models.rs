@@ -427,6 +427,33 @@ fn overlapping_split_has_more_validation_windows_from_training_trajectories() {
 }
 
 #[test]
+fn symmetry_augmentation_adds_moved_training_copies_and_leaves_validation_alone() {
+    let tmp = tempfile::tempdir().unwrap();
+    let push = push_data(tmp.path());
+    let mut cfg = small(ModelKind::Residual, World::Push);
+    cfg.epochs = 1;
+    let plain = train(&push, &cfg, &mut |_| {}).unwrap();
+    cfg.augment_se2 = 3;
+    let aug = train(&push, &cfg, &mut |_| {}).unwrap();
+    assert_eq!(aug.windows.0, 4 * plain.windows.0);
+    assert_eq!(aug.windows.1, plain.windows.1);
+    assert_eq!(aug.validation_segments, plain.validation_segments);
+    // Copies could reach the validation set through overlapping windows, and the car is not
+    // invariant: both are refused with the reason.
+    cfg.split = Split::OverlappingWindows;
+    let e = train(&push, &cfg, &mut |_| {}).unwrap_err().to_string();
+    assert!(
+        e.contains("augment_se2") && e.contains("split by trajectories"),
+        "{e}"
+    );
+    let car = car_data(tmp.path());
+    let mut cfg = small(ModelKind::Residual, World::Car);
+    cfg.augment_se2 = 2;
+    let e = train(&car, &cfg, &mut |_| {}).unwrap_err().to_string();
+    assert!(e.contains("pushing data"), "{e}");
+}
+
+#[test]
 fn bad_input_gives_clear_errors() {
     let tmp = tempfile::tempdir().unwrap();
     let push = push_data(tmp.path());

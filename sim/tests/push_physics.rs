@@ -76,7 +76,11 @@ fn block_on_its_corners_turns_less_than_on_a_grid() {
     let on_corners = push_from(&corners, start, push);
     let (tg, tc) = (grid.final_pose.theta, on_corners.final_pose.theta);
     assert!(tc < -0.05 && tg < tc, "θ grid {tg}, corners {tc}");
-    assert!(tc / tg < 0.8, "corners turn {:.2}× as much as the grid", tc / tg);
+    assert!(
+        tc / tg < 0.8,
+        "corners turn {:.2}× as much as the grid",
+        tc / tg
+    );
     assert!(on_corners.final_pose.x > grid.final_pose.x);
 }
 
