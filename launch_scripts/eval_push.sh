@@ -94,16 +94,35 @@ for plant in "${plants[@]}"; do
     done
   done
 done
-# the table: one row per model, free and obstacle side by side
-awk -F, 'NR > 1 { key = $1; kind[key] = $2; k[key] = $3; order[key] = NR
+# Controller variants on a few of our simulator's models (row "sim+<variant>"): Tu & Lin's own
+# MPPI settings and SMPPI-style smoothed sampling noise (launch_scripts/mppi/*.toml).
+for variant in ${VARIANTS:-tu_lin smooth}; do
+  for name in ${VARIANT_MODELS:-node-rk4-k1 node-rk4-k3 residual-k2 node-dopri5-k3}; do
+    m="$out/models/sim-$name"
+    [[ -e "$m/model.json" ]] || continue
+    for scene in free obstacle; do
+      csv="$out/episodes/$scene-sim+$variant-$name.csv"
+      [[ -e "$csv" ]] && continue
+      "$bin" eval push --model "$m" --scenario "$scene" --episodes "$EPISODES" --seed "$SEED" \
+        --mppi "$root/launch_scripts/mppi/$variant.toml" --label "sim+$variant-$name" \
+        --csv "$csv.tmp" --summary "$summary" --quiet > /dev/null && mv "$csv.tmp" "$csv"
+      tail -1 "$summary"
+    done
+  done
+done
+# the table: one row per model (data set @ plant, kind, k), free and obstacle side by side
+awk -F, 'NR > 1 { key = $1; kind[key] = $2; k[key] = $3
+  split(key, a, "-"); data[key] = a[1]
   cell = sprintf("%.0f %% / %.0f %% / %.1f / %d (n=%d)", 100 * $7, 100 * $9, $12, $10, $5)
   if ($4 == "free") free[key] = cell; else obst[key] = cell }
   END {
+    rank["residual"] = 1; rank["node-euler"] = 2; rank["node-rk4"] = 3; rank["node-dopri5"] = 4
+    rank["physics"] = 5; rank["hybrid"] = 6
     print "| data | kind | k | free: success / strict / steps to success / collisions | obstacle: success / strict / steps to success / collisions |"
     print "|---|---|---|---|---|"
-    n = 0; for (key in order) keys[++n] = key
-    for (i = 1; i <= n; i++) for (j = i + 1; j <= n; j++) if (order[keys[j]] < order[keys[i]]) { t = keys[i]; keys[i] = keys[j]; keys[j] = t }
-    for (i = 1; i <= n; i++) { key = keys[i]; split(key, a, "-")
-      printf "| %s | %s | %s | %s | %s |\n", a[1], kind[key], k[key], free[key], obst[key] }
+    n = 0; for (key in kind) { keys[++n] = key; sk[key] = sprintf("%s|%d|%d", data[key], rank[kind[key]], k[key]) }
+    for (i = 1; i <= n; i++) for (j = i + 1; j <= n; j++) if (sk[keys[j]] < sk[keys[i]]) { t = keys[i]; keys[i] = keys[j]; keys[j] = t }
+    for (i = 1; i <= n; i++) { key = keys[i]
+      printf "| %s | %s | %s | %s | %s |\n", data[key], kind[key], k[key], free[key], obst[key] }
   }' "$summary" > "$out/table.md"
 cat "$out/table.md"
