@@ -73,7 +73,9 @@ summary="$out/summary.csv"
 # on the block resting on its four corners (PyBullet's box-on-plane contact, which their data
 # come from: the matched plant), row label "<data>@corners".
 plants=(sim:grid)
-for ds in "${datasets[@]}"; do [[ "$ds" == tulin* ]] && plants+=("$ds:corners" "$ds:grid"); done
+for support in corners grid; do
+  for ds in "${datasets[@]}"; do [[ "$ds" == tulin* ]] && plants+=("$ds:$support"); done
+done
 for plant in "${plants[@]}"; do
   ds="${plant%%:*}"; support="${plant#*:}"
   row="$ds"; [[ "$support" == corners ]] && row="$ds@corners"
