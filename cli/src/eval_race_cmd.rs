@@ -50,6 +50,9 @@ pub struct RaceArgs {
     /// solved with GD and SQP on the model and played open-loop on the simulator (Table I).
     #[arg(long)]
     offline: bool,
+    /// Offline: largest number of gradient-descent iterations (each tries 512 step sizes).
+    #[arg(long, default_value_t = 300)]
+    gd_iterations: usize,
     /// Output directory for report.json and the plots (race_MODEL.png).
     #[arg(long, default_value = "race_eval")]
     out: PathBuf,
@@ -292,7 +295,14 @@ fn offline(model: &Model, args: &RaceArgs) -> anyhow::Result<()> {
         for opt in ["gd", "sqp"] {
             let t0 = Instant::now();
             let sol = if opt == "gd" {
-                solve_gd(&problem, &m.initial_inputs(), &GdSettings::default())?
+                solve_gd(
+                    &problem,
+                    &m.initial_inputs(),
+                    &GdSettings {
+                        iterations: args.gd_iterations,
+                        ..GdSettings::default()
+                    },
+                )?
             } else {
                 solve_sqp(&problem, &m.initial_inputs(), &SqpSettings::default())?
             };
