@@ -118,7 +118,8 @@ fn candidate_costs(problem: &Problem<'_>, cands: &[Vec<Input>]) -> Result<Vec<f6
         return Ok(out);
     }
     // thread t takes chunks t, t + threads, …; results are put back in chunk order
-    let per_thread: Vec<Result<Vec<(usize, Vec<f64>)>, RacingError>> = std::thread::scope(|sc| {
+    type ChunkCosts = Vec<(usize, Vec<f64>)>;
+    let per_thread: Vec<Result<ChunkCosts, RacingError>> = std::thread::scope(|sc| {
         let handles: Vec<_> = (0..threads)
             .map(|t| {
                 let chunks = &chunks;
