@@ -10,8 +10,13 @@
 #              launch_scripts/tracks/default.json; /car/pose in, /car/cmd out, following /clock),
 #   recorder  (only if OUT_BAG is given: /car/pose /car/cmd /car/odom /clock) —
 # lets them run for SECONDS of wall time (default 20), then stops them with SIGINT.
-# Extra arguments go to the racer's --ros-args, e.g. `-p optimizer:=gd`. $SIM_RATE (default 1)
-# slows the simulation (`0.25`: quarter real time) when solves take longer than the 50 ms period.
+# Extra arguments go to the racer's --ros-args, e.g. `-p optimizer:=gd` or `-p delay:=0.05`.
+# The racer publishes each command 30 ms (its `delay`) of simulation time after the pose it was
+# computed from and plans from the state predicted at that time, so every solve must finish
+# within 30 ms of simulation time: $SIM_RATE (default 1) slows the simulation (0.2 for the
+# residual model, 0.1 for node-rk4 on 2 busy cores; the racer logs late commands).
+# With OUT_BAG and the `dynlab` binary present, the bag is checked at the end
+# (launch_scripts/race_check.py: laps, lap times, excursions, border distance, command rate).
 #
 # Binaries from $DYNLAB_BIN_DIR (default: target/release; build them with
 # `cargo build --release -p dynlab-nodes --bins`).
@@ -45,3 +50,7 @@ sleep "$seconds"
 trap - EXIT
 # recorder first so the bag ends cleanly
 for p in "${pids[@]}"; do kill -INT "$p" 2>/dev/null || true; wait "$p" || true; done
+if [[ -n "$out" && -x "$bin/dynlab" ]]; then
+  "$bin/dynlab" bag export "$out" > "$out.jsonl"
+  python3 "$here/launch_scripts/race_check.py" "$out.jsonl" "$track"
+fi

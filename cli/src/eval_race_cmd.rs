@@ -50,6 +50,13 @@ pub struct RaceArgs {
     /// solved with GD and SQP on the model and played open-loop on the simulator (Table I).
     #[arg(long)]
     offline: bool,
+    /// Offline: solve on the physics car model with the simulator's own parameters (the
+    /// nominal car, no friction ellipse) instead of loading --model.
+    #[arg(long)]
+    true_physics: bool,
+    /// Offline: largest number of gradient-descent iterations (each tries 512 step sizes).
+    #[arg(long, default_value_t = 300)]
+    gd_iterations: usize,
     /// Output directory for report.json and the plots (race_MODEL.png).
     #[arg(long, default_value = "race_eval")]
     out: PathBuf,
@@ -62,6 +69,13 @@ enum OptimizerArg {
 }
 
 pub fn run(args: RaceArgs) -> anyhow::Result<()> {
+    if args.offline && args.true_physics {
+        let car = match &args.scenario {
+            Some(p) => CarScenario::from_file(p)?.car,
+            None => CarScenario::floor().car,
+        };
+        return offline(&dynlab_control::racing::true_car_model(&car, 0.01)?, &args);
+    }
     let (learned, _) = load_model(&args.model, None, Some(World::Car))
         .with_context(|| format!("loading {}", args.model.display()))?;
     if args.offline {
@@ -292,7 +306,14 @@ fn offline(model: &Model, args: &RaceArgs) -> anyhow::Result<()> {
         for opt in ["gd", "sqp"] {
             let t0 = Instant::now();
             let sol = if opt == "gd" {
-                solve_gd(&problem, &m.initial_inputs(), &GdSettings::default())?
+                solve_gd(
+                    &problem,
+                    &m.initial_inputs(),
+                    &GdSettings {
+                        iterations: args.gd_iterations,
+                        ..GdSettings::default()
+                    },
+                )?
             } else {
                 solve_sqp(&problem, &m.initial_inputs(), &SqpSettings::default())?
             };

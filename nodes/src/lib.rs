@@ -8,6 +8,7 @@
 //! | [`record`] | `recorder` | topics discovered → rosbag2-compatible MCAP bag, flushed every second |
 //! | [`play`] | `player` | bag → topics with original timing, `--rate`, `--loop`, `/clock` |
 //! | [`mppi_pusher`] | `mppi_pusher` | when to push, hold off (stale pose) or stop (goal reached) |
+//! | [`racer`] | `racer` | state estimate, known command delay (state predicted over it), when each command is due |
 //! | [`start`] | all parameter-only nodes | command line, logging, shutdown flag, unknown-parameter warnings |
 //! | [`probe`] | `dds_probe` | publish / receive `PoseStamped` and measure latency (benchmarks) |
 #![warn(missing_docs)]
@@ -15,6 +16,7 @@
 pub mod mppi_pusher;
 pub mod play;
 pub mod probe;
+pub mod racer;
 pub mod record;
 pub mod start;
 

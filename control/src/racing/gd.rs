@@ -90,6 +90,71 @@ pub(crate) fn gradient_from(
     (cost, grad)
 }
 
+/// Candidates per batched rollout in the line search: a fixed split, so the batches a model
+/// sees (and so the results) do not depend on the number of threads.
+const LINE_SEARCH_CHUNK: usize = 64;
+
+/// The cost of every candidate input sequence: the candidates are rolled out in fixed chunks of
+/// [`LINE_SEARCH_CHUNK`] (one batched model call each), the chunks spread over the available
+/// cores. Deterministic: each chunk is the same batch whatever the thread count.
+fn candidate_costs(problem: &Problem<'_>, cands: &[Vec<Input>]) -> Result<Vec<f64>, RacingError> {
+    let chunks: Vec<&[Vec<Input>]> = cands.chunks(LINE_SEARCH_CHUNK).collect();
+    let threads = std::thread::available_parallelism()
+        .map_or(1, |n| n.get())
+        .clamp(1, chunks.len().max(1));
+    let eval = |chunk: &[Vec<Input>]| -> Result<Vec<f64>, RacingError> {
+        let rolled = problem.plant.rollout_batch(&problem.s0, chunk)?;
+        Ok(chunk
+            .iter()
+            .zip(&rolled)
+            .map(|(c, s)| problem.objective.cost(s, c))
+            .collect())
+    };
+    if threads <= 1 {
+        let mut out = Vec::with_capacity(cands.len());
+        for c in &chunks {
+            out.extend(eval(c)?);
+        }
+        return Ok(out);
+    }
+    // thread t takes chunks t, t + threads, …; results are put back in chunk order
+    type ChunkCosts = Vec<(usize, Vec<f64>)>;
+    let per_thread: Vec<Result<ChunkCosts, RacingError>> = std::thread::scope(|sc| {
+        let handles: Vec<_> = (0..threads)
+            .map(|t| {
+                let chunks = &chunks;
+                let eval = &eval;
+                sc.spawn(move || {
+                    let mut got = Vec::new();
+                    for i in (t..chunks.len()).step_by(threads) {
+                        got.push((i, eval(chunks[i])?));
+                    }
+                    Ok(got)
+                })
+            })
+            .collect();
+        handles
+            .into_iter()
+            .map(|h| {
+                h.join().unwrap_or_else(|_| {
+                    Err(RacingError::setting(
+                        "gd",
+                        "a line-search thread panicked",
+                        "report this as a bug",
+                    ))
+                })
+            })
+            .collect()
+    });
+    let mut by_chunk: Vec<Vec<f64>> = vec![Vec::new(); chunks.len()];
+    for r in per_thread {
+        for (i, v) in r? {
+            by_chunk[i] = v;
+        }
+    }
+    Ok(by_chunk.into_iter().flatten().collect())
+}
+
 /// The paper's batch gradient descent: each iteration scales the exact gradient by
 /// `step_sizes` constants log-spaced in `[smallest_step, largest_step]`, rolls all candidates
 /// out in one batch and keeps the cheapest; stops when no candidate improves the cost.
@@ -146,10 +211,9 @@ pub fn solve_gd(
                     .collect()
             })
             .collect();
-        let rolled = problem.plant.rollout_batch(&problem.s0, &cands)?;
+        let costs = candidate_costs(problem, &cands)?;
         let mut best = (cost, usize::MAX);
-        for (i, (c, s)) in cands.iter().zip(&rolled).enumerate() {
-            let v = problem.objective.cost(s, c);
+        for (i, &v) in costs.iter().enumerate() {
             if v < best.0 {
                 best = (v, i);
             }

@@ -11,15 +11,22 @@
 //! Parameters: `model` (model directory, required), `track` (track JSON;
 //! default `launch_scripts/tracks/default.json`), `optimizer` (`sqp`), `settings` (TOML with
 //! RacerSettings fields, optional), `horizon` (20), `hold` (model steps per control step, 5:
-//! 20 Hz with a 100 Hz model), `use_sim_time` (follow `/clock`; recommended with `sim_node`).
+//! 20 Hz with a 100 Hz model), `delay` (command delay \[s\], default 0.03 = three model
+//! steps, enough for a solve at a fifth of real time: the command computed from the pose stamped `t` is published when the clock reaches
+//! `t + delay`, and the optimiser starts from the state predicted at that time under the
+//! commands already sent; 0 publishes at once and assumes no delay; see
+//! `dynlab_nodes::racer`), `use_sim_time` (follow `/clock`; recommended with `sim_node`).
 
+use std::collections::VecDeque;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
-use dynlab_control::racing::{CarStateEstimator, Optimizer, Racer, RacerSettings};
+use dynlab_control::racing::{Optimizer, Racer, RacerSettings};
 use dynlab_msgs::geometry_msgs::PoseStamped;
+use dynlab_nodes::racer::{Planned, RaceClock};
 use dynlab_nodes::{Started, start_node};
-use dynlab_ros::{WaitSet, qos};
+use dynlab_ros::WaitSet;
+use dynlab_ros::qos::{self, History, QosProfile};
 use dynlab_sim::{CarInput, Track};
 use dynlab_simbridge::messages as m;
 
@@ -33,6 +40,7 @@ fn main() -> anyhow::Result<()> {
         "settings",
         "horizon",
         "hold",
+        "delay",
         "use_sim_time",
     ];
     let Started { mut node, shutdown } = start_node("racer", &known)?;
@@ -46,6 +54,7 @@ fn main() -> anyhow::Result<()> {
     let settings_path: String = p.get_or("settings", String::new())?;
     let horizon: i64 = p.get_or("horizon", 20)?;
     let hold: i64 = p.get_or("hold", 5)?;
+    let delay: f64 = p.get_or("delay", 0.03)?;
     let (model, _) = dynlab_learn::load_model(std::path::Path::new(&model_dir), None, None)
         .with_context(|| format!("parameter model: {model_dir}"))?;
     let track =
@@ -61,63 +70,91 @@ fn main() -> anyhow::Result<()> {
         .with_context(|| "parameter optimizer")?;
     settings.horizon = usize::try_from(horizon).context("parameter horizon must be ≥ 1")?;
     settings.hold = usize::try_from(hold).context("parameter hold must be ≥ 1")?;
-    let mut racer = Racer::new(&model, &track, settings)?;
-    let period_ns = (racer.period() * 1e9).round() as i64;
+    let racer = Racer::new(&model, &track, settings)?;
+    let dt = dynlab_control::racing::CarDynamics::dt(&model);
+    let delay_steps = (delay / dt).round();
+    if !(delay.is_finite() && delay >= 0.0 && (delay_steps * dt - delay).abs() < 1e-9) {
+        bail!(
+            "parameter delay: {delay} s is not a whole number (≥ 0) of model steps of {dt} s; use e.g. 0.03"
+        );
+    }
+    let mut rc = RaceClock::new(racer, &model, delay_steps as usize)?;
     tracing::info!(
-        "racing {} ({:.2} m) with {} ({:?}, n = {}, {:.0} Hz)",
+        "racing {} ({:.2} m) with {} ({:?}, n = {}, {:.0} Hz, command delay {:.0} ms)",
         track_path,
         track.length(),
         model_dir,
         settings.optimizer,
         settings.horizon,
-        1e9 / period_ns as f64
+        1.0 / rc.period(),
+        1e3 * rc.delay()
     );
     let clock = node.clock()?;
-    let mut poses =
-        node.create_subscription::<PoseStamped>(m::CAR_POSE_TOPIC, qos::sensor_data())?;
+    // best effort as the publisher, but deep: poses that arrive during a long solve are kept
+    let pose_qos = QosProfile {
+        history: History::KeepLast { depth: 100 },
+        ..qos::sensor_data()
+    };
+    let mut poses = node.create_subscription::<PoseStamped>(m::CAR_POSE_TOPIC, pose_qos)?;
     let publisher = node.create_publisher(m::CAR_CMD_TOPIC, qos::default_profile())?;
     let mut waits = WaitSet::new()?;
     waits.add(&mut poses)?;
-    let mut est = CarStateEstimator::default();
-    let mut state = None;
-    let mut next: Option<i64> = None;
+    // planned commands waiting for their time, and whether their due time was checked yet
+    let mut pending: VecDeque<(Planned, bool)> = VecDeque::new();
     let mut solves = 0u64;
+    let tick = dt;
+    let mut last_stamp: Option<f64> = None;
+    let mut missed = 0u64;
     let mut worst = 0.0f64;
+    let limits = settings.limits;
     while !shutdown.requested() {
         waits.wait(POLL)?;
         while let Some(msg) = poses.take()? {
             let t = f64::from(msg.header.stamp.sec) + 1e-9 * f64::from(msg.header.stamp.nanosec);
             let (x, y, psi) = msg.pose.planar_xy_yaw();
-            if let Some(s) = est.push(t, [x, y, psi]) {
-                state = Some(s);
+            if let Some(l) = last_stamp
+                && t > l + 1.5 * tick
+            {
+                missed += ((t - l) / tick).round() as u64 - 1;
             }
+            last_stamp = Some(last_stamp.map_or(t, |l: f64| l.max(t)));
+            rc.on_pose(t, [x, y, psi]);
         }
-        let Some(s) = state else { continue };
         let now = clock.now_ns()?;
-        if next.is_some_and(|n| now < n) {
-            continue;
+        let now_s = now as f64 * 1e-9;
+        while let Some((p, checked)) = pending.front_mut() {
+            let first = !*checked;
+            *checked = true;
+            if !rc.due(p, now_s, first) {
+                break;
+            }
+            // shrink a hair towards zero so the f32 message stays inside the limits
+            let u = p.step.input;
+            let u = limits.clamp([u[0] * (1.0 - 1e-6), u[1] * (1.0 - 1e-6)]);
+            publisher.publish(m::car_cmd_msg(now.max(0) as u64, CarInput::new(u[0], u[1])))?;
+            pending.pop_front();
         }
+        // schedule solves on pose stamps (the clock only releases commands): each solve starts
+        // from the pose of its own control instant, as in the headless loop
+        let Some(stamp) = last_stamp else { continue };
         let t0 = Instant::now();
-        let r = racer.step(s)?;
+        let Some(planned) = rc.plan(stamp)? else {
+            continue;
+        };
         let dt = t0.elapsed().as_secs_f64();
         worst = worst.max(dt);
         solves += 1;
-        publisher.publish(m::car_cmd_msg(
-            now.max(0) as u64,
-            CarInput::new(r.input[0], r.input[1]),
-        ))?;
         if solves.is_multiple_of(100) {
             tracing::info!(
-                "{solves} solves, last {:.1} ms ({}), worst {:.1} ms",
+                "{solves} solves, last {:.1} ms ({}), worst {:.1} ms, {} late commands, {} poses missed",
                 1e3 * dt,
-                r.status,
-                1e3 * worst
+                planned.step.status,
+                1e3 * worst,
+                rc.overruns(),
+                missed
             );
         }
-        next = Some(match next {
-            Some(n) => (n + period_ns).max(now),
-            None => now + period_ns,
-        });
+        pending.push_back((planned, false));
     }
     Ok(())
 }
