@@ -552,10 +552,13 @@ dispatch! {
 /// the layout `dense_forward` reads its weights in. Returns n_pad.
 pub(crate) fn pack_padded(w: &[f32], k: usize, n: usize, wp: &mut Vec<f32>) -> usize {
     let n_pad = n.div_ceil(NR) * NR;
-    wp.clear();
-    wp.resize(k * n_pad, 0.0);
+    // Grow only (no clearing pass): every row is written in full below.
+    if wp.len() < k * n_pad {
+        wp.resize(k * n_pad, 0.0);
+    }
     for (dst, src) in wp.chunks_exact_mut(n_pad).zip(w.chunks_exact(n)).take(k) {
         dst[..n].copy_from_slice(src);
+        dst[n..].fill(0.0);
     }
     n_pad
 }
