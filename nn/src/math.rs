@@ -92,26 +92,8 @@ pub fn tanh<const FMA: bool>(x: f32) -> f32 {
     let u = x * x;
     let p = horner::<FMA, 5>(&TANH_P, u);
     let q = horner::<FMA, 5>(&TANH_Q, u);
-    // x·p/q without a division (a vector division costs as much as ten fused multiply–adds, and
-    // tanh's was a quarter of a forward pass): an estimate r ≈ 1/q, the quotient n·r, and one
-    // correction from its residual n − q·y (exact with FMA), which makes the quotient correct to
-    // about one rounding step. Integer bit arithmetic and multiply–adds only, so every SIMD width
-    // gives the same bits (unlike `rcpps`, whose estimate differs between CPU vendors).
-    let n = x * p;
-    let r = recip_estimate::<FMA>(q);
-    let y0 = n * r;
-    let y = fmadd::<FMA>(r, fmadd::<FMA>(-q, y0, n), y0);
+    let y = x * p / q;
     clamp(y, -1.0, 1.0)
-}
-
-/// 1/q for positive normal q with relative error below 1.5e-4: the integer estimate
-/// `0x7EF311C3 − bits(q)` (relative error below 6 %) and one third-order step
-/// r ← r·(1 + e + e²), e = 1 − q·r (error e³).
-#[inline(always)]
-fn recip_estimate<const FMA: bool>(q: f32) -> f32 {
-    let r = f32::from_bits(0x7EF3_11C3u32.wrapping_sub(q.to_bits()));
-    let e = fmadd::<FMA>(-q, r, 1.0);
-    fmadd::<FMA>(r, fmadd::<FMA>(e, e, e), r)
 }
 
 /// e^x with relative error ≈ 2e-7 for x ∈ [−87, 88]; above 88 it returns e^88, below −87 exactly 0
