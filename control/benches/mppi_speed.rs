@@ -131,7 +131,13 @@ fn phases(model: &Model, k: usize, t: usize, threads: usize) -> [f64; 5] {
         }
     });
     let whole = time_step(model, k, t, threads, true);
-    [whole, sample, rollout, cost, whole - sample - rollout - cost]
+    [
+        whole,
+        sample,
+        rollout,
+        cost,
+        whole - sample - rollout - cost,
+    ]
 }
 
 fn torch_times() -> Option<Vec<(usize, usize, f64)>> {
@@ -200,9 +206,7 @@ fn main() {
     println!("|---|---|---|---|---|---|---|");
     for (k, t) in [(1000, 20), (100, 10)] {
         let [whole, sample, rollout, cost, rest] = phases(&rk4, k, t, 2);
-        println!(
-            "| {k} | {t} | {whole:.3} | {sample:.3} | {rollout:.3} | {cost:.3} | {rest:.3} |"
-        );
+        println!("| {k} | {t} | {whole:.3} | {sample:.3} | {rollout:.3} | {cost:.3} | {rest:.3} |");
     }
     if torch.is_none() {
         println!("(set DYNLAB_TORCH_PYTHON to a Python with torch for the PyTorch column)");

@@ -211,7 +211,9 @@ fn main() {
             "train_residual" => train_rate(ModelKind::Residual, 1),
             "mppi" => mppi_ms(&push_rk4_model(), 2),
             other => {
-                eprintln!("unknown benchmark {other}: train_rk4_k1, train_rk4_k3, train_residual, mppi");
+                eprintln!(
+                    "unknown benchmark {other}: train_rk4_k1, train_rk4_k3, train_residual, mppi"
+                );
                 return;
             }
         };

@@ -509,7 +509,11 @@ fn dense_forward_impl<const F: bool, const W: bool>(
                 return;
             }};
         }
-        match if act == Activation::Identity && k * n_pad <= 64 * 112 { n_pad } else { 0 } {
+        match if act == Activation::Identity && k * n_pad <= 64 * 112 {
+            n_pad
+        } else {
+            0
+        } {
             112 => whole_rows!(2, 112),
             96 => whole_rows!(2, 96),
             80 => whole_rows!(2, 80),
