@@ -1,7 +1,9 @@
 //! One MPPI step over a pushing NeuralODE (Tu & Lin's network: 6 → 100 → 100 → 3 tanh, RK4),
 //! for K = 1000, T = 20 and the paper's K = 100, T = 10, on 1 and 2 threads, beside an
 //! equivalent PyTorch MPPI (`benches/torch_mppi.py`, run when `DYNLAB_TORCH_PYTHON` names a
-//! Python with torch). Prints a table with the ratios.
+//! Python with torch). Prints a table with the ratios, a row for `MppiConfig::default()` (what
+//! `dynlab eval push` and `mppi_pusher` run), and a second table with the phases of a step
+//! (noise, rollout, costs, rest) timed on their own.
 //!
 //! ```sh
 //! DYNLAB_TORCH_PYTHON=/path/to/python cargo bench -p dynlab-control --bench mppi_speed
@@ -198,6 +200,13 @@ fn main() {
         let t2 = time_step(&m, 1000, 20, 2, false);
         println!("| {} | 1000 | 20 | – | {t2:.2} | – | – | – |", kind.name());
     }
+    // What `dynlab eval push` and `mppi_pusher` run by default (MppiConfig::default()).
+    let d = MppiConfig::default();
+    let t2 = time_step(&rk4, d.samples, d.horizon, d.threads, true);
+    println!(
+        "| node-rk4 + obstacle, MppiConfig::default() (eval push, mppi_pusher) | {} | {} | – | {t2:.2} | – | – | – |",
+        d.samples, d.horizon
+    );
     println!();
     println!(
         "Phases of one step (node-rk4 + obstacle, 2 threads; milliseconds, medians; \"rest\" = whole − the others):"
