@@ -90,7 +90,7 @@ fn median_ms(reps: usize, mut f: impl FnMut()) -> f64 {
     times[times.len() / 2]
 }
 
-/// The phases of one MPPI step (obstacle scene, 2 threads), each timed on its own with the same
+/// The phases of one MPPI step (obstacle scene), each timed on its own with the same
 /// work `Mppi::step` does: the K·T·3 normal draws and clamped sequences, the batched rollout, the
 /// K trajectory costs; "rest" is the whole step minus these (weights, averaging, shift, checks).
 fn phases(model: &Model, k: usize, t: usize, threads: usize) -> [f64; 5] {
@@ -209,13 +209,17 @@ fn main() {
     );
     println!();
     println!(
-        "Phases of one step (node-rk4 + obstacle, 2 threads; milliseconds, medians; \"rest\" = whole − the others):"
+        "Phases of one step (node-rk4 + obstacle; milliseconds, medians; \"rest\" = whole − the others):"
     );
-    println!("| K | T | whole step | noise + clamp | rollout_f32 | costs | rest |");
-    println!("|---|---|---|---|---|---|---|");
+    println!("| K | T | threads | whole step | noise + clamp | rollout_f32 | costs | rest |");
+    println!("|---|---|---|---|---|---|---|---|");
     for (k, t) in [(1000, 20), (100, 10)] {
-        let [whole, sample, rollout, cost, rest] = phases(&rk4, k, t, 2);
-        println!("| {k} | {t} | {whole:.3} | {sample:.3} | {rollout:.3} | {cost:.3} | {rest:.3} |");
+        for threads in [1, 2] {
+            let [whole, sample, rollout, cost, rest] = phases(&rk4, k, t, threads);
+            println!(
+                "| {k} | {t} | {threads} | {whole:.3} | {sample:.3} | {rollout:.3} | {cost:.3} | {rest:.3} |"
+            );
+        }
     }
     if torch.is_none() {
         println!("(set DYNLAB_TORCH_PYTHON to a Python with torch for the PyTorch column)");
