@@ -1,7 +1,9 @@
 //! One MPPI step over a pushing NeuralODE (Tu & Lin's network: 6 → 100 → 100 → 3 tanh, RK4),
 //! for K = 1000, T = 20 and the paper's K = 100, T = 10, on 1 and 2 threads, beside an
 //! equivalent PyTorch MPPI (`benches/torch_mppi.py`, run when `DYNLAB_TORCH_PYTHON` names a
-//! Python with torch). Prints a table with the ratios.
+//! Python with torch). Prints a table with the ratios, a row for `MppiConfig::default()` (what
+//! `dynlab eval push` and `mppi_pusher` run), and a second table with the phases of a step
+//! (noise, rollout, costs, rest) timed on their own.
 //!
 //! ```sh
 //! DYNLAB_TORCH_PYTHON=/path/to/python cargo bench -p dynlab-control --bench mppi_speed
@@ -11,12 +13,12 @@ use std::path::Path;
 use std::process::Command;
 use std::time::Instant;
 
-use dynlab_control::mppi::{Mppi, MppiConfig, PushTask};
+use dynlab_control::mppi::{CostWeights, Mppi, MppiConfig, PushTask, trajectory_cost};
 use dynlab_learn::dynamics::ode::Solver;
 use dynlab_learn::train::default_physics_solver;
-use dynlab_learn::{Model, ModelKind, Network, Normalization, World};
+use dynlab_learn::{Model, ModelKind, Network, Normalization, RolloutWorkspace, World};
 use dynlab_nn::{Activation, Init, Mlp, MlpSpec};
-use dynlab_sim::PushScenario;
+use dynlab_sim::{PushScenario, SimRng};
 
 fn model(kind: ModelKind) -> Model {
     let spec = MlpSpec::uniform(6, &[100, 100], 3, Activation::Tanh).expect("spec");
@@ -70,6 +72,74 @@ fn time_step(model: &Model, k: usize, t: usize, threads: usize, obstacle: bool) 
         .collect();
     times.sort_by(f64::total_cmp);
     times[times.len() / 2]
+}
+
+/// Median milliseconds of `f` over `reps` calls (after 3 warm-up calls).
+fn median_ms(reps: usize, mut f: impl FnMut()) -> f64 {
+    for _ in 0..3 {
+        f();
+    }
+    let mut times: Vec<f64> = (0..reps)
+        .map(|_| {
+            let t0 = Instant::now();
+            f();
+            t0.elapsed().as_secs_f64() * 1e3
+        })
+        .collect();
+    times.sort_by(f64::total_cmp);
+    times[times.len() / 2]
+}
+
+/// The phases of one MPPI step (obstacle scene), each timed on its own with the same
+/// work `Mppi::step` does: the K·T·3 normal draws and clamped sequences, the batched rollout, the
+/// K trajectory costs; "rest" is the whole step minus these (weights, averaging, shift, checks).
+fn phases(model: &Model, k: usize, t: usize, threads: usize) -> [f64; 5] {
+    let cfg = MppiConfig {
+        samples: k,
+        horizon: t,
+        threads,
+        ..MppiConfig::default()
+    };
+    let scene = PushScenario::obstacle();
+    let task = PushTask::from_scenario(&scene, cfg.obstacle_margin);
+    let reps = if k * t >= 10_000 { 15 } else { 200 };
+    let mut rng = SimRng::new(1);
+    let mut noise = vec![0.0f64; k * t * 3];
+    let mut actions = vec![0.0f32; k * t * 3];
+    let sample = median_ms(reps, || {
+        for (n, a) in noise.iter_mut().zip(actions.iter_mut()) {
+            *n = rng.normal();
+            *a = (0.3 * *n).clamp(-1.0, 1.0) as f32;
+        }
+    });
+    let s0: Vec<f32> = (0..k).flat_map(|_| scene.start.map(|v| v as f32)).collect();
+    let mut traj = vec![0.0f32; k * t * 3];
+    let mut ws = RolloutWorkspace::new(threads);
+    let rollout = median_ms(reps, || {
+        model
+            .rollout_f32(&s0, &actions, &mut traj, &mut ws)
+            .expect("rollout");
+    });
+    let weights = CostWeights {
+        q: cfg.q,
+        q_terminal: cfg.q_terminal,
+        collision: cfg.collision_cost,
+        swept: cfg.swept_collision,
+    };
+    let mut costs = vec![0.0; k];
+    let cost = median_ms(reps, || {
+        for (c, tr) in costs.iter_mut().zip(traj.chunks_exact(t * 3)) {
+            *c = trajectory_cost(&task, &weights, scene.start, tr);
+        }
+    });
+    let whole = time_step(model, k, t, threads, true);
+    [
+        whole,
+        sample,
+        rollout,
+        cost,
+        whole - sample - rollout - cost,
+    ]
 }
 
 fn torch_times() -> Option<Vec<(usize, usize, f64)>> {
@@ -129,6 +199,27 @@ fn main() {
         let m = model(kind);
         let t2 = time_step(&m, 1000, 20, 2, false);
         println!("| {} | 1000 | 20 | – | {t2:.2} | – | – | – |", kind.name());
+    }
+    // What `dynlab eval push` and `mppi_pusher` run by default (MppiConfig::default()).
+    let d = MppiConfig::default();
+    let t2 = time_step(&rk4, d.samples, d.horizon, d.threads, true);
+    println!(
+        "| node-rk4 + obstacle, MppiConfig::default() (eval push, mppi_pusher) | {} | {} | – | {t2:.2} | – | – | – |",
+        d.samples, d.horizon
+    );
+    println!();
+    println!(
+        "Phases of one step (node-rk4 + obstacle; milliseconds, medians; \"rest\" = whole − the others):"
+    );
+    println!("| K | T | threads | whole step | noise + clamp | rollout_f32 | costs | rest |");
+    println!("|---|---|---|---|---|---|---|---|");
+    for (k, t) in [(1000, 20), (100, 10)] {
+        for threads in [1, 2] {
+            let [whole, sample, rollout, cost, rest] = phases(&rk4, k, t, threads);
+            println!(
+                "| {k} | {t} | {threads} | {whole:.3} | {sample:.3} | {rollout:.3} | {cost:.3} | {rest:.3} |"
+            );
+        }
     }
     if torch.is_none() {
         println!("(set DYNLAB_TORCH_PYTHON to a Python with torch for the PyTorch column)");

@@ -91,6 +91,8 @@ pub struct Mppi {
     traj: Vec<f32>,
     costs: Vec<f64>,
     w: Vec<f64>,
+    /// The weighted mean sequence, `T × 3` (reused between steps).
+    mean: Vec<f64>,
 }
 
 impl Mppi {
@@ -117,6 +119,7 @@ impl Mppi {
             traj: vec![0.0; k * t * 3],
             costs: vec![0.0; k],
             w: vec![0.0; k],
+            mean: vec![0.0; t * 3],
             nominal: Vec::new(),
             cfg,
             task,
@@ -212,7 +215,9 @@ impl Mppi {
             sum += *w;
         }
         if sum > 0.0 {
-            let mut new = vec![0.0; row];
+            let new = &mut self.mean;
+            new.clear();
+            new.resize(row, 0.0);
             for (i, w) in self.w.iter_mut().enumerate() {
                 *w /= sum;
                 if *w == 0.0 {

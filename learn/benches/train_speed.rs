@@ -203,6 +203,23 @@ fn main() {
         println!("train_speed: run with `cargo bench -p dynlab-learn --bench train_speed`");
         return;
     }
+    // DYNLAB_BENCH_ONLY=train_rk4_k1 (etc.) runs one row once, for `perf stat`/`perf record`.
+    if let Ok(only) = std::env::var("DYNLAB_BENCH_ONLY") {
+        let v = match only.as_str() {
+            "train_rk4_k1" => train_rate(ModelKind::NodeRk4, 1),
+            "train_rk4_k3" => train_rate(ModelKind::NodeRk4, 3),
+            "train_residual" => train_rate(ModelKind::Residual, 1),
+            "mppi" => mppi_ms(&push_rk4_model(), 2),
+            other => {
+                eprintln!(
+                    "unknown benchmark {other}: train_rk4_k1, train_rk4_k3, train_residual, mppi"
+                );
+                return;
+            }
+        };
+        println!("{only}: {v:.3}");
+        return;
+    }
     let rounds: usize = std::env::var("DYNLAB_BENCH_ROUNDS")
         .ok()
         .and_then(|v| v.parse().ok())

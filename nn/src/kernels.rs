@@ -434,11 +434,12 @@ fn dense_block<const F: bool, const R: usize, const C: usize>(
         for accr in acc.iter_mut() {
             *accr = *b0;
         }
-        for (p, wrow) in wt.chunks_exact(n_pad).enumerate().take(k) {
-            let b: &[f32; C] = match wrow[jb..jb + C].try_into() {
-                Ok(b) => b,
-                Err(_) => continue,
-            };
+        assert!(jb + C <= n_pad && wt.len() >= k * n_pad);
+        for p in 0..k {
+            // SAFETY: p < k and jb + C ≤ n_pad (asserted), so the C floats from p·n_pad + jb lie
+            // within wt (length ≥ k·n_pad); [f32; C] has the alignment of f32. (A checked slice
+            // with a fallible conversion kept the accumulators in memory across iterations.)
+            let b: &[f32; C] = unsafe { &*wt.as_ptr().add(p * n_pad + jb).cast::<[f32; C]>() };
             for r in 0..R {
                 // SAFETY: every `rows[r]` has exactly `k` elements (sliced above; the caller's
                 // `a` holds m × k) and `p < k` (`take(k)`). Indexing without the check matters:
@@ -491,6 +492,36 @@ fn dense_forward_impl<const F: bool, const W: bool>(
 ) {
     let mut i = 0;
     if W {
+        // AVX-512 with at most 7 registers per output row: the whole padded row in one block of
+        // 12–14 accumulators, so each packed weight vector loaded serves 2–6 rows and each
+        // broadcast 2–7 vectors (the 8 × 16 block below loads one broadcast per FMA and is limited
+        // by loads). Same arithmetic per element, so the result is bitwise that of any block.
+        macro_rules! whole_rows {
+            ($r:literal, $c:literal) => {{
+                while i + $r <= m {
+                    dense_block::<F, $r, $c>(act, i, k, n, n_pad, a, wt, bias_pad, out, z);
+                    i += $r;
+                }
+                while i < m {
+                    dense_block::<F, 1, $c>(act, i, k, n, n_pad, a, wt, bias_pad, out, z);
+                    i += 1;
+                }
+                return;
+            }};
+        }
+        match if act == Activation::Identity && k * n_pad <= 64 * 112 {
+            n_pad
+        } else {
+            0
+        } {
+            112 => whole_rows!(2, 112),
+            96 => whole_rows!(2, 96),
+            80 => whole_rows!(2, 80),
+            64 => whole_rows!(3, 64),
+            48 => whole_rows!(4, 48),
+            32 => whole_rows!(6, 32),
+            _ => {}
+        }
         // AVX-512: one 16-lane register per row, so twice the rows for 8 accumulators.
         while i + 2 * MR <= m {
             dense_block::<F, { 2 * MR }, NR>(act, i, k, n, n_pad, a, wt, bias_pad, out, z);
@@ -525,10 +556,13 @@ dispatch! {
 /// the layout `dense_forward` reads its weights in. Returns n_pad.
 pub(crate) fn pack_padded(w: &[f32], k: usize, n: usize, wp: &mut Vec<f32>) -> usize {
     let n_pad = n.div_ceil(NR) * NR;
-    wp.clear();
-    wp.resize(k * n_pad, 0.0);
+    // Grow only (no clearing pass): every row is written in full below.
+    if wp.len() < k * n_pad {
+        wp.resize(k * n_pad, 0.0);
+    }
     for (dst, src) in wp.chunks_exact_mut(n_pad).zip(w.chunks_exact(n)).take(k) {
         dst[..n].copy_from_slice(src);
+        dst[n..].fill(0.0);
     }
     n_pad
 }

@@ -2,6 +2,7 @@
 //! mode (JVP) and batched input Jacobians.
 
 use std::ops::Range;
+use std::sync::atomic::{AtomicU64, Ordering};
 
 use crate::kernels::{self, gemm_a_b, gemm_a_bt};
 use crate::rng::SplitMix64;
@@ -150,11 +151,32 @@ pub enum JacobianMode {
 /// Batches are row-major `batch × width` slices. Every evaluation goes through a [`Workspace`]
 /// that owns the buffers (grown on first use, then reused without allocating) and records the
 /// activations needed by [`Mlp::backward`].
-#[derive(Debug, Clone, PartialEq)]
+///
+/// The workspace also keeps the weights in the layouts the kernels read (transposed and padded),
+/// packed on the first evaluation after a parameter change and reused until the next: every
+/// parameter write goes through [`Mlp::params_mut`] (or creates a network), which gives the
+/// parameters a new process-unique stamp, and a workspace repacks when the stamp it packed
+/// differs. So an MPPI step or a training step packs each layer once, not on every forward call.
+#[derive(Debug, Clone)]
 pub struct Mlp {
     spec: MlpSpec,
     layers: Vec<LayerShape>,
     params: Vec<f32>,
+    /// Identifies the parameter values (see the type's documentation); a clone shares it, since
+    /// its parameters are equal until one of them is written.
+    stamp: u64,
+}
+
+impl PartialEq for Mlp {
+    fn eq(&self, other: &Self) -> bool {
+        self.spec == other.spec && self.layers == other.layers && self.params == other.params
+    }
+}
+
+/// A new process-unique parameter stamp (never 0, the workspace's "nothing packed").
+fn next_stamp() -> u64 {
+    static NEXT: AtomicU64 = AtomicU64::new(1);
+    NEXT.fetch_add(1, Ordering::Relaxed)
 }
 
 impl Mlp {
@@ -181,6 +203,7 @@ impl Mlp {
                 *w = rng.uniform_symmetric(bound);
             }
         }
+        mlp.stamp = next_stamp();
         mlp
     }
 
@@ -211,6 +234,7 @@ impl Mlp {
             params: vec![0.0; offset],
             layers,
             spec,
+            stamp: next_stamp(),
         }
     }
 
@@ -254,8 +278,10 @@ impl Mlp {
         &self.params
     }
 
-    /// All parameters, flat and mutable (for an optimiser step).
+    /// All parameters, flat and mutable (for an optimiser step). Marks the parameters as changed,
+    /// so workspaces repack the weights at their next evaluation.
     pub fn params_mut(&mut self) -> &mut [f32] {
+        self.stamp = next_stamp();
         &mut self.params
     }
 
@@ -301,18 +327,12 @@ impl Mlp {
         ws.reserve(batch);
         ws.batch = None;
         ws.x[..x.len()].copy_from_slice(x);
+        self.pack_forward(ws);
         for (l, layer) in self.layers.iter().enumerate() {
             let (input, rest) = ws.a.split_at_mut(l);
             let input: &[f32] = if l == 0 { &ws.x } else { &input[l - 1] };
             let out = &mut rest[0][..batch * layer.n_out];
-            let n_pad = kernels::pack_transposed(
-                &self.params[layer.weight.clone()],
-                &self.params[layer.bias.clone()],
-                layer.n_out,
-                layer.n_in,
-                &mut ws.wt,
-                &mut ws.bias_pad,
-            );
+            let packed = &ws.fwd[l];
             let z_len = if layer.activation.needs_preactivation() {
                 batch * layer.n_out
             } else {
@@ -323,10 +343,10 @@ impl Mlp {
                 batch,
                 layer.n_in,
                 layer.n_out,
-                n_pad,
+                packed.n_pad,
                 &input[..batch * layer.n_in],
-                &ws.wt,
-                &ws.bias_pad,
+                &packed.w,
+                &packed.bias,
                 out,
                 &mut ws.z[l][..z_len],
             );
@@ -356,9 +376,10 @@ impl Mlp {
         if let Some(dx) = &dx {
             check_len("dx", batch * self.n_in(), dx.len())?;
         }
+        self.pack_backward(ws);
         let mut cur = std::mem::take(&mut ws.g0);
         let mut next = std::mem::take(&mut ws.g1);
-        let mut wp = std::mem::take(&mut ws.wt);
+        let bwd = std::mem::take(&mut ws.bwd);
         let mut zeros = std::mem::take(&mut ws.bias_pad);
         let mut dx = dx;
         for (l, layer) in self.layers.iter().enumerate().rev() {
@@ -396,7 +417,6 @@ impl Mlp {
                 p0 += kc;
             }
             kernels::add_column_sums(&mut grad[layer.bias.clone()], dz);
-            let weight = &self.params[layer.weight.clone()];
             // d(input) = dz·W: (batch × n_out) · (n_out × n_in).
             let target: &mut [f32] = if l > 0 {
                 &mut next[..batch * n_in]
@@ -405,17 +425,17 @@ impl Mlp {
             } else {
                 continue;
             };
-            let n_pad = kernels::pack_padded(weight, n_out, n_in, &mut wp);
+            let packed = &bwd[l];
             zeros.clear();
-            zeros.resize(n_pad, 0.0);
+            zeros.resize(packed.n_pad, 0.0);
             kernels::dense_forward(
                 Activation::Identity,
                 batch,
                 n_out,
                 n_in,
-                n_pad,
+                packed.n_pad,
                 dz,
-                &wp,
+                &packed.w,
                 &zeros,
                 target,
                 &mut [],
@@ -438,9 +458,45 @@ impl Mlp {
         }
         ws.g0 = cur;
         ws.g1 = next;
-        ws.wt = wp;
+        ws.bwd = bwd;
         ws.bias_pad = zeros;
         Ok(())
+    }
+
+    /// Packs every layer's Wᵀ and bias for [`kernels::dense_forward`] into `ws`, unless `ws`
+    /// already holds them for these parameter values.
+    fn pack_forward(&self, ws: &mut Workspace) {
+        if ws.fwd_stamp == self.stamp {
+            return;
+        }
+        for (layer, packed) in self.layers.iter().zip(ws.fwd.iter_mut()) {
+            packed.n_pad = kernels::pack_transposed(
+                &self.params[layer.weight.clone()],
+                &self.params[layer.bias.clone()],
+                layer.n_out,
+                layer.n_in,
+                &mut packed.w,
+                &mut packed.bias,
+            );
+        }
+        ws.fwd_stamp = self.stamp;
+    }
+
+    /// Packs every layer's W padded for the input-gradient product of [`Mlp::backward`] into
+    /// `ws`, unless `ws` already holds them for these parameter values.
+    fn pack_backward(&self, ws: &mut Workspace) {
+        if ws.bwd_stamp == self.stamp {
+            return;
+        }
+        for (layer, packed) in self.layers.iter().zip(ws.bwd.iter_mut()) {
+            packed.n_pad = kernels::pack_padded(
+                &self.params[layer.weight.clone()],
+                layer.n_out,
+                layer.n_in,
+                &mut packed.w,
+            );
+        }
+        ws.bwd_stamp = self.stamp;
     }
 
     /// Forward mode (Jacobian–vector product): returns `(y, dy)` with y = f(x) and dy = J(x)·dx,
@@ -661,6 +717,14 @@ fn grow(v: &mut Vec<f32>, len: usize) {
     }
 }
 
+/// One layer's weights in a kernel layout (row length `n_pad`, a multiple of the register block).
+#[derive(Debug, Clone, Default)]
+struct PackedLayer {
+    w: Vec<f32>,
+    bias: Vec<f32>,
+    n_pad: usize,
+}
+
 /// Buffers for evaluating and differentiating one [`Mlp`] architecture: the batch input, every
 /// layer's output (and pre-activation where GELU needs it), and scratch for backward, JVP and
 /// Jacobians. Buffers grow to the largest batch seen and are then reused, so a training or
@@ -680,7 +744,12 @@ pub struct Workspace {
     j0: Vec<f32>,
     j1: Vec<f32>,
     jac: Vec<f32>,
-    wt: Vec<f32>,
+    /// Per layer: Wᵀ and bias packed for the forward kernel, valid for parameters `fwd_stamp`.
+    fwd: Vec<PackedLayer>,
+    fwd_stamp: u64,
+    /// Per layer: W padded for the input-gradient product, valid for parameters `bwd_stamp`.
+    bwd: Vec<PackedLayer>,
+    bwd_stamp: u64,
     bias_pad: Vec<f32>,
     t0: Vec<f32>,
     t1: Vec<f32>,
@@ -705,7 +774,10 @@ impl Workspace {
             j0: Vec::new(),
             j1: Vec::new(),
             jac: Vec::new(),
-            wt: Vec::new(),
+            fwd: vec![PackedLayer::default(); n_layers],
+            fwd_stamp: 0,
+            bwd: vec![PackedLayer::default(); n_layers],
+            bwd_stamp: 0,
             bias_pad: Vec::new(),
             t0: Vec::new(),
             t1: Vec::new(),

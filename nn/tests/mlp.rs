@@ -395,3 +395,40 @@ fn backward_rows_do_not_depend_on_the_batch_block_shape() {
         }
     }
 }
+
+#[test]
+fn packed_weights_follow_every_parameter_change() {
+    // A workspace keeps the packed weights between calls; a parameter write, a clone that is then
+    // changed, or another network of the same shape must never see stale packed weights.
+    let mut mlp = pushing(Activation::Tanh);
+    let other = net(&[6, 100, 100, 3], Activation::Tanh, 99);
+    let x = data(5, 9 * 6, -1.0, 1.0);
+    let dy = data(6, 9 * 3, -1.0, 1.0);
+    let mut ws = mlp.workspace();
+    let fresh = |m: &Mlp| {
+        let mut w = m.workspace();
+        let y = m.forward(&x, &mut w).unwrap().to_vec();
+        let mut g = vec![0.0; m.n_params()];
+        let mut dx = vec![0.0; x.len()];
+        m.backward(&mut w, &dy, &mut g, Some(&mut dx)).unwrap();
+        (y, g, dx)
+    };
+    let cached = |m: &Mlp, ws: &mut dynlab_nn::Workspace| {
+        let y = m.forward(&x, ws).unwrap().to_vec();
+        let mut g = vec![0.0; m.n_params()];
+        let mut dx = vec![0.0; x.len()];
+        m.backward(ws, &dy, &mut g, Some(&mut dx)).unwrap();
+        (y, g, dx)
+    };
+    assert_eq!(cached(&mlp, &mut ws), fresh(&mlp));
+    let before = mlp.clone();
+    for p in mlp.params_mut().iter_mut() {
+        *p *= 0.5;
+    }
+    let changed = cached(&mlp, &mut ws);
+    assert_eq!(changed, fresh(&mlp));
+    assert_ne!(changed.0, fresh(&before).0);
+    assert_eq!(cached(&before, &mut ws), fresh(&before));
+    assert_eq!(cached(&other, &mut ws), fresh(&other));
+    assert_eq!(cached(&mlp, &mut ws), changed);
+}
