@@ -146,7 +146,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     Effect::GripPatch => "k",
                     Effect::ComOffset => "ox",
                     Effect::TableTilt => "gx",
-                    Effect::FrictionPatch => "beta",
+                    Effect::FrictionPatch => "k",
                     Effect::PusherFriction => "mu",
                 };
                 if let Some(v) = c.params.get(key) {

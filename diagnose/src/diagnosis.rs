@@ -37,7 +37,6 @@ use dynlab_learn::dynamics::conventions::wrap_angle;
 use dynlab_learn::dynamics::data::{
     DataError, SplitMix64, StateTrajectory, Window, split_trajectories, windows,
 };
-use dynlab_learn::dynamics::ode;
 use dynlab_learn::dynamics::physics::{Effect, ModelError, PhysicsModel};
 use dynlab_learn::fit::{bounded_least_squares, initial_state};
 use dynlab_learn::train::segment;
@@ -313,7 +312,7 @@ impl Augmented<'_> {
             if self.pure_physics {
                 // the model is Φ_P: the augmented model is Φ_{P+e}
                 if let Some(p) = &self.with {
-                    ode::integrate(p, &solver, n, &sw, &u, dt_phys, &mut nw);
+                    p.integrate_step(&solver, n, &sw, &u, dt_phys, &mut nw);
                     for i in 0..n {
                         next[i * ds..(i + 1) * ds].copy_from_slice(&nw[i * dw..i * dw + ds]);
                     }
@@ -324,8 +323,9 @@ impl Augmented<'_> {
             } else {
                 let _ = self.model.step(&s, &u, &mut next);
                 if let Some(p) = &self.with {
-                    ode::integrate(&self.base, &solver, n, &sb, &u, dt_phys, &mut nb);
-                    ode::integrate(p, &solver, n, &sw, &u, dt_phys, &mut nw);
+                    self.base
+                        .integrate_step(&solver, n, &sb, &u, dt_phys, &mut nb);
+                    p.integrate_step(&solver, n, &sw, &u, dt_phys, &mut nw);
                     for i in 0..n {
                         for c in 0..ds {
                             next[i * ds + c] += nw[i * dw + c] - nb[i * db + c];
@@ -420,14 +420,8 @@ fn starts(e: Effect, trajs: &[StateTrajectory]) -> Vec<Vec<(&'static str, f64)>>
             let r = 0.25 * (hi[0] - lo[0]).max(hi[1] - lo[1]).max(0.02);
             let mut v = Vec::new();
             for (x, y) in grid(3) {
-                for b in [-0.3, 0.5] {
-                    v.push(vec![
-                        ("cx", x),
-                        ("cy", y),
-                        ("r", r),
-                        ("w", 0.01),
-                        ("beta", b),
-                    ]);
+                for k in [0.3, 3.0] {
+                    v.push(vec![("cx", x), ("cy", y), ("r", r), ("w", 0.01), ("k", k)]);
                 }
             }
             v

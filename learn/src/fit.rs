@@ -14,8 +14,8 @@ use clarabel::solver::{
 };
 use dynlab_dynamics::conventions::wrap_angle;
 use dynlab_dynamics::data::{SplitMix64, StateTrajectory, Window};
-use dynlab_dynamics::ode::{self, OdeStatus, Solver, SolverTape};
-use dynlab_dynamics::physics::{Effect, PhysicsModel};
+use dynlab_dynamics::ode::{OdeStatus, Solver};
+use dynlab_dynamics::physics::{Effect, PhysicsModel, StepTape};
 
 use crate::train::{Loss, PhysicsFit, TrainConfig};
 use crate::{LearnError, World};
@@ -350,7 +350,7 @@ pub(crate) fn fit_physics(
         }
         let mut r = Vec::new();
         let mut jac = Vec::new();
-        let mut tape = SolverTape::default();
+        let mut tape = StepTape::default();
         let mut sn = vec![0.0; dp];
         let mut sens = vec![0.0; dp * np];
         let mut phis = vec![0.0; dp * dp];
@@ -369,9 +369,9 @@ pub(crate) fn fit_physics(
                 let a = w.start + j;
                 let u = &t.u[a * du..(a + 1) * du];
                 let rep = if with_j {
-                    ode::integrate_taped(&p, solver, 1, &s, u, t_phys, &mut sn, &mut tape)
+                    p.integrate_step_taped(solver, 1, &s, u, t_phys, &mut sn, &mut tape)
                 } else {
-                    ode::integrate(&p, solver, 1, &s, u, t_phys, &mut sn)
+                    p.integrate_step(solver, 1, &s, u, t_phys, &mut sn)
                 };
                 let bad = rep.status != OdeStatus::Success;
                 if with_j {
@@ -379,7 +379,7 @@ pub(crate) fn fit_physics(
                         ybar.iter_mut().for_each(|x| *x = 0.0);
                         ybar[d] = 1.0;
                         pbar.iter_mut().for_each(|x| *x = 0.0);
-                        ode::integrate_vjp(&p, &tape, &ybar, &mut sbar0, &mut ubar, &mut pbar);
+                        p.integrate_step_vjp(&tape, &ybar, &mut sbar0, &mut ubar, &mut pbar);
                         phis[d * dp..(d + 1) * dp].copy_from_slice(&sbar0);
                         phit[d * np..(d + 1) * np].copy_from_slice(&pbar);
                     }

@@ -191,6 +191,10 @@ impl PhysicsModel {
         }
     }
 
+    pub(crate) fn slots(&self) -> &[Slot] {
+        &self.slots
+    }
+
     /// The robot.
     pub fn robot(&self) -> Robot {
         self.robot
