@@ -21,6 +21,22 @@ fn arg<T: std::str::FromStr>(name: &str, default: T) -> T {
         .unwrap_or(default)
 }
 
+fn truth(e: Option<Effect>) -> Vec<(&'static str, f64)> {
+    match e {
+        Some(Effect::ComOffset) => vec![("com_offset.ox", 0.02), ("com_offset.oy", 0.01)],
+        Some(Effect::TableTilt) => vec![("table_tilt.gx", 0.02f64.tan() / 0.1)],
+        Some(Effect::FrictionPatch) => vec![
+            ("friction_patch.cx", 0.5),
+            ("friction_patch.cy", 0.1),
+            ("friction_patch.r", 0.1),
+            ("friction_patch.w", 0.002),
+            ("friction_patch.k", 5.0),
+        ],
+        Some(Effect::PusherFriction) => vec![("pusher_friction.mu", 0.5)],
+        _ => vec![],
+    }
+}
+
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let episodes: u64 = arg("--episodes", 20);
     let noise: f64 = arg("--noise", 0.0);
@@ -44,13 +60,24 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         "{:<28} {:>6} {:>12} {:>12} {:>10}",
         "model step", "k", "pos RMS/mm", "θ RMS/mrad", "ratio"
     );
+    // the effect at the simulator's value (diagnosis::simdata::push_scenario)
+    let mut with = PhysicsModel::pushing(&eff.into_iter().collect::<Vec<_>>())?;
+    with.set_param("c", arg("--c", 0.0383))?;
+    for (name, v) in truth(eff) {
+        with.set_param(name, v)?;
+    }
     for k in [1usize, 5] {
         let mut base = (0.0, 0.0);
-        for (name, world_line, substeps) in [
-            ("block-frame pusher (old)", false, 2),
-            ("world-line pusher, rk4×2", true, 2),
-            ("world-line pusher, rk4×8", true, 8),
+        for (name, world_line, substeps, m) in [
+            ("block-frame pusher (old)", false, 2, &model),
+            ("world-line pusher, rk4×2", true, 2, &model),
+            ("world-line pusher, rk4×8", true, 8, &model),
+            ("world-line + effect (truth)", true, 2, &with),
         ] {
+            let model = m;
+            if eff.is_none() && std::ptr::eq(m, &with) {
+                continue;
+            }
             let solver = Solver::Rk4 { substeps };
             let (mut ep, mut et, mut cnt) = (0.0, 0.0, 0usize);
             for t in &data.trajectories {
@@ -63,7 +90,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                         if world_line {
                             model.integrate_step(&solver, 1, &s, u, 1.0, &mut o);
                         } else {
-                            ode::integrate(&model, &solver, 1, &s, u, 1.0, &mut o);
+                            ode::integrate(model, &solver, 1, &s, u, 1.0, &mut o);
                         }
                         s.copy_from_slice(&o);
                     }

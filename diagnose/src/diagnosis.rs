@@ -451,7 +451,8 @@ pub fn diagnose(
             &data.trajectories,
             (cfg.segment_s / data.pose_dt_s.max(1e-9)).round().max(2.0) as usize + 1,
         ),
-        World::Push => push_level(&data.trajectories),
+        // the loader gives one state per push (`dynlab_learn::dataset::one_state_per_push`)
+        World::Push => data.trajectories.clone(),
     };
     let trajs: Vec<StateTrajectory> = trajs.into_iter().filter(|t| t.len() > k).collect();
     let lengths: Vec<usize> = trajs.iter().map(|t| t.len()).collect();
@@ -725,7 +726,8 @@ pub fn diagnose(
 /// Pushing data recorded with poses between pushes (a 10 Hz block pose) hold each action over
 /// many poses; a pushing model steps one whole push. Keeps the pose at each push start (where the
 /// action changes) and the last pose, so that one transition is one push. Data with one pose per
-/// push pass unchanged.
+/// push pass unchanged. The data set loader already does this from the command stamps
+/// (`dynlab_learn::dataset::one_state_per_push`); this is for trajectories built otherwise.
 pub fn push_level(trajs: &[StateTrajectory]) -> Vec<StateTrajectory> {
     trajs
         .iter()

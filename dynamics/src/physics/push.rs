@@ -149,8 +149,8 @@ pub(crate) fn rhs_line<R: Real>(
     out[0] = zero;
     out[1] = zero;
     out[2] = zero;
-    let mut ox = zero;
-    let mut oy = zero;
+    let mut com: Option<(R, R)> = None;
+    let mut patch: Option<&[R]> = None;
     let mut mu: Option<R> = None;
     let mut tilt: Option<(R, R)> = None;
     for (sl, &on) in slots.iter().zip(active) {
@@ -159,20 +159,19 @@ pub(crate) fn rhs_line<R: Real>(
         }
         let q = &p[sl.p_off..];
         match sl.effect {
-            Effect::ComOffset => {
-                ox = ox + q[0];
-                oy = oy + q[1];
-            }
+            Effect::ComOffset => com = Some((q[0], q[1])),
             Effect::PusherFriction => mu = Some(q[0]),
             Effect::TableTilt => tilt = Some((q[0], q[1])),
-            Effect::FrictionPatch => {
-                let (fx, fy) = patch_offset(a, x, y, th, q);
-                ox = ox + fx;
-                oy = oy + fy;
-            }
+            Effect::FrictionPatch => patch = Some(q),
             _ => {}
         }
     }
+    // centre of friction and limit-surface ratio of the support distribution
+    let (ox, oy, c) = if com.is_none() && patch.is_none() {
+        (zero, zero, c)
+    } else {
+        support_friction(a, c, x, y, th, com, patch)
+    };
     let (st, ct) = (th.sin(), th.cos());
     let rel = psi - th;
     let (nd, td) = (rel.cos(), rel.sin());
@@ -251,26 +250,66 @@ pub(crate) fn rhs_line<R: Real>(
     out[2] = om;
 }
 
-/// Centre-of-friction offset (block frame) of a block of side `a` at `(x, y, θ)` partly on a
-/// disc patch with friction ratio `k`: the friction-weighted centroid of the support grid,
-/// `Σ wᵢ rᵢ / Σ wᵢ` with `wᵢ = 1 + (k − 1)·σ((r − ‖pᵢ − c‖)/w)`.
-fn patch_offset<R: Real>(a: R, x: R, y: R, th: R, q: &[R]) -> (R, R) {
-    let (cx, cy, r, w, k) = (q[0], q[1], q[2], q[3], q[4]);
+/// Centre of friction `(o_x, o_y)` (block frame) and limit-surface ratio of a block of side
+/// `a` at `(x, y, θ)` whose support is an `N × N` grid (as in the simulator) with friction
+/// weights `wᵢ = Nᵢ·μᵢ`: the normal load varies linearly so that its centroid is the centre of
+/// mass (`com_offset`: `Nᵢ ∝ max(0, 1 + o_x xᵢ/⟨x²⟩ + o_y yᵢ/⟨y²⟩)`, the simulator's load
+/// model), and `μᵢ/μ = 1 + (k − 1)·σ((r − ‖pᵢ − c‖)/w)` on a disc patch (`friction_patch`).
+/// The offset is the weighted centroid; the ratio is the nominal `c` scaled by the weighted mean
+/// distance from it over the uniform grid's mean distance from the centre.
+fn support_friction<R: Real>(
+    a: R,
+    c: R,
+    x: R,
+    y: R,
+    th: R,
+    com: Option<(R, R)>,
+    patch: Option<&[R]>,
+) -> (R, R, R) {
     let (st, ct) = (th.sin(), th.cos());
+    let nn = PATCH_GRID as f64;
+    // ⟨x²⟩ of the grid, in units of a²
+    let m2: f64 = (0..PATCH_GRID)
+        .map(|i| ((i as f64 + 0.5) / nn - 0.5).powi(2))
+        .sum::<f64>()
+        / nn;
+    let mut pts = Vec::with_capacity(PATCH_GRID * PATCH_GRID);
+    for i in 0..PATCH_GRID {
+        for j in 0..PATCH_GRID {
+            let fx = (i as f64 + 0.5) / nn - 0.5;
+            let fy = (j as f64 + 0.5) / nn - 0.5;
+            let lx = a * fx;
+            let ly = a * fy;
+            let mut wi = R::cst(1.0);
+            if let Some((cx_, cy_)) = com {
+                let l = (cx_ * fx + cy_ * fy) / (a * m2) + 1.0;
+                wi = if l.value() > 0.0 { l } else { R::cst(0.0) };
+            }
+            if let Some(q) = patch {
+                let wx = x + ct * lx - st * ly;
+                let wy = y + st * lx + ct * ly;
+                wi = wi * (disc(wx, wy, q[0], q[1], q[2], q[3]) * (q[4] - 1.0) + 1.0);
+            }
+            pts.push((lx, ly, wi, (fx * fx + fy * fy).sqrt()));
+        }
+    }
     let mut sw = R::cst(0.0);
     let mut swx = R::cst(0.0);
     let mut swy = R::cst(0.0);
-    for i in 0..PATCH_GRID {
-        for j in 0..PATCH_GRID {
-            let lx = a * ((i as f64 + 0.5) / PATCH_GRID as f64 - 0.5);
-            let ly = a * ((j as f64 + 0.5) / PATCH_GRID as f64 - 0.5);
-            let wx = x + ct * lx - st * ly;
-            let wy = y + st * lx + ct * ly;
-            let wi = disc(wx, wy, cx, cy, r, w) * (k - 1.0) + 1.0;
-            sw = sw + wi;
-            swx = swx + wi * lx;
-            swy = swy + wi * ly;
-        }
+    let mut uniform = 0.0;
+    for &(lx, ly, wi, d) in &pts {
+        sw = sw + wi;
+        swx = swx + wi * lx;
+        swy = swy + wi * ly;
+        uniform += d;
     }
-    (swx / sw, swy / sw)
+    let (ox, oy) = (swx / sw, swy / sw);
+    let mut sd = R::cst(0.0);
+    for &(lx, ly, wi, _) in &pts {
+        let (dx, dy) = (lx - ox, ly - oy);
+        sd = sd + wi * (dx * dx + dy * dy + 1e-12).sqrt();
+    }
+    let mean = sd / sw;
+    let uniform_mean = a * (uniform / pts.len() as f64);
+    (ox, oy, c * mean / uniform_mean)
 }
