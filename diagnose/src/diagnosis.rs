@@ -38,7 +38,7 @@ use dynlab_learn::dynamics::data::{
     DataError, SplitMix64, StateTrajectory, Window, split_trajectories, windows,
 };
 use dynlab_learn::dynamics::physics::{Effect, ModelError, PhysicsModel};
-use dynlab_learn::fit::{bounded_least_squares, initial_state};
+use dynlab_learn::fit::{bounded_least_squares, cluster_std, initial_state};
 use dynlab_learn::train::segment;
 use dynlab_learn::{Dataset, LearnError, Model, World};
 use serde::{Deserialize, Serialize};
@@ -615,7 +615,22 @@ pub fn diagnose(
                 }
                 (r, jac)
             };
-            let res = bounded_least_squares(&th0, &lower, &upper, &free, cfg.iterations, &mut eval);
+            let mut res =
+                bounded_least_squares(&th0, &lower, &upper, &free, cfg.iterations, &mut eval);
+            // standard errors clustered by trajectory (overlapping windows are correlated);
+            // residual rows are step-major: (step j, window i, dimension c)
+            let (r, jac) = eval(&res.theta, true);
+            let cluster: Vec<usize> = (0..k)
+                .flat_map(|_| {
+                    fit_w
+                        .iter()
+                        .flat_map(|w| std::iter::repeat_n(w.trajectory, ds))
+                })
+                .collect();
+            let cs = cluster_std(&jac, &r, res.theta.len(), &free, &cluster);
+            if cs.iter().all(|v| !v.is_nan()) {
+                res.std = cs;
+            }
             if best.as_ref().is_none_or(|b| res.cost < b.0) {
                 best = Some((res.cost, res.theta, res.std));
             }
