@@ -342,7 +342,9 @@ fn push_step_derivatives_match_finite_differences() {
         let z: Vec<f64> = PUSH_S.iter().chain(&PUSH_U).copied().collect();
         let fd = fd_jac(|z| step(&m, &z[..3], &z[3..]), &z, 1e-7);
         let (mut out, mut js, mut ju) = ([0.0; 3], [0.0; 9], [0.0; 9]);
-        m.step_jacobians(&solver, 1, &PUSH_S, &PUSH_U, 1.0, &mut out, &mut js, &mut ju);
+        m.step_jacobians(
+            &solver, 1, &PUSH_S, &PUSH_U, 1.0, &mut out, &mut js, &mut ju,
+        );
         assert_eq!(out.to_vec(), step(&m, &PUSH_S, &PUSH_U));
         // reverse mode, one output at a time
         let mut tape = StepTape::default();
@@ -365,7 +367,11 @@ fn push_step_derivatives_match_finite_differences() {
             m.integrate_step_vjp(&tape, &ybar, &mut sb, &mut ub, &mut pb);
             for c in 0..6 {
                 let want = fd[c][r];
-                let fwd = if c < 3 { js[r * 3 + c] } else { ju[r * 3 + c - 3] };
+                let fwd = if c < 3 {
+                    js[r * 3 + c]
+                } else {
+                    ju[r * 3 + c - 3]
+                };
                 let rev = if c < 3 { sb[c] } else { ub[c - 3] };
                 let tol = 1e-5 * want.abs().max(1.0);
                 assert!((fwd - want).abs() < tol, "d{r}/dz{c}: {fwd} vs {want}");
@@ -374,7 +380,11 @@ fn push_step_derivatives_match_finite_differences() {
             for c in 0..np {
                 let want = fdp[c][r];
                 let tol = 1e-5 * want.abs().max(1.0);
-                assert!((pb[c] - want).abs() < tol, "d{r}/dθ{c}: {} vs {want}", pb[c]);
+                assert!(
+                    (pb[c] - want).abs() < tol,
+                    "d{r}/dθ{c}: {} vs {want}",
+                    pb[c]
+                );
             }
         }
     }
