@@ -9,7 +9,7 @@
 use dynlab_diagnose::diagnosis::simdata::{push_dataset, push_scenario};
 use dynlab_diagnose::diagnosis::{DiagnoseConfig, Diagnosis, diagnose};
 use dynlab_learn::dynamics::conventions::wrap_angle;
-use dynlab_learn::dynamics::ode::{self, Solver};
+use dynlab_learn::dynamics::ode;
 use dynlab_learn::dynamics::physics::{Effect, PhysicsModel};
 use dynlab_learn::train::default_physics_solver;
 use dynlab_learn::{Dataset, Model, ModelKind, World};

@@ -237,7 +237,9 @@ pub struct StepTape {
 impl PhysicsModel {
     /// Integrates `n` samples over one model step `dt` with the inputs held (`s0`, `u`, `out`
     /// row-major, `dim_state` / `dim_input` per sample). The car integrates its vector field;
-    /// a push holds the pusher's world line fixed over the step (see the [module docs](self)).
+    /// a push integrates `(x, y, θ)` together with its step constants `(ψ, q_x, q_y)` (world
+    /// push direction, pusher start point) held fixed, so the pusher moves on a straight world
+    /// line while the block turns under it; derivatives chain exactly through the constants.
     /// This is the model's step: use it rather than integrating the [`VectorField`] directly.
     #[allow(clippy::too_many_arguments)]
     pub fn integrate_step(
