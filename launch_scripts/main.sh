@@ -106,6 +106,7 @@ for before in sorted(d.glob("before@*.json")):
     v = v.read_text().strip() if v.exists() else "—"
     tb = (b.get("tve") or {}).get("tve", float("nan"))
     ta = (a.get("tve") or {}).get("tve", float("nan"))
-    print(f"{name:<22} {v:<16} {b['loss']:>12.4e} {a['loss']:>12.4e} {100*(a['loss']/b['loss']-1):>7.0f}% {tb:>11.3f} {ta:>10.3f}")
+    f = lambda x: f"{x:.3f}" if x == x else "—"
+    print(f"{name:<22} {v:<16} {b['loss']:>12.4e} {a['loss']:>12.4e} {100*(a['loss']/b['loss']-1):>7.0f}% {f(tb):>11} {f(ta):>10}")
 PY
 printf '\nReports: %s/compare/*/index.html (where it fails, before/after), %s/diagnosis/*/diagnosis.html\nModels and errors: %s\n' "$out" "$out" "$out"
