@@ -62,12 +62,38 @@ for effect_bag in car_aero_drag car_steering_offset; do
     --bag "$out/test/$effect_bag" --out "$out/compare/$effect_bag"
 done
 
-# Pushing is not in the loop yet: `dynlab train` reads the bundled pushing bags (block pose at
-# 10 Hz) as 0.1 s transitions while a pushing model steps one whole push, and the nominal
-# pushing model holds the push direction in the block frame (the simulator's pusher moves on a
-# straight world line); see diagnose/README.md, "Limits".
+# Pushing: the same loop on the bundled pushing bag with a hidden centre-of-mass offset (one
+# transition per push: the loader collapses the 10 Hz block pose to the push starts; k = 3 pushes).
+step "Held-out pushing test data (push_com_offset scenario, other seed)"
+"$dynlab" collect push --scenario "$scen/push_com_offset.toml" --episodes 10 --seed 9002 \
+  --out "$out/test/push_com_offset" | tail -n 1
 
-step "Before / after: held-out 50-step error of the car physics model (test data with the hidden effect)"
+step "Baseline: the pushing physics model fitted on the nominal bag"
+"$dynlab" train --bag bags/push_nominal --kind physics --steps 3 --out "$out/models/push_physics" | tail -n 1
+
+effect_bag=push_com_offset
+step "$effect_bag: baseline error on held-out data"
+"$dynlab" eval-model --model "$out/models/push_physics" --bag "$out/test/$effect_bag" --steps 3 --json \
+  > "$out/eval/before@$effect_bag.json"
+step "$effect_bag: diagnosis"
+"$dynlab" diagnose --model "$out/models/push_physics" --bag "bags/$effect_bag" --out "$out/diagnosis/$effect_bag"
+verdict="$(verdict_of "$out/diagnosis/$effect_bag/diagnosis.json")"
+if [[ -z "$verdict" ]]; then
+  echo "no effect found for $effect_bag; nothing to add"
+  cp "$out/eval/before@$effect_bag.json" "$out/eval/after@$effect_bag.json"
+else
+  step "$effect_bag: add $verdict and refit"
+  "$dynlab" train --bag "bags/$effect_bag" --kind physics --steps 3 --effects "$verdict" \
+    --out "$out/models/push_physics+$verdict" | grep -E "\($verdict|physics model, best"
+  "$dynlab" eval-model --model "$out/models/push_physics+$verdict" --bag "$out/test/$effect_bag" --steps 3 \
+    --json > "$out/eval/after@$effect_bag.json"
+  echo "$verdict" > "$out/eval/verdict@$effect_bag.txt"
+  step "$effect_bag: where the error fell (compare, side by side with the baseline)"
+  "$dynlab" compare --steps 3 --model "$out/models/push_physics+$verdict" --baseline "$out/models/push_physics" \
+    --bag "$out/test/$effect_bag" --out "$out/compare/$effect_bag"
+fi
+
+step "Before / after: held-out error of the physics model (car: 50 steps, pushing: 3 pushes; test data with the hidden effect)"
 python3 - "$out/eval" <<'PY'
 import json, pathlib, sys
 d = pathlib.Path(sys.argv[1])
@@ -80,6 +106,7 @@ for before in sorted(d.glob("before@*.json")):
     v = v.read_text().strip() if v.exists() else "—"
     tb = (b.get("tve") or {}).get("tve", float("nan"))
     ta = (a.get("tve") or {}).get("tve", float("nan"))
-    print(f"{name:<22} {v:<16} {b['loss']:>12.4e} {a['loss']:>12.4e} {100*(a['loss']/b['loss']-1):>7.0f}% {tb:>11.3f} {ta:>10.3f}")
+    f = lambda x: f"{x:.3f}" if x == x else "—"
+    print(f"{name:<22} {v:<16} {b['loss']:>12.4e} {a['loss']:>12.4e} {100*(a['loss']/b['loss']-1):>7.0f}% {f(tb):>11} {f(ta):>10}")
 PY
 printf '\nReports: %s/compare/*/index.html (where it fails, before/after), %s/diagnosis/*/diagnosis.html\nModels and errors: %s\n' "$out" "$out" "$out"

@@ -3,7 +3,7 @@
 //! effect first and significant (and nothing on nominal data)?
 //!
 //! `cargo run --release -p dynlab-diagnose --example recovery -- [--seeds N] [--noise X]
-//! [--car-episodes N] [--car-duration S] [--push-episodes N] [--only NAME]`
+//! [--car-episodes N] [--car-duration S] [--push-episodes N] [--only NAME] [--world car|push]`
 //!
 //! The model under diagnosis is the nominal physics model at its documented values (what a fit
 //! on nominal data returns; the simulator's nominal world is those values).
@@ -33,6 +33,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let car_dur: f64 = arg("--car-duration", 15.0);
     let push_eps: u64 = arg("--push-episodes", 20);
     let only: String = arg("--only", String::new());
+    let only_world: String = arg("--world", String::new());
     let steps: usize = arg("--steps", 0);
     let fit_baseline = std::env::args().any(|a| a == "--fit-baseline");
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
@@ -57,6 +58,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     }
     for (world, effect) in cases {
         let name = effect.map_or("none (nominal)", |e| e.name());
+        if !only_world.is_empty() && world.name() != only_world {
+            continue;
+        }
         if !only.is_empty() && !name.starts_with(&only) {
             continue;
         }
@@ -146,7 +150,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     Effect::GripPatch => "k",
                     Effect::ComOffset => "ox",
                     Effect::TableTilt => "gx",
-                    Effect::FrictionPatch => "beta",
+                    Effect::FrictionPatch => "k",
                     Effect::PusherFriction => "mu",
                 };
                 if let Some(v) = c.params.get(key) {

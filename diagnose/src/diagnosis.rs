@@ -37,9 +37,8 @@ use dynlab_learn::dynamics::conventions::wrap_angle;
 use dynlab_learn::dynamics::data::{
     DataError, SplitMix64, StateTrajectory, Window, split_trajectories, windows,
 };
-use dynlab_learn::dynamics::ode;
 use dynlab_learn::dynamics::physics::{Effect, ModelError, PhysicsModel};
-use dynlab_learn::fit::{bounded_least_squares, initial_state};
+use dynlab_learn::fit::{bounded_least_squares, cluster_std, initial_state};
 use dynlab_learn::train::segment;
 use dynlab_learn::{Dataset, LearnError, Model, World};
 use serde::{Deserialize, Serialize};
@@ -313,7 +312,7 @@ impl Augmented<'_> {
             if self.pure_physics {
                 // the model is Φ_P: the augmented model is Φ_{P+e}
                 if let Some(p) = &self.with {
-                    ode::integrate(p, &solver, n, &sw, &u, dt_phys, &mut nw);
+                    p.integrate_step(&solver, n, &sw, &u, dt_phys, &mut nw);
                     for i in 0..n {
                         next[i * ds..(i + 1) * ds].copy_from_slice(&nw[i * dw..i * dw + ds]);
                     }
@@ -324,8 +323,9 @@ impl Augmented<'_> {
             } else {
                 let _ = self.model.step(&s, &u, &mut next);
                 if let Some(p) = &self.with {
-                    ode::integrate(&self.base, &solver, n, &sb, &u, dt_phys, &mut nb);
-                    ode::integrate(p, &solver, n, &sw, &u, dt_phys, &mut nw);
+                    self.base
+                        .integrate_step(&solver, n, &sb, &u, dt_phys, &mut nb);
+                    p.integrate_step(&solver, n, &sw, &u, dt_phys, &mut nw);
                     for i in 0..n {
                         for c in 0..ds {
                             next[i * ds + c] += nw[i * dw + c] - nb[i * db + c];
@@ -420,14 +420,8 @@ fn starts(e: Effect, trajs: &[StateTrajectory]) -> Vec<Vec<(&'static str, f64)>>
             let r = 0.25 * (hi[0] - lo[0]).max(hi[1] - lo[1]).max(0.02);
             let mut v = Vec::new();
             for (x, y) in grid(3) {
-                for b in [-0.3, 0.5] {
-                    v.push(vec![
-                        ("cx", x),
-                        ("cy", y),
-                        ("r", r),
-                        ("w", 0.01),
-                        ("beta", b),
-                    ]);
+                for k in [0.3, 3.0] {
+                    v.push(vec![("cx", x), ("cy", y), ("r", r), ("w", 0.01), ("k", k)]);
                 }
             }
             v
@@ -457,7 +451,8 @@ pub fn diagnose(
             &data.trajectories,
             (cfg.segment_s / data.pose_dt_s.max(1e-9)).round().max(2.0) as usize + 1,
         ),
-        World::Push => push_level(&data.trajectories),
+        // the loader gives one state per push (`dynlab_learn::dataset::one_state_per_push`)
+        World::Push => data.trajectories.clone(),
     };
     let trajs: Vec<StateTrajectory> = trajs.into_iter().filter(|t| t.len() > k).collect();
     let lengths: Vec<usize> = trajs.iter().map(|t| t.len()).collect();
@@ -620,7 +615,22 @@ pub fn diagnose(
                 }
                 (r, jac)
             };
-            let res = bounded_least_squares(&th0, &lower, &upper, &free, cfg.iterations, &mut eval);
+            let mut res =
+                bounded_least_squares(&th0, &lower, &upper, &free, cfg.iterations, &mut eval);
+            // standard errors clustered by trajectory (overlapping windows are correlated);
+            // residual rows are step-major: (step j, window i, dimension c)
+            let (r, jac) = eval(&res.theta, true);
+            let cluster: Vec<usize> = (0..k)
+                .flat_map(|_| {
+                    fit_w
+                        .iter()
+                        .flat_map(|w| std::iter::repeat_n(w.trajectory, ds))
+                })
+                .collect();
+            let cs = cluster_std(&jac, &r, res.theta.len(), &free, &cluster);
+            if cs.iter().all(|v| !v.is_nan()) {
+                res.std = cs;
+            }
             if best.as_ref().is_none_or(|b| res.cost < b.0) {
                 best = Some((res.cost, res.theta, res.std));
             }
@@ -731,7 +741,8 @@ pub fn diagnose(
 /// Pushing data recorded with poses between pushes (a 10 Hz block pose) hold each action over
 /// many poses; a pushing model steps one whole push. Keeps the pose at each push start (where the
 /// action changes) and the last pose, so that one transition is one push. Data with one pose per
-/// push pass unchanged.
+/// push pass unchanged. The data set loader already does this from the command stamps
+/// (`dynlab_learn::dataset::one_state_per_push`); this is for trajectories built otherwise.
 pub fn push_level(trajs: &[StateTrajectory]) -> Vec<StateTrajectory> {
     trajs
         .iter()

@@ -42,7 +42,7 @@ fn push_all(mu: f64) -> PhysicsModel {
     m.set_param("friction_patch.cy", 0.02).unwrap();
     m.set_param("friction_patch.r", 0.05).unwrap();
     m.set_param("friction_patch.w", 0.02).unwrap();
-    m.set_param("friction_patch.beta", 0.4).unwrap();
+    m.set_param("friction_patch.k", 1.4).unwrap();
     m.set_param("pusher_friction.mu", mu).unwrap();
     m
 }
@@ -302,18 +302,91 @@ fn rear_friction_ellipse_caps_the_drive_force() {
 }
 
 #[test]
-fn table_tilt_is_linear_in_its_parameters() {
+fn table_tilt_deflects_a_push_downhill_and_holds_a_block_at_rest() {
+    // a central push along +x at θ = 0 on a table tilted towards ±y
+    let s = [0.5, 0.0, 0.0];
+    let u = [0.0, 0.0, 0.5];
+    let mut f = [0.0; 3];
+    let nominal = PhysicsModel::pushing(&[]).unwrap();
+    nominal.eval_one(&s, &u, &mut f);
+    let vx = f[0];
+    assert!(vx > 0.0 && f[1].abs() < 1e-15 && f[2].abs() < 1e-15);
     let mut m = PhysicsModel::pushing(&[Effect::TableTilt]).unwrap();
-    let t = |m: &PhysicsModel| m.effect_term(Effect::TableTilt, &PUSH_S, &PUSH_U).unwrap();
-    m.set_param("table_tilt.gx", 0.1).unwrap();
-    let a = t(&m);
-    m.set_param("table_tilt.gx", 0.3).unwrap();
-    m.set_param("table_tilt.gy", -0.2).unwrap();
-    let b = t(&m);
-    // Δf = J_θ θ exactly
-    for r in 0..3 {
-        let lin = a.d_params[r * 2] * 0.3 + a.d_params[r * 2 + 1] * -0.2;
-        assert!((b.contribution[r] - lin).abs() < 1e-15);
+    for gy in [0.2, -0.2] {
+        m.set_param("table_tilt.gy", gy).unwrap();
+        m.eval_one(&s, &u, &mut f);
+        // the pusher sets the normal velocity; the tilt adds a downhill drift
+        assert!((f[0] - vx).abs() < 1e-9, "{f:?}");
+        assert!(f[1] * gy > 0.0 && f[1].abs() > 0.1 * vx, "{f:?}");
+    }
+    // no push: the tilt (below the friction angle) does not move the block
+    m.eval_one(&s, &[0.0, 0.0, 0.0], &mut f);
+    assert_eq!(f, [0.0; 3]);
+}
+
+#[test]
+fn push_step_derivatives_match_finite_differences() {
+    use dynlab_dynamics::physics::StepTape;
+    let solver = Solver::Rk4 { substeps: 2 };
+    for m in [
+        PhysicsModel::pushing(&[]).unwrap(),
+        push_all(0.2),
+        push_all(1.5),
+    ] {
+        let np = m.params().len();
+        let step = |m: &PhysicsModel, s: &[f64], u: &[f64]| {
+            let mut o = [0.0; 3];
+            m.integrate_step(&solver, 1, s, u, 1.0, &mut o);
+            o.to_vec()
+        };
+        let z: Vec<f64> = PUSH_S.iter().chain(&PUSH_U).copied().collect();
+        let fd = fd_jac(|z| step(&m, &z[..3], &z[3..]), &z, 1e-7);
+        let (mut out, mut js, mut ju) = ([0.0; 3], [0.0; 9], [0.0; 9]);
+        m.step_jacobians(
+            &solver, 1, &PUSH_S, &PUSH_U, 1.0, &mut out, &mut js, &mut ju,
+        );
+        assert_eq!(out.to_vec(), step(&m, &PUSH_S, &PUSH_U));
+        // reverse mode, one output at a time
+        let mut tape = StepTape::default();
+        let mut o = [0.0; 3];
+        m.integrate_step_taped(&solver, 1, &PUSH_S, &PUSH_U, 1.0, &mut o, &mut tape);
+        let theta = m.params().to_vec();
+        let fdp = fd_jac(
+            |q| {
+                let mut mm = m.clone();
+                mm.set_params(q).unwrap();
+                step(&mm, &PUSH_S, &PUSH_U)
+            },
+            &theta,
+            1e-7,
+        );
+        for r in 0..3 {
+            let mut ybar = [0.0; 3];
+            ybar[r] = 1.0;
+            let (mut sb, mut ub, mut pb) = ([0.0; 3], [0.0; 3], vec![0.0; np]);
+            m.integrate_step_vjp(&tape, &ybar, &mut sb, &mut ub, &mut pb);
+            for c in 0..6 {
+                let want = fd[c][r];
+                let fwd = if c < 3 {
+                    js[r * 3 + c]
+                } else {
+                    ju[r * 3 + c - 3]
+                };
+                let rev = if c < 3 { sb[c] } else { ub[c - 3] };
+                let tol = 1e-5 * want.abs().max(1.0);
+                assert!((fwd - want).abs() < tol, "d{r}/dz{c}: {fwd} vs {want}");
+                assert!((rev - want).abs() < tol, "d{r}/dz{c}: {rev} vs {want}");
+            }
+            for c in 0..np {
+                let want = fdp[c][r];
+                let tol = 1e-5 * want.abs().max(1.0);
+                assert!(
+                    (pb[c] - want).abs() < tol,
+                    "d{r}/dθ{c}: {} vs {want}",
+                    pb[c]
+                );
+            }
+        }
     }
 }
 

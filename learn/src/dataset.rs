@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use dynlab_bag::Bag;
 use dynlab_dynamics::data::{
     CommandHold, CommandSample, PipelineConfig, PipelineReport, PoseSample, SavGol,
-    StateTrajectory, build_trajectories,
+    StateTrajectory, Trajectory, build_trajectories,
 };
 use dynlab_msgs::ackermann_msgs::AckermannDriveStamped;
 use dynlab_msgs::dynlab_msgs::PushAction;
@@ -133,10 +133,19 @@ fn trajectories_with_stamps(
             ..Default::default()
         },
     };
-    let (trajs, report) = build_trajectories(poses, commands, &cfg)?;
+    let (mut trajs, report) = build_trajectories(poses, commands, &cfg)?;
+    if world == World::Push {
+        let mut cmd_t: Vec<i64> = commands.iter().map(|c| c.t_ns).collect();
+        cmd_t.sort_unstable();
+        trajs = trajs
+            .iter()
+            .map(|t| one_state_per_push(t, &cmd_t))
+            .collect();
+    }
     // resampled to a fixed step: that is the step of the data now
     let dt = match (world, step_ns) {
         (World::Car, Some(ns)) => ns as f64 * 1e-9,
+        (World::Push, _) => median_interval_s(&trajs).unwrap_or(report.median_dt_s),
         _ => report.median_dt_s,
     };
     let states = match world {
@@ -148,6 +157,56 @@ fn trajectories_with_stamps(
     };
     let stamps = trajs.iter().map(|t| t.t_ns.clone()).collect();
     Ok((states, report, dt, stamps))
+}
+
+/// One state per push: a pushing model steps one whole push, so a pushing trajectory keeps
+/// the pose each push starts from (the last pose at or before its `/push/action` message, as
+/// [`CommandHold::BeforeNextPose`] assigns commands) and its last pose (the settled pose after
+/// the last push); the poses in between (a block pose streamed at 10 Hz during a push) are
+/// dropped. Data with one pose per push (each push published after the pose it starts from)
+/// keep every pose and load exactly as before.
+pub fn one_state_per_push(traj: &Trajectory, cmd_t: &[i64]) -> Trajectory {
+    let n = traj.t_ns.len();
+    let mut keep = vec![false; n];
+    if n > 0 {
+        keep[0] = true;
+        keep[n - 1] = true;
+    }
+    for &c in cmd_t {
+        let k = traj.t_ns.partition_point(|&t| t <= c);
+        if k > 0 && k < n {
+            keep[k - 1] = true;
+        }
+    }
+    let du = traj.dim_u;
+    let idx: Vec<usize> = (0..n).filter(|&i| keep[i]).collect();
+    let t_ns: Vec<i64> = idx.iter().map(|&i| traj.t_ns[i]).collect();
+    let mut gaps: Vec<i64> = t_ns.windows(2).map(|w| w[1] - w[0]).collect();
+    gaps.sort_unstable();
+    let dt = gaps
+        .get(gaps.len() / 2)
+        .map_or(traj.dt, |&g| g as f64 * 1e-9);
+    Trajectory {
+        pose: idx.iter().map(|&i| traj.pose[i]).collect(),
+        u: idx
+            .iter()
+            .flat_map(|&i| traj.u[i * du..(i + 1) * du].iter().copied())
+            .collect(),
+        t_ns,
+        dim_u: du,
+        dt,
+        resampled: traj.resampled,
+    }
+}
+
+/// Median interval between consecutive states over all trajectories \[s\].
+fn median_interval_s(trajs: &[Trajectory]) -> Option<f64> {
+    let mut gaps: Vec<i64> = trajs
+        .iter()
+        .flat_map(|t| t.t_ns.windows(2).map(|w| w[1] - w[0]))
+        .collect();
+    gaps.sort_unstable();
+    gaps.get(gaps.len() / 2).map(|&g| g as f64 * 1e-9)
 }
 
 /// Infers the world of a bag from its topics (`/push/block_pose` → push, `/car/pose` → car).

@@ -5,8 +5,9 @@
 //! program `min ½δᵀ(JᵀJ + λ diag(JᵀJ))δ + (Jᵀr)ᵀδ  s.t.  lower ≤ θ + δ ≤ upper`, solved by
 //! `clarabel` (an interior-point QP solver), so bounds are honoured exactly instead of by clamping.
 //! For a residual that is linear in the parameters the first step with `λ → 0` is the constrained
-//! linear least-squares solution. Standard errors come from `σ²(JᵀJ)⁻¹` over the free parameters,
-//! `σ² = ‖r‖²/(m − n)`.
+//! linear least-squares solution. Standard errors: [`bounded_least_squares`] reports `σ²(JᵀJ)⁻¹`
+//! (`σ² = ‖r‖²/(m − n)`, independent residuals); the physics fit replaces them by
+//! [`cluster_std`], clustered by trajectory, since overlapping k-step windows are correlated.
 
 use clarabel::algebra::CscMatrix;
 use clarabel::solver::{
@@ -14,8 +15,8 @@ use clarabel::solver::{
 };
 use dynlab_dynamics::conventions::wrap_angle;
 use dynlab_dynamics::data::{SplitMix64, StateTrajectory, Window};
-use dynlab_dynamics::ode::{self, OdeStatus, Solver, SolverTape};
-use dynlab_dynamics::physics::{Effect, PhysicsModel};
+use dynlab_dynamics::ode::{OdeStatus, Solver};
+use dynlab_dynamics::physics::{Effect, PhysicsModel, StepTape};
 
 use crate::train::{Loss, PhysicsFit, TrainConfig};
 use crate::{LearnError, World};
@@ -133,6 +134,79 @@ pub fn bounded_least_squares(
         iterations: its,
         residuals: m,
     }
+}
+
+/// Cluster-robust ("sandwich") standard errors of a least-squares fit: residuals `r` and
+/// Jacobian `jac` (`m × n` row-major) at the solution, and a cluster id per residual (the
+/// trajectory it comes from). `Cov = A⁻¹ B A⁻¹ · G/(G − 1)` with `A = JᵀJ` and
+/// `B = Σ_g (J_gᵀ r_g)(J_gᵀ r_g)ᵀ` over the `G` clusters, over the free parameters. Residuals
+/// of overlapping k-step windows of one trajectory are strongly correlated, so `σ²(JᵀJ)⁻¹`
+/// (which treats every residual as independent) is far too small; clustering by whole
+/// trajectories keeps that correlation. Fixed parameters get 0, and every free one NaN when
+/// there are fewer than 2 clusters or `JᵀJ` is singular.
+pub fn cluster_std(jac: &[f64], r: &[f64], n: usize, free: &[bool], cluster: &[usize]) -> Vec<f64> {
+    let idx: Vec<usize> = (0..n).filter(|&i| free[i]).collect();
+    let nf = idx.len();
+    let mut std = vec![0.0; n];
+    if nf == 0 {
+        return std;
+    }
+    let m = r.len();
+    if jac.len() != m * n || cluster.len() != m {
+        idx.iter().for_each(|&i| std[i] = f64::NAN);
+        return std;
+    }
+    let (jtj, _) = reduced_normal_equations(jac, r, n, &idx);
+    let mut scores: std::collections::BTreeMap<usize, Vec<f64>> = Default::default();
+    for ((row, ri), &g) in jac.chunks_exact(n).zip(r).zip(cluster) {
+        let sc = scores.entry(g).or_insert_with(|| vec![0.0; nf]);
+        for (a, &ia) in idx.iter().enumerate() {
+            sc[a] += row[ia] * ri;
+        }
+    }
+    let g = scores.len();
+    if g < 2 {
+        idx.iter().for_each(|&i| std[i] = f64::NAN);
+        return std;
+    }
+    let mut b = vec![0.0; nf * nf];
+    for sc in scores.values() {
+        for i in 0..nf {
+            for j in 0..nf {
+                b[i * nf + j] += sc[i] * sc[j];
+            }
+        }
+    }
+    let trace: f64 = (0..nf).map(|i| jtj[i * nf + i]).sum::<f64>().max(1e-300);
+    let mut a = jtj;
+    for i in 0..nf {
+        a[i * nf + i] += 1e-12 * trace / nf as f64;
+    }
+    // columns of A⁻¹
+    let mut inv = vec![0.0; nf * nf];
+    for k in 0..nf {
+        let mut e = vec![0.0; nf];
+        e[k] = 1.0;
+        match solve(&a, &e, nf) {
+            Some(col) => (0..nf).for_each(|i| inv[i * nf + k] = col[i]),
+            None => {
+                idx.iter().for_each(|&i| std[i] = f64::NAN);
+                return std;
+            }
+        }
+    }
+    let corr = g as f64 / (g as f64 - 1.0);
+    for (k, &i) in idx.iter().enumerate() {
+        // (A⁻¹ B A⁻¹)_kk
+        let mut v = 0.0;
+        for p in 0..nf {
+            for q in 0..nf {
+                v += inv[k * nf + p] * b[p * nf + q] * inv[q * nf + k];
+            }
+        }
+        std[i] = (corr * v).max(0.0).sqrt();
+    }
+    std
 }
 
 /// `JᵀJ` and `Jᵀr` over the columns `idx`.
@@ -350,7 +424,7 @@ pub(crate) fn fit_physics(
         }
         let mut r = Vec::new();
         let mut jac = Vec::new();
-        let mut tape = SolverTape::default();
+        let mut tape = StepTape::default();
         let mut sn = vec![0.0; dp];
         let mut sens = vec![0.0; dp * np];
         let mut phis = vec![0.0; dp * dp];
@@ -369,9 +443,9 @@ pub(crate) fn fit_physics(
                 let a = w.start + j;
                 let u = &t.u[a * du..(a + 1) * du];
                 let rep = if with_j {
-                    ode::integrate_taped(&p, solver, 1, &s, u, t_phys, &mut sn, &mut tape)
+                    p.integrate_step_taped(solver, 1, &s, u, t_phys, &mut sn, &mut tape)
                 } else {
-                    ode::integrate(&p, solver, 1, &s, u, t_phys, &mut sn)
+                    p.integrate_step(solver, 1, &s, u, t_phys, &mut sn)
                 };
                 let bad = rep.status != OdeStatus::Success;
                 if with_j {
@@ -379,7 +453,7 @@ pub(crate) fn fit_physics(
                         ybar.iter_mut().for_each(|x| *x = 0.0);
                         ybar[d] = 1.0;
                         pbar.iter_mut().for_each(|x| *x = 0.0);
-                        ode::integrate_vjp(&p, &tape, &ybar, &mut sbar0, &mut ubar, &mut pbar);
+                        p.integrate_step_vjp(&tape, &ybar, &mut sbar0, &mut ubar, &mut pbar);
                         phis[d * dp..(d + 1) * dp].copy_from_slice(&sbar0);
                         phit[d * np..(d + 1) * np].copy_from_slice(&pbar);
                     }
@@ -420,7 +494,7 @@ pub(crate) fn fit_physics(
         }
         (r, jac)
     };
-    let res = bounded_least_squares(
+    let mut res = bounded_least_squares(
         p.params(),
         &lower,
         &upper,
@@ -428,6 +502,19 @@ pub(crate) fn fit_physics(
         cfg.physics_iterations,
         &mut eval,
     );
+    // honest standard errors: clustered by trajectory (windows overlap)
+    if free.iter().any(|&f| f) {
+        let (r, jac) = eval(&res.theta, true);
+        let rows = k * lr.len();
+        let cluster: Vec<usize> = ws
+            .iter()
+            .flat_map(|w| std::iter::repeat_n(w.trajectory, rows))
+            .collect();
+        let cs = cluster_std(&jac, &r, np, &free, &cluster);
+        if cs.iter().all(|v| !v.is_nan()) {
+            res.std = cs;
+        }
+    }
     p.set_params(&res.theta)?;
     p.set_std_errors(Some(res.std))?;
     Ok(PhysicsFit {

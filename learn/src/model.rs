@@ -363,13 +363,12 @@ impl Model {
         // physics part
         if let Some(p) = &self.physics {
             let rep = if p.dim_state() == ds {
-                ode::integrate(p, &self.physics_solver, n, s, u, self.physics_time(), out)
+                p.integrate_step(&self.physics_solver, n, s, u, self.physics_time(), out)
             } else {
                 let dp = p.dim_state();
                 let sp = pad_effect_states(p, n, s, u);
                 let mut op = vec![0.0; n * dp];
-                let rep = ode::integrate(
-                    p,
+                let rep = p.integrate_step(
                     &self.physics_solver,
                     n,
                     &sp,
@@ -514,8 +513,7 @@ impl Model {
         let mut ju = vec![0.0; n * ds * du];
         if let Some(p) = &self.physics {
             if p.dim_state() == ds {
-                ode::step_jacobians(
-                    p,
+                p.step_jacobians(
                     &self.physics_solver,
                     n,
                     s,
@@ -533,8 +531,7 @@ impl Model {
                 let mut np_ = vec![0.0; n * dp];
                 let mut jsp = vec![0.0; n * dp * dp];
                 let mut jup = vec![0.0; n * dp * du];
-                ode::step_jacobians(
-                    p,
+                p.step_jacobians(
                     &self.physics_solver,
                     n,
                     &sp,

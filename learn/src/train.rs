@@ -1225,7 +1225,7 @@ fn normalization(
         inputs.extend_from_slice(u);
         match physics {
             Some(p) => {
-                ode::integrate(p, solver, 1, s0, u, t_phys, &mut pn);
+                p.integrate_step(solver, 1, s0, u, t_phys, &mut pn);
                 for d in lr.clone() {
                     outputs.push(s1[d] - pn[d]);
                 }

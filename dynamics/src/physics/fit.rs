@@ -3,9 +3,7 @@
 
 use super::model::{ModelError, PhysicsModel};
 use crate::conventions::wrap_angle;
-use crate::ode::{
-    OdeReport, OdeStatus, Solver, SolverTape, integrate, integrate_taped, integrate_vjp,
-};
+use crate::ode::{OdeReport, OdeStatus, Solver};
 
 /// One measured transition: from `s0` under input `u` held for `dt` to the measured `s1`.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -89,7 +87,7 @@ pub fn residuals(
     let mut pred = vec![0.0; model.dim_state()];
     for tr in transitions {
         check(model, tr, m)?;
-        reps.push(integrate(model, solver, 1, &tr.s0, &tr.u, tr.dt, &mut pred));
+        reps.push(model.integrate_step(solver, 1, &tr.s0, &tr.u, tr.dt, &mut pred));
         residual_rows(model, &pred, &tr.s1, weights, &mut r);
     }
     Ok((r, reps))
@@ -113,14 +111,14 @@ pub fn residuals_and_jacobian(
         failed: Vec::new(),
     };
     let mut pred = vec![0.0; ds];
-    let mut tape = SolverTape::default();
+    let mut tape = super::StepTape::default();
     let mut ybar = vec![0.0; ds];
     let mut sbar0 = vec![0.0; ds];
     let mut ubar = vec![0.0; du];
     let mut pbar = vec![0.0; np];
     for (i, tr) in transitions.iter().enumerate() {
         check(model, tr, m)?;
-        let rep = integrate_taped(model, solver, 1, &tr.s0, &tr.u, tr.dt, &mut pred, &mut tape);
+        let rep = model.integrate_step_taped(solver, 1, &tr.s0, &tr.u, tr.dt, &mut pred, &mut tape);
         if rep.status != OdeStatus::Success {
             out.failed.push((i, rep));
         }
@@ -130,7 +128,7 @@ pub fn residuals_and_jacobian(
             if wd != 0.0 {
                 ybar.iter_mut().for_each(|x| *x = 0.0);
                 ybar[d] = wd;
-                integrate_vjp(model, &tape, &ybar, &mut sbar0, &mut ubar, &mut pbar);
+                model.integrate_step_vjp(&tape, &ybar, &mut sbar0, &mut ubar, &mut pbar);
             }
             out.jacobian.extend_from_slice(&pbar);
         }

@@ -24,11 +24,13 @@ mod car;
 mod fit;
 mod model;
 mod push;
+mod step;
 
 pub use car::{CAR_FITTED_PARAMS, CAR_NOMINAL_PARAMS, MOTOR_LAG_STATE};
 pub use fit::{ResidualJacobian, Transition, residuals, residuals_and_jacobian};
 pub use model::{EffectTerm, ModelError, PhysicsModel};
-pub use push::{PUSH_FITTED_PARAMS, PUSH_NOMINAL_PARAMS};
+pub use push::{PUSH_FITTED_PARAMS, PUSH_NOMINAL_PARAMS, PUSHER_RADIUS_M};
+pub use step::StepTape;
 
 /// Which robot a model or effect belongs to.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -97,11 +99,13 @@ pub enum Effect {
     /// Pushing: the block's centre of mass (centre of friction) is offset from its geometric
     /// centre by `(o_x, o_y)` in the block frame.
     ComOffset,
-    /// Pushing: a tilted table; a sliding block drifts downhill by `(g_x, g_y)` metres per metre
-    /// slid (world frame).
+    /// Pushing: a tilted table; gravity along the table, `(g_x, g_y) = tan α/μ·(cos, sin)` of
+    /// the downhill direction (world frame, normalised by the friction limit), acts at the
+    /// centre of mass and shares the friction limit with the pusher force.
     TableTilt,
-    /// Pushing: a circular patch of the table where the block moves `1 + β` times as far per
-    /// push (lower friction: it coasts further after the pusher stops).
+    /// Pushing: a circular patch of the table where the block–table μ is `k` times the table's,
+    /// per support point: a block partly on the patch has its centre of friction moved towards
+    /// the patch (and turns); fully on or off, quasi-static motion is unchanged.
     FrictionPatch,
     /// Pushing: Coulomb friction `μ_p` between pusher and block (the nominal pusher is
     /// frictionless): sticking inside the motion cone, sliding on its edge.
@@ -202,7 +206,7 @@ static TABLE_TILT: [ParamSpec; 2] = [
         -1.0,
         1.0,
         0.0,
-        "downhill drift along world x per metre slid (≈ slope/μ)",
+        "tilt force along world x over the friction limit (tan α·cos dir/μ)",
     ),
     ps(
         "gy",
@@ -211,7 +215,7 @@ static TABLE_TILT: [ParamSpec; 2] = [
         -1.0,
         1.0,
         0.0,
-        "downhill drift along world y per metre slid (≈ slope/μ)",
+        "tilt force along world y over the friction limit (tan α·sin dir/μ)",
     ),
 ];
 static FRICTION_PATCH: [ParamSpec; 5] = [
@@ -244,13 +248,13 @@ static FRICTION_PATCH: [ParamSpec; 5] = [
         "width of the smooth patch edge (logistic)",
     ),
     ps(
-        "beta",
-        "β",
+        "k",
+        "k",
         "-",
-        -1.0,
-        5.0,
-        0.0,
-        "extra motion per push inside the patch (0: none)",
+        0.05,
+        20.0,
+        1.0,
+        "block–table friction inside the patch over the table's, μ_patch/μ (1: no change)",
     ),
 ];
 static PUSHER_FRICTION: [ParamSpec; 1] = [ps(
@@ -334,11 +338,11 @@ impl Effect {
     }
 
     /// Whether the contribution is linear in the effect's parameters (for all states and
-    /// inputs), so that it can be fitted by linear least squares. `aero_drag` and `table_tilt`
-    /// are; the others enter through nonlinear functions (`friction_patch` is linear in `β` once
-    /// the region is fixed, `grip_patch` is not even then: tire forces saturate).
+    /// inputs), so that it can be fitted by linear least squares. `aero_drag` is; the others
+    /// enter through nonlinear functions (`table_tilt` shares the friction limit with the
+    /// pusher force, the patches saturate).
     pub fn linear_in_params(self) -> bool {
-        matches!(self, Effect::AeroDrag | Effect::TableTilt)
+        matches!(self, Effect::AeroDrag)
     }
 
     /// Names of the states the effect adds to the model state (appended in effect order).

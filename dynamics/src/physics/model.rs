@@ -191,6 +191,10 @@ impl PhysicsModel {
         }
     }
 
+    pub(crate) fn slots(&self) -> &[Slot] {
+        &self.slots
+    }
+
     /// The robot.
     pub fn robot(&self) -> Robot {
         self.robot
@@ -607,40 +611,13 @@ impl PhysicsModel {
                 );
                 let _ = writeln!(
                     o,
-                    "  (ẋ, ẏ) = R(θ)·(F_x, F_y){}{}",
-                    if has(Effect::FrictionPatch).is_some() {
-                        "·g"
-                    } else {
-                        ""
-                    },
-                    if has(Effect::TableTilt).is_some() {
-                        format!(
-                            " + ‖v‖·({}, {})",
-                            num(pv(Effect::TableTilt, 0)),
-                            num(pv(Effect::TableTilt, 1))
-                        )
-                    } else {
-                        String::new()
-                    }
+                    "  pusher on a world line: ψ = θ₀ + φ, start q = (x₀, y₀) + R(θ₀)·(−a/2 − r_p, κ·p·a/2), speed ℓ·L"
                 );
                 let _ = writeln!(
                     o,
-                    "  θ̇      = (p_x·F_y − p_y·F_x)/c²{}",
-                    if has(Effect::FrictionPatch).is_some() {
-                        "·g"
-                    } else {
-                        ""
-                    }
+                    "  contact: σ = (−a/2 − r_p − n·(q − o))/(n·d),  p_y = t·(q + σ·d − o),  v_p = ℓ·L·(cos(ψ − θ), sin(ψ − θ))"
                 );
-                let _ = writeln!(
-                    o,
-                    "  v_p = ℓ·L·(cos φ, sin φ),  (p_x, p_y) = (−a/2, κ·p·a/2){}",
-                    if has(Effect::ComOffset).is_some() {
-                        " − (o_x, o_y)"
-                    } else {
-                        ""
-                    }
-                );
+                let _ = writeln!(o, "  (ẋ, ẏ) = R(θ)·(v_cof + ω × (o − cof)),  θ̇ = ω");
                 match has(Effect::PusherFriction) {
                     Some(_) => {
                         let _ = writeln!(
@@ -654,21 +631,28 @@ impl PhysicsModel {
                             writeln!(o, "  F = (v_px / (1 + p_y²/c²), 0)   (frictionless pusher)");
                     }
                 }
+                let _ = writeln!(o, "  v_cof = (F_x, F_y),  ω = (p_x·F_y − p_y·F_x)/c²");
                 if has(Effect::ComOffset).is_some() {
                     let _ = writeln!(
                         o,
-                        "  centre velocity = v_com + ω × (−o){}",
+                        "  centre of friction = load centroid at (o_x, o_y) (block frame){}",
                         tag(Effect::ComOffset)
                     );
-                }
-                if has(Effect::TableTilt).is_some() {
-                    let _ = writeln!(o, "  table tilt drift{}", tag(Effect::TableTilt));
                 }
                 if has(Effect::FrictionPatch).is_some() {
                     let _ = writeln!(
                         o,
-                        "  g = 1 + β·σ((r − ‖(x, y) − c‖)/w){}",
+                        "  μ_i/μ = 1 + (k − 1)·σ((r − ‖p_i − c‖)/w) per support point → centre of friction, c{}",
                         tag(Effect::FrictionPatch)
+                    );
+                }
+                if has(Effect::TableTilt).is_some() {
+                    let _ = writeln!(
+                        o,
+                        "  tilt: wrench f·(F̂, m̂) + R(θ)ᵀ(g_x, g_y) on the limit surface, twist scaled to v_px ({}, {}){}",
+                        num(pv(Effect::TableTilt, 0)),
+                        num(pv(Effect::TableTilt, 1)),
+                        tag(Effect::TableTilt)
                     );
                 }
             }

@@ -18,10 +18,38 @@
 //!   the friction cone `|F_y| ≤ μ_p F_x` (the pusher velocity is inside the motion cone),
 //!   otherwise sliding on the cone edge `F = f (1, ±μ_p)` with `f` from the normal velocity.
 //!
-//! The world pose moves with the block-frame twist rotated by θ. Approximations, documented:
-//! the contact point and push direction are held in the block frame over the push (the real
-//! pusher moves in a straight world line while the block turns a little), no pushing when
-//! `v_px ≤ 0`, and `c = 0.383 a` (uniform pressure on a square).
+//! **The pusher moves on a straight world line** (as the simulator's and a robot's pusher do):
+//! the push starts at the step's initial pose `(x₀, y₀, θ₀)`, so the pusher centre starts at
+//! `q = (x₀, y₀) + R(θ₀)·(−a/2 − r_p, κ·p·a/2)` (a disc of radius `r_p` touching the face) and
+//! moves along the world direction `ψ = θ₀ + φ`. These three step constants `(ψ, q)` are held in
+//! the world frame over the push (auxiliary states of the step's ODE, see
+//! [`PhysicsModel::integrate_step`](super::PhysicsModel::integrate_step)); the model state stays
+//! `(x, y, θ)`. At a block pose the pusher's progress `σ` along its line follows from contact
+//! (the disc centre stays `r_p` behind the face): `σ = (−a/2 − r_p − n·(q − o))/(n·d)`, so the
+//! contact's lateral offset `p_y = t·(q + σ d − o)` (block axes `n`, `t`) and the pusher
+//! velocity in the block frame `v_p = ℓ L (cos(ψ − θ), sin(ψ − θ))` are known at every instant:
+//! the block may turn under the pusher and the contact slides along the face. The contact is
+//! lost when `p_y` leaves the face or the pusher stops approaching it (`cos(ψ − θ) ≤ 0`).
+//!
+//! Evaluated at the step's start (the plain [`VectorField`](crate::ode::VectorField) of the
+//! model) the constants are those of the start pose, so `f(s, u)` is the instantaneous push
+//! rate at the start of a push from `s`.
+//!
+//! Effects (each a physical term, checked against the simulator in the tests):
+//! * `com_offset`: the centre of mass (= centre of friction, the support load's centroid) is at
+//!   `(o_x, o_y)` in the block frame; contact arms are taken about it.
+//! * `table_tilt`: gravity along the table, normalised by the friction limit
+//!   `(g_x, g_y) = tan α / μ · (cos dir, sin dir)` (world frame), acts at the centre of mass:
+//!   the table friction balances pusher force plus tilt, so the wrench `W = f·F̂ + g` lies on
+//!   the limit surface `(W_x² + W_y²) + W_m²/c² = 1`, which fixes the pusher force `f`; the
+//!   twist is `λ (W_x, W_y, W_m/c²)` with `λ` from the contact's normal velocity.
+//! * `friction_patch`: a disc of the table where μ is `k` times the table's. The friction is
+//!   per support point (a 5 × 5 grid over the footprint, as in the simulator): a block partly on
+//!   the patch has its centre of friction moved towards the patch, which turns it. A block fully
+//!   on or off the patch moves the same (quasi-static: friction scale does not change motion).
+//! * `pusher_friction`: sticking inside the motion cone, sliding on its edge (see above).
+//!
+//! Approximation, documented: `c = 0.383 a` (uniform pressure on a square) by default.
 
 use super::car::{Slot, disc};
 use super::{Effect, ParamSpec, ps};
@@ -73,7 +101,24 @@ pub static PUSH_NOMINAL_PARAMS: [ParamSpec; 4] = [
 /// scale; both stay fixed.
 pub static PUSH_FITTED_PARAMS: [&str; 2] = ["c", "kappa"];
 
-/// The pushing vector field with the effects in `slots` whose `active` flag is set.
+/// Pusher disc radius \[m\] (the simulator's default finger tip).
+pub const PUSHER_RADIUS_M: f64 = 0.01;
+
+/// Support grid of the `friction_patch` term: `N × N` points over the footprint.
+const PATCH_GRID: usize = 5;
+
+/// The step constants `(ψ, q_x, q_y)` of a push from pose `s` under action `u`: the world push
+/// direction and the pusher centre's start point (world frame).
+pub(crate) fn start_constants<R: Real>(p: &[R], s: &[R], u: &[R]) -> [R; 3] {
+    let (a, kappa) = (p[0], p[3]);
+    let (x, y, th) = (s[0], s[1], s[2]);
+    let bx = a * -0.5 - PUSHER_RADIUS_M;
+    let by = kappa * u[0] * a * 0.5;
+    let (st, ct) = (th.sin(), th.cos());
+    [th + u[1], x + ct * bx - st * by, y + st * bx + ct * by]
+}
+
+/// The pushing vector field at the start of a push from `s` (step constants from `s`, `u`).
 pub(crate) fn rhs<R: Real>(
     p: &[R],
     slots: &[Slot],
@@ -82,85 +127,189 @@ pub(crate) fn rhs<R: Real>(
     u: &[R],
     out: &mut [R],
 ) {
-    let [a, c, len, kappa] = [0, 1, 2, 3].map(|i| p[i]);
+    let line = start_constants(p, s, u);
+    rhs_line(p, slots, active, s, line, u[2], out);
+}
+
+/// The pushing vector field at pose `s` during a push along the world line `line = (ψ, q)`
+/// with length fraction `ell`.
+pub(crate) fn rhs_line<R: Real>(
+    p: &[R],
+    slots: &[Slot],
+    active: &[bool],
+    s: &[R],
+    line: [R; 3],
+    ell: R,
+    out: &mut [R],
+) {
+    let [a, c, len, _kappa] = [0, 1, 2, 3].map(|i| p[i]);
     let (x, y, th) = (s[0], s[1], s[2]);
-    let (loc, phi, ell) = (u[0], u[1], u[2]);
-    let mut ox = R::cst(0.0);
-    let mut oy = R::cst(0.0);
+    let [psi, qx, qy] = line;
+    let zero = R::cst(0.0);
+    out[0] = zero;
+    out[1] = zero;
+    out[2] = zero;
+    let mut com: Option<(R, R)> = None;
+    let mut patch: Option<&[R]> = None;
     let mut mu: Option<R> = None;
+    let mut tilt: Option<(R, R)> = None;
     for (sl, &on) in slots.iter().zip(active) {
         if !on {
             continue;
         }
         let q = &p[sl.p_off..];
         match sl.effect {
-            Effect::ComOffset => {
-                ox = q[0];
-                oy = q[1];
-            }
+            Effect::ComOffset => com = Some((q[0], q[1])),
             Effect::PusherFriction => mu = Some(q[0]),
+            Effect::TableTilt => tilt = Some((q[0], q[1])),
+            Effect::FrictionPatch => patch = Some(q),
             _ => {}
         }
     }
-    // contact point relative to the centre of mass, block frame
+    // centre of friction and limit-surface ratio of the support distribution
+    let (ox, oy, c) = if com.is_none() && patch.is_none() {
+        (zero, zero, c)
+    } else {
+        support_friction(a, c, x, y, th, com, patch)
+    };
+    let (st, ct) = (th.sin(), th.cos());
+    let rel = psi - th;
+    let (nd, td) = (rel.cos(), rel.sin());
+    if nd.value() <= 1e-6 {
+        return;
+    }
+    // pusher progress from contact, then the contact's lateral offset (block frame)
+    let (rx, ry) = (qx - x, qy - y);
+    let n_rel = ct * rx + st * ry;
+    let t_rel = ct * ry - st * rx;
+    let sigma = (a * -0.5 - PUSHER_RADIUS_M - n_rel) / nd;
+    let lat = t_rel + sigma * td;
+    if lat.value().abs() > 0.5 * a.value() {
+        return;
+    }
+    // contact point relative to the centre of friction, block frame
     let px = a * -0.5 - ox;
-    let py = kappa * loc * a * 0.5 - oy;
-    let vpx = ell * len * phi.cos();
-    let vpy = ell * len * phi.sin();
+    let py = lat - oy;
+    let vpx = ell * len * nd;
+    let vpy = ell * len * td;
+    if vpx.value() <= 0.0 {
+        return;
+    }
     let c2 = c * c;
     let m11 = py * py / c2 + 1.0;
     let m12 = -(px * py) / c2;
     let m22 = px * px / c2 + 1.0;
-    let (fx, fy) = if vpx.value() <= 0.0 {
-        (R::cst(0.0), R::cst(0.0))
-    } else {
-        match mu {
-            None => (vpx / m11, R::cst(0.0)),
-            Some(mu) => {
-                let det = m11 * m22 - m12 * m12;
-                let sx = (m22 * vpx - m12 * vpy) / det;
-                let sy = (m11 * vpy - m12 * vpx) / det;
-                if sy.value().abs() <= (mu * sx).value() {
-                    (sx, sy)
-                } else {
-                    let sign = if sy.value() >= 0.0 { 1.0 } else { -1.0 };
-                    let dir_y = mu * sign;
-                    let f = vpx / (m11 + m12 * dir_y);
-                    (f, f * dir_y)
-                }
+    let (mut fx, mut fy) = match mu {
+        None => (vpx / m11, zero),
+        Some(mu) => {
+            let det = m11 * m22 - m12 * m12;
+            let sx = (m22 * vpx - m12 * vpy) / det;
+            let sy = (m11 * vpy - m12 * vpx) / det;
+            if sy.value().abs() <= (mu * sx).value() {
+                (sx, sy)
+            } else {
+                let sign = if sy.value() >= 0.0 { 1.0 } else { -1.0 };
+                let dir_y = mu * sign;
+                let f = vpx / (m11 + m12 * dir_y);
+                (f, f * dir_y)
             }
         }
     };
-    let om = (px * fy - py * fx) / c2;
-    // velocity of the geometric centre: v_com + ω × (centre − com)
+    let mut mz = px * fy - py * fx;
+    if let Some((gx, gy)) = tilt {
+        // tilt force in the block frame, normalised by the friction limit; the wrench
+        // f·(F̂, m̂) + (t, 0) on the unit limit surface, then scaled to the contact kinematics
+        let tx = ct * gx + st * gy;
+        let ty = ct * gy - st * gx;
+        let qa = fx * fx + fy * fy + mz * mz / c2;
+        let qb = fx * tx + fy * ty;
+        let qc = tx * tx + ty * ty - 1.0;
+        let disc = qb * qb - qa * qc;
+        let disc = if disc.value() > 1e-12 {
+            disc
+        } else {
+            R::cst(1e-12)
+        };
+        let f = (disc.sqrt() - qb) / qa;
+        let (wx, wy, wm) = (f * fx + tx, f * fy + ty, f * mz);
+        let normal = wx - wm * py / c2;
+        if normal.value() <= 1e-9 {
+            return;
+        }
+        let lam = vpx / normal;
+        fx = lam * wx;
+        fy = lam * wy;
+        mz = lam * wm;
+    }
+    let om = mz / c2;
+    // velocity of the geometric centre: v_cof + ω × (centre − cof)
     let vx = fx + om * oy;
     let vy = fy - om * ox;
+    out[0] = ct * vx - st * vy;
+    out[1] = st * vx + ct * vy;
+    out[2] = om;
+}
+
+/// Centre of friction `(o_x, o_y)` (block frame) and limit-surface ratio of a block of side
+/// `a` at `(x, y, θ)` whose support is an `N × N` grid (as in the simulator) with friction
+/// weights `wᵢ = Nᵢ·μᵢ`: the normal load varies linearly so that its centroid is the centre of
+/// mass (`com_offset`: `Nᵢ ∝ max(0, 1 + o_x xᵢ/⟨x²⟩ + o_y yᵢ/⟨y²⟩)`, the simulator's load
+/// model), and `μᵢ/μ = 1 + (k − 1)·σ((r − ‖pᵢ − c‖)/w)` on a disc patch (`friction_patch`).
+/// The offset is the weighted centroid; the ratio is the nominal `c` scaled by the weighted mean
+/// distance from it over the uniform grid's mean distance from the centre.
+fn support_friction<R: Real>(
+    a: R,
+    c: R,
+    x: R,
+    y: R,
+    th: R,
+    com: Option<(R, R)>,
+    patch: Option<&[R]>,
+) -> (R, R, R) {
     let (st, ct) = (th.sin(), th.cos());
-    let mut wx = ct * vx - st * vy;
-    let mut wy = st * vx + ct * vy;
-    let mut wom = om;
-    for (sl, &on) in slots.iter().zip(active) {
-        if !on {
-            continue;
-        }
-        let q = &p[sl.p_off..];
-        match sl.effect {
-            Effect::FrictionPatch => {
-                let g = disc(x, y, q[0], q[1], q[2], q[3]) * q[4] + 1.0;
-                wx = wx * g;
-                wy = wy * g;
-                wom = wom * g;
+    let nn = PATCH_GRID as f64;
+    // ⟨x²⟩ of the grid, in units of a²
+    let m2: f64 = (0..PATCH_GRID)
+        .map(|i| ((i as f64 + 0.5) / nn - 0.5).powi(2))
+        .sum::<f64>()
+        / nn;
+    let mut pts = Vec::with_capacity(PATCH_GRID * PATCH_GRID);
+    for i in 0..PATCH_GRID {
+        for j in 0..PATCH_GRID {
+            let fx = (i as f64 + 0.5) / nn - 0.5;
+            let fy = (j as f64 + 0.5) / nn - 0.5;
+            let lx = a * fx;
+            let ly = a * fy;
+            let mut wi = R::cst(1.0);
+            if let Some((cx_, cy_)) = com {
+                let l = (cx_ * fx + cy_ * fy) / (a * m2) + 1.0;
+                wi = if l.value() > 0.0 { l } else { R::cst(0.0) };
             }
-            Effect::TableTilt => {
-                let eps = 1e-6;
-                let speed = (wx * wx + wy * wy + eps * eps).sqrt() - eps;
-                wx = wx + q[0] * speed;
-                wy = wy + q[1] * speed;
+            if let Some(q) = patch {
+                let wx = x + ct * lx - st * ly;
+                let wy = y + st * lx + ct * ly;
+                wi = wi * (disc(wx, wy, q[0], q[1], q[2], q[3]) * (q[4] - 1.0) + 1.0);
             }
-            _ => {}
+            pts.push((lx, ly, wi, (fx * fx + fy * fy).sqrt()));
         }
     }
-    out[0] = wx;
-    out[1] = wy;
-    out[2] = wom;
+    let mut sw = R::cst(0.0);
+    let mut swx = R::cst(0.0);
+    let mut swy = R::cst(0.0);
+    let mut uniform = 0.0;
+    for &(lx, ly, wi, d) in &pts {
+        sw = sw + wi;
+        swx = swx + wi * lx;
+        swy = swy + wi * ly;
+        uniform += d;
+    }
+    let (ox, oy) = (swx / sw, swy / sw);
+    let mut sd = R::cst(0.0);
+    for &(lx, ly, wi, _) in &pts {
+        let (dx, dy) = (lx - ox, ly - oy);
+        sd = sd + wi * (dx * dx + dy * dy + 1e-12).sqrt();
+    }
+    let mean = sd / sw;
+    let uniform_mean = a * (uniform / pts.len() as f64);
+    (ox, oy, c * mean / uniform_mean)
 }
