@@ -7,7 +7,9 @@
 #
 # Environment: EPISODES (default 50), SEED (default 1), EPOCHS (default 300), KINDS (default
 # "residual node-euler node-rk4 node-dopri5 physics hybrid"), STEPS (default "1 2 3 4 5"),
-# TU_LIN (default ../shared/data/tu_lin_pushing.mcap; skipped when missing), THREADS (default 2).
+# TU_LIN (default ../shared/data/tu_lin_pushing.mcap; skipped when missing), THREADS (default 2),
+# PLANTS (default: every "data:support" pair, e.g. "sim:grid tulin:corners"), VARIANTS and
+# VARIANT_MODELS (controller variants, see below).
 # Our data: 500 episodes × 10 pushes from starts spread over x ± 5 cm, y ± 10 cm, θ ± π/2
 # around (0.4, 0, 0), one pose per push (as Tu & Lin record), so that both scenes' starts
 # (θ = ±0.2π) are inside the training distribution.
@@ -76,6 +78,7 @@ plants=(sim:grid)
 for support in corners grid; do
   for ds in "${datasets[@]}"; do [[ "$ds" == tulin* ]] && plants+=("$ds:$support"); done
 done
+[[ -n "${PLANTS:-}" ]] && read -r -a plants <<< "$PLANTS"
 for plant in "${plants[@]}"; do
   ds="${plant%%:*}"; support="${plant#*:}"
   row="$ds"; [[ "$support" == corners ]] && row="$ds@corners"
