@@ -3,8 +3,8 @@
 
 use dynlab_control::racing::{
     GdSettings, Input, InputLimits, Manoeuvre, Objective, Optimizer, Plant, Problem, Racer,
-    RacerSettings, Regulariser, SolveStatus, SqpSettings, State, Target, TrackTerms, gradient,
-    solve_gd, solve_sqp,
+    RacerSettings, Regulariser, SolveStatus, SpeedProfile, SqpSettings, State, Target, TrackTerms,
+    gradient, solve_gd, solve_sqp,
 };
 use dynlab_learn::dynamics::ode::Solver;
 use dynlab_learn::dynamics::physics::PhysicsModel;
@@ -320,4 +320,42 @@ fn racer_drives_forward_on_an_oval_without_leaving_it() {
             "{optimizer:?} progressed only {progress} m in 1 s"
         );
     }
+}
+
+#[test]
+fn the_speed_profile_slows_for_bends_and_brakes_into_them_in_time() {
+    let (straight, radius) = (3.0, 0.4);
+    let track = Track::oval(straight, radius, 0.2, 300).unwrap();
+    let (vmax, alat, brake) = (2.0, 1.0, 2.0);
+    let p = SpeedProfile::new(&track, vmax, alat, brake, 0.0).unwrap();
+    // in the middle of a bend: √(a_lat · r)
+    let mid_bend = straight + 0.5 * std::f64::consts::PI * radius;
+    let bend_speed = (alat * radius).sqrt();
+    assert!(
+        (p.speed_at(mid_bend) - bend_speed).abs() < 0.02,
+        "{}",
+        p.speed_at(mid_bend)
+    );
+    assert!((p.min_speed() - bend_speed).abs() < 0.02);
+    // the middle of a 3 m straight is fast: v² ≤ v_bend² + 2 a d with d = 1.5 m → capped at 2
+    assert!((p.speed_at(0.5 * straight) - vmax).abs() < 1e-9);
+    // braking: 0.2 m before the bend no faster than √(v_bend² + 2 a d) (d with two 3 cm
+    // segments of slack: the discrete curvature reaches 1/r one point after the joint)
+    let before = p.speed_at(straight - 0.2);
+    assert!(
+        before <= (bend_speed.powi(2) + 2.0 * brake * 0.26).sqrt(),
+        "{before}"
+    );
+    assert!(before > bend_speed + 0.1, "{before}");
+    // reference progress integrates the speed: on the straight at v_max
+    let prog = p.progress(1.0, 0.05, 10);
+    assert_eq!(prog.len(), 10);
+    assert!(
+        (prog[0] - 0.1).abs() < 1e-6 && (prog[9] - 1.0).abs() < 1e-6,
+        "{prog:?}"
+    );
+    // unlimited accelerations: constant speed
+    let flat = SpeedProfile::new(&track, vmax, f64::INFINITY, f64::INFINITY, 0.0).unwrap();
+    assert_eq!(flat.min_speed(), vmax);
+    assert!(SpeedProfile::new(&track, 0.0, 1.0, 1.0, 0.0).is_err());
 }

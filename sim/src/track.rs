@@ -449,4 +449,27 @@ mod locate_tests {
         let far = t.locate_near([-0.5, -0.4], loc.segment + 100, 5);
         assert_eq!(far, loc);
     }
+
+    #[test]
+    fn curvatures_of_an_oval_are_zero_on_the_straights_and_one_over_the_radius_in_the_bends() {
+        let (straight, radius) = (2.0, 0.5);
+        let t = Track::oval(straight, radius, 0.2, 400).unwrap();
+        let arcs = t.arc_lengths();
+        for smooth in [0.0, 0.1] {
+            let k = t.curvatures(smooth);
+            for (i, s) in arcs.iter().enumerate() {
+                // away from the joints by more than the smoothing and one segment
+                let in_bend = *s > straight + smooth + 0.05
+                    && *s < straight + std::f64::consts::PI * radius - smooth - 0.05;
+                let on_straight = *s > smooth + 0.05 && *s < straight - smooth - 0.05;
+                if in_bend {
+                    assert!((k[i] - 1.0 / radius).abs() < 0.02, "{smooth} {s}: {}", k[i]);
+                }
+                if on_straight {
+                    assert!(k[i].abs() < 1e-9, "{smooth} {s}: {}", k[i]);
+                }
+            }
+        }
+        assert!((t.length() - t.arc_lengths()[399] - t.length() / 400.0).abs() < 1e-3);
+    }
 }

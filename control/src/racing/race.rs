@@ -47,10 +47,10 @@ pub struct RacerSettings {
     /// Default 2 (faster reference speeds spin the ORCA car in the default track's bends).
     pub reference_speed: f64,
     /// Lateral acceleration the reference speed allows in bends \[m/s²\]: the reference speed
-    /// at arc length s is `min(reference_speed, √(a / |κ(s)|))` (`inf`: constant). Default 8.
+    /// at arc length s is `min(reference_speed, √(a / |κ(s)|))` (`inf`: constant). Default 5.
     pub lateral_acceleration: f64,
     /// Deceleration (and acceleration) the reference speed profile allows between bends
-    /// \[m/s²\] (`inf`: none). Default 4.
+    /// \[m/s²\] (`inf`: none). Default 3.
     pub braking: f64,
     /// Arc length over which the centre line's curvature is averaged (either side) for the
     /// reference speed \[m\] (the driven line is wider than the centre line). Default 0.15.
@@ -81,8 +81,8 @@ impl Default for RacerSettings {
             optimizer: Optimizer::Sqp,
             progress_weight: 0.0,
             reference_speed: 2.0,
-            lateral_acceleration: 8.0,
-            braking: 4.0,
+            lateral_acceleration: 5.0,
+            braking: 3.0,
             curvature_smoothing: 0.15,
             reference_weight: 1.0,
             margin: 0.03,
