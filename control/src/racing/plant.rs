@@ -147,23 +147,63 @@ impl<'a> Plant<'a> {
             .collect())
     }
 
-    /// Rolls out `inputs` and linearises about the trajectory: the exact Jacobians of every
-    /// model step in one batched call, composed over each hold.
-    pub fn linearize(&self, s0: &State, inputs: &[Input]) -> Result<Linearization, RacingError> {
-        let n = inputs.len();
+    /// Every model step's state `x₀, x_{0,1}, …` under `inputs` held for `hold` steps
+    /// (`(n · hold + 1) × 6`, flat): what [`Plant::linearize_fine`] needs.
+    pub fn rollout_fine(&self, s0: &State, inputs: &[Input]) -> Result<Vec<f64>, RacingError> {
         let h = self.hold;
-        let steps = n * h;
-        // fine states x_{k,j}
+        let steps = inputs.len() * h;
         let mut fine = vec![0.0; (steps + 1) * 6];
         fine[..6].copy_from_slice(s0);
-        let mut u_fine = vec![0.0; steps * 2];
-        for j in 0..steps {
-            u_fine[j * 2..j * 2 + 2].copy_from_slice(&inputs[j / h]);
-        }
         if steps > 0 {
+            let u_fine = self.fine_inputs(inputs);
             let (head, tail) = fine.split_at_mut(6);
             self.model.rollout(head, &u_fine, tail)?;
         }
+        Ok(fine)
+    }
+
+    /// The control-step states `x₀ … x_n` of a fine trajectory from [`Plant::rollout_fine`].
+    pub fn coarse(&self, fine: &[f64]) -> Vec<State> {
+        fine.chunks_exact(6)
+            .step_by(self.hold)
+            .map(|c| [c[0], c[1], c[2], c[3], c[4], c[5]])
+            .collect()
+    }
+
+    fn fine_inputs(&self, inputs: &[Input]) -> Vec<f64> {
+        let h = self.hold;
+        let mut u_fine = vec![0.0; inputs.len() * h * 2];
+        for j in 0..inputs.len() * h {
+            u_fine[j * 2..j * 2 + 2].copy_from_slice(&inputs[j / h]);
+        }
+        u_fine
+    }
+
+    /// Rolls out `inputs` and linearises about the trajectory: the exact Jacobians of every
+    /// model step in one batched call, composed over each hold.
+    pub fn linearize(&self, s0: &State, inputs: &[Input]) -> Result<Linearization, RacingError> {
+        let fine = self.rollout_fine(s0, inputs)?;
+        self.linearize_fine(&fine, inputs)
+    }
+
+    /// As [`Plant::linearize`] about an already rolled-out fine trajectory `fine` of `inputs`
+    /// (from [`Plant::rollout_fine`]): only the Jacobians are evaluated.
+    pub fn linearize_fine(
+        &self,
+        fine: &[f64],
+        inputs: &[Input],
+    ) -> Result<Linearization, RacingError> {
+        let n = inputs.len();
+        let h = self.hold;
+        let steps = n * h;
+        if fine.len() != (steps + 1) * 6 {
+            return Err(RacingError::setting(
+                "fine trajectory",
+                fine.len(),
+                "pass the output of Plant::rollout_fine for the same inputs",
+            ));
+        }
+        let u_fine = self.fine_inputs(inputs);
         let jac = self.model.jacobians(&fine[..steps * 6], &u_fine)?;
         let mut states = Vec::with_capacity(n + 1);
         let mut a = Vec::with_capacity(n);
