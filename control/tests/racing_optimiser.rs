@@ -327,7 +327,7 @@ fn the_speed_profile_slows_for_bends_and_brakes_into_them_in_time() {
     let (straight, radius) = (3.0, 0.4);
     let track = Track::oval(straight, radius, 0.2, 300).unwrap();
     let (vmax, alat, brake) = (2.0, 1.0, 2.0);
-    let p = SpeedProfile::new(&track, vmax, alat, brake, 0.0).unwrap();
+    let p = SpeedProfile::new(&track, vmax, alat, brake, brake, 0.0).unwrap();
     // in the middle of a bend: √(a_lat · r)
     let mid_bend = straight + 0.5 * std::f64::consts::PI * radius;
     let bend_speed = (alat * radius).sqrt();
@@ -355,7 +355,15 @@ fn the_speed_profile_slows_for_bends_and_brakes_into_them_in_time() {
         "{prog:?}"
     );
     // unlimited accelerations: constant speed
-    let flat = SpeedProfile::new(&track, vmax, f64::INFINITY, f64::INFINITY, 0.0).unwrap();
+    let flat = SpeedProfile::new(
+        &track,
+        vmax,
+        f64::INFINITY,
+        f64::INFINITY,
+        f64::INFINITY,
+        0.0,
+    )
+    .unwrap();
     assert_eq!(flat.min_speed(), vmax);
-    assert!(SpeedProfile::new(&track, 0.0, 1.0, 1.0, 0.0).is_err());
+    assert!(SpeedProfile::new(&track, 0.0, 1.0, 1.0, 1.0, 0.0).is_err());
 }

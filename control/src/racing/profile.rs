@@ -7,7 +7,7 @@ use super::RacingError;
 
 /// Reference speed over the arc length of a track: `v(s) = min(v_max, √(a_lat / |κ(s)|))`,
 /// lowered so that the car can brake into every bend at `a_brake` (a backward pass around the
-/// closed track) and accelerate out of it at `a_brake` (a forward pass).
+/// closed track) and accelerate out of it at `a_accel` (a forward pass).
 #[derive(Debug, Clone, PartialEq)]
 pub struct SpeedProfile {
     arc: Vec<f64>,
@@ -17,13 +17,14 @@ pub struct SpeedProfile {
 
 impl SpeedProfile {
     /// The profile of `track` with top speed `max_speed` \[m/s\], lateral acceleration
-    /// `lateral_acceleration` \[m/s²\] and braking/acceleration `braking` \[m/s²\] (both `∞`:
-    /// constant `max_speed`); curvature averaged over `±smooth` \[m\] of arc length.
+    /// `lateral_acceleration`, braking `braking` and acceleration `acceleration` \[m/s²\]
+    /// (all `∞`: constant `max_speed`); curvature averaged over `±smooth` \[m\] of arc length.
     pub fn new(
         track: &Track,
         max_speed: f64,
         lateral_acceleration: f64,
         braking: f64,
+        acceleration: f64,
         smooth: f64,
     ) -> Result<Self, RacingError> {
         if !(max_speed > 0.0 && max_speed.is_finite()) {
@@ -33,10 +34,10 @@ impl SpeedProfile {
                 "the reference speed must be a finite speed > 0 (m/s)",
             ));
         }
-        if !(lateral_acceleration > 0.0 && braking > 0.0 && smooth >= 0.0) {
+        if !(lateral_acceleration > 0.0 && braking > 0.0 && acceleration > 0.0 && smooth >= 0.0) {
             return Err(RacingError::setting(
-                "lateral_acceleration/braking/curvature_smoothing",
-                format!("{lateral_acceleration} / {braking} / {smooth}"),
+                "lateral_acceleration/braking/acceleration/curvature_smoothing",
+                format!("{lateral_acceleration} / {braking} / {acceleration} / {smooth}"),
                 "accelerations must be > 0 (inf: unlimited) and the smoothing ≥ 0",
             ));
         }
@@ -52,7 +53,7 @@ impl SpeedProfile {
                     .min(max_speed)
             })
             .collect();
-        if braking.is_finite() {
+        if braking.is_finite() || acceleration.is_finite() {
             let ds = |i: usize| {
                 let j = (i + 1) % n;
                 if j == 0 {
@@ -70,7 +71,7 @@ impl SpeedProfile {
                 for i in 0..n {
                     let prev = speed[(i + n - 1) % n];
                     let d = ds((i + n - 1) % n);
-                    speed[i] = speed[i].min((prev * prev + 2.0 * braking * d).sqrt());
+                    speed[i] = speed[i].min((prev * prev + 2.0 * acceleration * d).sqrt());
                 }
             }
         }

@@ -49,9 +49,12 @@ pub struct RacerSettings {
     /// Lateral acceleration the reference speed allows in bends \[m/s²\]: the reference speed
     /// at arc length s is `min(reference_speed, √(a / |κ(s)|))` (`inf`: constant). Default 5.
     pub lateral_acceleration: f64,
-    /// Deceleration (and acceleration) the reference speed profile allows between bends
-    /// \[m/s²\] (`inf`: none). Default 3.
+    /// Deceleration the reference speed profile allows before bends \[m/s²\] (`inf`: none).
+    /// Default 3.
     pub braking: f64,
+    /// Acceleration the reference speed profile allows out of bends \[m/s²\] (`inf`: none;
+    /// gentle: full throttle in a bend spins the car). Default 1.5.
+    pub acceleration: f64,
     /// Arc length over which the centre line's curvature is averaged (either side) for the
     /// reference speed \[m\] (the driven line is wider than the centre line). Default 0.15.
     pub curvature_smoothing: f64,
@@ -83,6 +86,7 @@ impl Default for RacerSettings {
             reference_speed: 2.0,
             lateral_acceleration: 5.0,
             braking: 3.0,
+            acceleration: 1.5,
             curvature_smoothing: 0.15,
             reference_weight: 1.0,
             margin: 0.03,
@@ -162,6 +166,7 @@ impl<'a> Racer<'a> {
             settings.reference_speed,
             settings.lateral_acceleration,
             settings.braking,
+            settings.acceleration,
             settings.curvature_smoothing,
         )?;
         Ok(Self {
