@@ -367,3 +367,40 @@ fn the_speed_profile_slows_for_bends_and_brakes_into_them_in_time() {
     assert_eq!(flat.min_speed(), vmax);
     assert!(SpeedProfile::new(&track, 0.0, 1.0, 1.0, 1.0, 0.0).is_err());
 }
+
+#[test]
+fn the_plants_rollout_equals_the_models_rollout_bit_for_bit() {
+    for kind in [
+        ModelKind::Residual,
+        ModelKind::NodeRk4,
+        ModelKind::NodeEuler,
+    ] {
+        let spec = MlpSpec::uniform(5, &[16, 16], 3, Activation::Gelu).unwrap();
+        let mut norm = Normalization::identity(5, 3);
+        norm.output_std = vec![0.05; 3];
+        let model = Model::new(
+            kind,
+            World::Car,
+            0.01,
+            None,
+            Some(Network::new(Mlp::new(spec, Init::Auto, 5), norm)),
+            None,
+            if kind == ModelKind::NodeEuler {
+                Solver::euler()
+            } else {
+                Solver::rk4()
+            },
+        )
+        .unwrap();
+        let plant = Plant::new(&model, 3).unwrap();
+        let s0: State = [0.1, -0.2, 0.3, 1.2, 0.1, -0.4];
+        let inputs: Vec<Input> = (0..7).map(|k| [0.05 * k as f64 - 0.1, 0.6]).collect();
+        let fine = plant.rollout_fine(&s0, &inputs).unwrap();
+        let actions: Vec<f64> = (0..21).flat_map(|j| inputs[j / 3]).collect();
+        let mut out = vec![0.0; 21 * 6];
+        model.rollout(&s0, &actions, &mut out).unwrap();
+        assert_eq!(&fine[6..], &out[..], "{kind:?}");
+        assert!(out.iter().all(|v| v.is_finite()));
+        assert_eq!(plant.coarse(&fine), plant.rollout(&s0, &inputs).unwrap());
+    }
+}

@@ -1,6 +1,9 @@
 //! The learned model with a zero-order input hold: rollouts and exact linearisations.
 
-use dynlab_learn::{Model, StepJacobians, World};
+use dynlab_learn::dynamics::ode::{Solver, VectorField, integrate};
+use dynlab_learn::model::car_pose_update;
+use dynlab_learn::net::NetField;
+use dynlab_learn::{Model, ModelKind, StepJacobians, World};
 
 use super::RacingError;
 
@@ -39,12 +42,81 @@ impl CarDynamics for Model {
         Ok(())
     }
     fn rollout(&self, s0: &[f64], actions: &[f64], out: &mut [f64]) -> Result<(), RacingError> {
-        Model::rollout(self, s0, actions, out)?;
+        if !rollout_one_field(self, s0, actions, out) {
+            Model::rollout(self, s0, actions, out)?;
+        }
         Ok(())
     }
     fn jacobians(&self, s: &[f64], u: &[f64]) -> Result<StepJacobians, RacingError> {
         Ok(Model::jacobians(self, s, u)?)
     }
+}
+
+/// [`Model::rollout`] for car models whose step is the network alone (residual, NeuralODE
+/// Euler/RK4): the same arithmetic (bit for bit: tested), but one network field — and so one
+/// network workspace — for all steps instead of a fresh one per step. Returns false (nothing
+/// done) for other models and malformed shapes, which [`Model::rollout`] then handles.
+fn rollout_one_field(model: &Model, s0: &[f64], actions: &[f64], out: &mut [f64]) -> bool {
+    let Some(net) = model.network() else {
+        return false;
+    };
+    let kind = model.kind();
+    let node = matches!(kind, ModelKind::NodeEuler | ModelKind::NodeRk4);
+    if model.world() != World::Car
+        || model.physics().is_some()
+        || !(node || kind == ModelKind::Residual)
+        || s0.is_empty()
+        || !s0.len().is_multiple_of(6)
+    {
+        return false;
+    }
+    let n = s0.len() / 6;
+    if !actions.len().is_multiple_of(n * 2) || out.len() != actions.len() / 2 * 6 {
+        return false;
+    }
+    if s0.iter().chain(actions).any(|v| !v.is_finite()) {
+        return false;
+    }
+    // as Model::step
+    let solver = model.solver().unwrap_or(Solver::rk4());
+    let field = NetField::new(net);
+    let dt = model.dt();
+    let mut cur = s0.to_vec();
+    let mut z = vec![0.0f32; n * 3];
+    let mut uf = vec![0.0f32; n * 2];
+    let mut zn = vec![0.0f32; n * 3];
+    for (j, u) in actions.chunks_exact(n * 2).enumerate() {
+        for i in 0..n {
+            for d in 0..3 {
+                z[i * 3 + d] = cur[i * 6 + 3 + d] as f32;
+            }
+        }
+        for (a, b) in uf.iter_mut().zip(u) {
+            *a = *b as f32;
+        }
+        if node {
+            integrate(&field, &solver, n, &z, &uf, 1.0, &mut zn);
+        } else {
+            field.eval(n, &z, &uf, &mut zn);
+            for (a, b) in zn.iter_mut().zip(&z) {
+                *a += b;
+            }
+        }
+        let dst = &mut out[j * n * 6..(j + 1) * n * 6];
+        for i in 0..n {
+            let si = &cur[i * 6..i * 6 + 6];
+            let vn = [
+                f64::from(zn[i * 3]),
+                f64::from(zn[i * 3 + 1]),
+                f64::from(zn[i * 3 + 2]),
+            ];
+            let p = car_pose_update(dt, [si[0], si[1], si[2]], [si[3], si[4], si[5]], vn);
+            dst[i * 6..i * 6 + 3].copy_from_slice(&p);
+            dst[i * 6 + 3..i * 6 + 6].copy_from_slice(&vn);
+        }
+        cur.copy_from_slice(dst);
+    }
+    true
 }
 
 /// A car model whose input is held for `hold` model steps: one control step is `hold · dt`.
