@@ -95,7 +95,6 @@ fn main() {
         for (cname, cfg) in &configs {
             if let Some(o) = &only
                 && !format!("{mname} {cname}").contains(o.as_str())
-                && *mname != "physics"
             {
                 continue;
             }
@@ -126,7 +125,7 @@ fn main() {
                 cname,
                 p50,
                 p99,
-                p99 / reference[cname]
+                reference.get(cname).map_or(f64::NAN, |r| p99 / r)
             );
         }
     }

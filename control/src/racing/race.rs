@@ -47,13 +47,15 @@ pub struct RacerSettings {
     /// Default 2 (faster reference speeds spin the ORCA car in the default track's bends).
     pub reference_speed: f64,
     /// Lateral acceleration the reference speed allows in bends \[m/s²\]: the reference speed
-    /// at arc length s is `min(reference_speed, √(a / |κ(s)|))` (`inf`: constant). Default 5.
+    /// at arc length s is `min(reference_speed, √(a / |κ(s)|))` (`inf`: constant). Default
+    /// `inf` (the default track's bends are driven at the reference speed; for tracks with
+    /// hairpins set it, e.g. 5 with `braking = 3`, `acceleration = 1.5`).
     pub lateral_acceleration: f64,
     /// Deceleration the reference speed profile allows before bends \[m/s²\] (`inf`: none).
-    /// Default 3.
+    /// Default `inf`.
     pub braking: f64,
     /// Acceleration the reference speed profile allows out of bends \[m/s²\] (`inf`: none;
-    /// gentle: full throttle in a bend spins the car). Default 1.5.
+    /// gentle: full throttle in a bend spins the car). Default `inf`.
     pub acceleration: f64,
     /// Arc length over which the centre line's curvature is averaged (either side) for the
     /// reference speed \[m\] (the driven line is wider than the centre line). Default 0.15.
@@ -84,9 +86,9 @@ impl Default for RacerSettings {
             optimizer: Optimizer::Sqp,
             progress_weight: 0.0,
             reference_speed: 2.0,
-            lateral_acceleration: 5.0,
-            braking: 3.0,
-            acceleration: 1.5,
+            lateral_acceleration: f64::INFINITY,
+            braking: f64::INFINITY,
+            acceleration: f64::INFINITY,
             curvature_smoothing: 0.15,
             reference_weight: 1.0,
             margin: 0.03,
