@@ -8,7 +8,8 @@
 #    bundled floor bag bags/car_nominal;
 # 3. offline manoeuvres (Table I) with GD and SQP on each model;
 # 4. laps with each model (SQP and GD) beside the simulator as the true model, on the default
-#    track and, when present, the ORCA track ($ORCA_TRACK, default ../shared/data/orca_track.json).
+#    track and, when present, the ORCA track ($ORCA_TRACK, default ../shared/data/orca_track.json;
+#    with the curvature-aware reference speed of launch_scripts/tracks/orca_racer.toml).
 #
 # Uses the release `dynlab` from $DYNLAB_BIN_DIR (default target/release; build it with
 # `cargo build --release -p dynlab`). Takes ≈ 30–60 min on 2 cores (training dominates).
@@ -40,11 +41,13 @@ tracks=("default:$here/launch_scripts/tracks/default.json")
 [[ -f "$orca" ]] && tracks+=("orca:$orca")
 for t in "${tracks[@]}"; do
   name="${t%%:*}"; file="${t#*:}"
+  settings=()
+  [[ "$name" == orca ]] && settings=(--settings "$here/launch_scripts/tracks/orca_racer.toml")
   for kind in residual node-rk4; do
     for opt in sqp gd; do
       echo "== laps: $name track, $kind, $opt"
       "$dl" eval race --model "$out/car_$kind" --optimizer "$opt" --laps 2 --track "$file" \
-        --out "$out/laps_${name}_${kind}_${opt}"
+        "${settings[@]}" --out "$out/laps_${name}_${kind}_${opt}"
     done
   done
 done

@@ -88,9 +88,16 @@ fn main() {
         "{:<16} {:<14} {:>10} {:>10} {:>12}",
         "model", "optimiser", "p50 (ms)", "p99 (ms)", "p99 / phys"
     );
+    // DYNLAB_RACE_ONLY=<text>: only rows whose "model optimiser" contains the text (profiling)
+    let only = std::env::var("DYNLAB_RACE_ONLY").ok();
     let mut reference = std::collections::HashMap::new();
     for (mname, model) in &models {
         for (cname, cfg) in &configs {
+            if let Some(o) = &only
+                && !format!("{mname} {cname}").contains(o.as_str())
+            {
+                continue;
+            }
             let gd = cfg.optimizer == Optimizer::Gd;
             if gd && *mname == "simulator (FD)" {
                 continue;
@@ -118,7 +125,7 @@ fn main() {
                 cname,
                 p50,
                 p99,
-                p99 / reference[cname]
+                reference.get(cname).map_or(f64::NAN, |r| p99 / r)
             );
         }
     }

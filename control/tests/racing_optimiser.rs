@@ -3,8 +3,8 @@
 
 use dynlab_control::racing::{
     GdSettings, Input, InputLimits, Manoeuvre, Objective, Optimizer, Plant, Problem, Racer,
-    RacerSettings, Regulariser, SolveStatus, SqpSettings, State, Target, TrackTerms, gradient,
-    solve_gd, solve_sqp,
+    RacerSettings, Regulariser, SolveStatus, SpeedProfile, SqpSettings, State, Target, TrackTerms,
+    gradient, solve_gd, solve_sqp,
 };
 use dynlab_learn::dynamics::ode::Solver;
 use dynlab_learn::dynamics::physics::PhysicsModel;
@@ -173,6 +173,7 @@ fn racing_gradient_with_progress_and_excursion_matches_finite_differences() {
                 excursion_weight: 100.0,
                 reference_weight: 1.0,
                 reference_step: 0.1,
+                reference_progress: &[],
             }),
             limits: InputLimits::default(),
             reg: Regulariser::default(),
@@ -260,6 +261,7 @@ fn infeasible_track_qp_is_reported_as_a_status() {
                 excursion_weight: 100.0,
                 reference_weight: 1.0,
                 reference_step: 0.1,
+                reference_progress: &[],
             }),
             limits: InputLimits::default(),
             reg: Regulariser::default(),
@@ -317,5 +319,88 @@ fn racer_drives_forward_on_an_oval_without_leaving_it() {
             progress > 0.5,
             "{optimizer:?} progressed only {progress} m in 1 s"
         );
+    }
+}
+
+#[test]
+fn the_speed_profile_slows_for_bends_and_brakes_into_them_in_time() {
+    let (straight, radius) = (3.0, 0.4);
+    let track = Track::oval(straight, radius, 0.2, 300).unwrap();
+    let (vmax, alat, brake) = (2.0, 1.0, 2.0);
+    let p = SpeedProfile::new(&track, vmax, alat, brake, brake, 0.0).unwrap();
+    // in the middle of a bend: √(a_lat · r)
+    let mid_bend = straight + 0.5 * std::f64::consts::PI * radius;
+    let bend_speed = (alat * radius).sqrt();
+    assert!(
+        (p.speed_at(mid_bend) - bend_speed).abs() < 0.02,
+        "{}",
+        p.speed_at(mid_bend)
+    );
+    assert!((p.min_speed() - bend_speed).abs() < 0.02);
+    // the middle of a 3 m straight is fast: v² ≤ v_bend² + 2 a d with d = 1.5 m → capped at 2
+    assert!((p.speed_at(0.5 * straight) - vmax).abs() < 1e-9);
+    // braking: 0.2 m before the bend no faster than √(v_bend² + 2 a d) (d with two 3 cm
+    // segments of slack: the discrete curvature reaches 1/r one point after the joint)
+    let before = p.speed_at(straight - 0.2);
+    assert!(
+        before <= (bend_speed.powi(2) + 2.0 * brake * 0.26).sqrt(),
+        "{before}"
+    );
+    assert!(before > bend_speed + 0.1, "{before}");
+    // reference progress integrates the speed: on the straight at v_max
+    let prog = p.progress(1.0, 0.05, 10);
+    assert_eq!(prog.len(), 10);
+    assert!(
+        (prog[0] - 0.1).abs() < 1e-6 && (prog[9] - 1.0).abs() < 1e-6,
+        "{prog:?}"
+    );
+    // unlimited accelerations: constant speed
+    let flat = SpeedProfile::new(
+        &track,
+        vmax,
+        f64::INFINITY,
+        f64::INFINITY,
+        f64::INFINITY,
+        0.0,
+    )
+    .unwrap();
+    assert_eq!(flat.min_speed(), vmax);
+    assert!(SpeedProfile::new(&track, 0.0, 1.0, 1.0, 1.0, 0.0).is_err());
+}
+
+#[test]
+fn the_plants_rollout_equals_the_models_rollout_bit_for_bit() {
+    for kind in [
+        ModelKind::Residual,
+        ModelKind::NodeRk4,
+        ModelKind::NodeEuler,
+    ] {
+        let spec = MlpSpec::uniform(5, &[16, 16], 3, Activation::Gelu).unwrap();
+        let mut norm = Normalization::identity(5, 3);
+        norm.output_std = vec![0.05; 3];
+        let model = Model::new(
+            kind,
+            World::Car,
+            0.01,
+            None,
+            Some(Network::new(Mlp::new(spec, Init::Auto, 5), norm)),
+            None,
+            if kind == ModelKind::NodeEuler {
+                Solver::euler()
+            } else {
+                Solver::rk4()
+            },
+        )
+        .unwrap();
+        let plant = Plant::new(&model, 3).unwrap();
+        let s0: State = [0.1, -0.2, 0.3, 1.2, 0.1, -0.4];
+        let inputs: Vec<Input> = (0..7).map(|k| [0.05 * k as f64 - 0.1, 0.6]).collect();
+        let fine = plant.rollout_fine(&s0, &inputs).unwrap();
+        let actions: Vec<f64> = (0..21).flat_map(|j| inputs[j / 3]).collect();
+        let mut out = vec![0.0; 21 * 6];
+        model.rollout(&s0, &actions, &mut out).unwrap();
+        assert_eq!(&fine[6..], &out[..], "{kind:?}");
+        assert!(out.iter().all(|v| v.is_finite()));
+        assert_eq!(plant.coarse(&fine), plant.rollout(&s0, &inputs).unwrap());
     }
 }

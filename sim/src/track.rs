@@ -12,6 +12,8 @@ pub struct Track {
     half_width: Vec<f64>,
     /// Cumulative arc length at each centre point.
     cum: Vec<f64>,
+    /// Length of the closed centre line.
+    total: f64,
 }
 
 #[derive(Deserialize)]
@@ -67,8 +69,12 @@ impl Track {
             centre,
             half_width,
             cum: Vec::new(),
+            total: 0.0,
         };
         t.cum = t.arc_lengths();
+        let n = t.centre.len();
+        let (a, b) = (t.centre[n - 1], t.centre[0]);
+        t.total = t.cum[n - 1] + (b[0] - a[0]).hypot(b[1] - a[1]);
         Ok(t)
     }
 
@@ -266,14 +272,55 @@ pub struct TrackLocation {
 impl Track {
     /// Length of the closed centre line \[m\].
     pub fn length(&self) -> f64 {
+        self.total
+    }
+
+    /// Centre-line curvature at every centre point \[1/m\] (turning angle between the adjacent
+    /// segments over their mean length; left turns positive), averaged over `±smooth` \[m\] of
+    /// arc length (a car's line through a bend is wider than the centre line's: 0 = raw).
+    pub fn curvatures(&self, smooth: f64) -> Vec<f64> {
         let n = self.centre.len();
+        let seg = |i: usize| {
+            let a = self.centre[i % n];
+            let b = self.centre[(i + 1) % n];
+            [b[0] - a[0], b[1] - a[1]]
+        };
+        let raw: Vec<f64> = (0..n)
+            .map(|i| {
+                let (p, q) = (seg(i + n - 1), seg(i));
+                let turn = wrap_angle(q[1].atan2(q[0]) - p[1].atan2(p[0]));
+                let len = 0.5 * (p[0].hypot(p[1]) + q[0].hypot(q[1]));
+                if len > 0.0 { turn / len } else { 0.0 }
+            })
+            .collect();
+        if smooth <= 0.0 {
+            return raw;
+        }
+        let len = self.total;
         (0..n)
             .map(|i| {
-                let a = self.centre[i];
-                let b = self.centre[(i + 1) % n];
-                (b[0] - a[0]).hypot(b[1] - a[1])
+                // total turning within ±smooth over the arc length covered
+                let (mut turn, mut j) = (0.0, 0usize);
+                let arc_dist = |a: usize, b: usize| {
+                    let d = (self.cum[b % n] - self.cum[a % n]).abs();
+                    d.min(len - d)
+                };
+                let mut sum_len = 0.0f64;
+                while j < n && arc_dist(i, i + n - j) <= smooth {
+                    let k = (i + n - j) % n;
+                    turn += raw[k];
+                    sum_len += 1.0;
+                    j += 1;
+                }
+                j = 1;
+                while j < n && arc_dist(i, i + j) <= smooth {
+                    turn += raw[(i + j) % n];
+                    sum_len += 1.0;
+                    j += 1;
+                }
+                turn / sum_len.max(1.0)
             })
-            .sum()
+            .collect()
     }
 
     /// Arc length from point 0 to centre point `i` \[m\] (cumulative, `i < len()`).
@@ -401,5 +448,28 @@ mod locate_tests {
         // a hint far away falls back to the full search
         let far = t.locate_near([-0.5, -0.4], loc.segment + 100, 5);
         assert_eq!(far, loc);
+    }
+
+    #[test]
+    fn curvatures_of_an_oval_are_zero_on_the_straights_and_one_over_the_radius_in_the_bends() {
+        let (straight, radius) = (2.0, 0.5);
+        let t = Track::oval(straight, radius, 0.2, 400).unwrap();
+        let arcs = t.arc_lengths();
+        for smooth in [0.0, 0.1] {
+            let k = t.curvatures(smooth);
+            for (i, s) in arcs.iter().enumerate() {
+                // away from the joints by more than the smoothing and one segment
+                let in_bend = *s > straight + smooth + 0.05
+                    && *s < straight + std::f64::consts::PI * radius - smooth - 0.05;
+                let on_straight = *s > smooth + 0.05 && *s < straight - smooth - 0.05;
+                if in_bend {
+                    assert!((k[i] - 1.0 / radius).abs() < 0.02, "{smooth} {s}: {}", k[i]);
+                }
+                if on_straight {
+                    assert!(k[i].abs() < 1e-9, "{smooth} {s}: {}", k[i]);
+                }
+            }
+        }
+        assert!((t.length() - t.arc_lengths()[399] - t.length() / 400.0).abs() < 1e-3);
     }
 }

@@ -96,6 +96,10 @@ pub struct TrackTerms<'t> {
     pub reference_weight: f64,
     /// Reference progress per control step \[m\] (reference speed × control period).
     pub reference_step: f64,
+    /// Reference progress from `x₀` after each control step \[m\] (step 1 first), e.g. from a
+    /// curvature-aware [`SpeedProfile`](super::SpeedProfile); replaces `k · reference_step`
+    /// for the steps it covers. Empty: constant reference speed.
+    pub reference_progress: &'t [f64],
 }
 
 /// The total cost `ℓ(x(u), u)`.
@@ -177,7 +181,12 @@ impl<'t> Objective<'t> {
         }
         if let (Some(tt), Some((l0, l))) = (&self.track, loc) {
             if tt.reference_weight > 0.0 {
-                let r = progress_between(tt.track, l0, l) - k as f64 * tt.reference_step;
+                let goal = tt
+                    .reference_progress
+                    .get(k - 1)
+                    .copied()
+                    .unwrap_or(k as f64 * tt.reference_step);
+                let r = progress_between(tt.track, l0, l) - goal;
                 let c = tt.reference_weight;
                 st.value += c * r * r;
                 st.grad[0] += 2.0 * c * r * l.tangent[0];

@@ -1,6 +1,9 @@
 //! The learned model with a zero-order input hold: rollouts and exact linearisations.
 
-use dynlab_learn::{Model, StepJacobians, World};
+use dynlab_learn::dynamics::ode::{Solver, VectorField, integrate};
+use dynlab_learn::model::car_pose_update;
+use dynlab_learn::net::NetField;
+use dynlab_learn::{Model, ModelKind, StepJacobians, World};
 
 use super::RacingError;
 
@@ -39,12 +42,81 @@ impl CarDynamics for Model {
         Ok(())
     }
     fn rollout(&self, s0: &[f64], actions: &[f64], out: &mut [f64]) -> Result<(), RacingError> {
-        Model::rollout(self, s0, actions, out)?;
+        if !rollout_one_field(self, s0, actions, out) {
+            Model::rollout(self, s0, actions, out)?;
+        }
         Ok(())
     }
     fn jacobians(&self, s: &[f64], u: &[f64]) -> Result<StepJacobians, RacingError> {
         Ok(Model::jacobians(self, s, u)?)
     }
+}
+
+/// [`Model::rollout`] for car models whose step is the network alone (residual, NeuralODE
+/// Euler/RK4): the same arithmetic (bit for bit: tested), but one network field — and so one
+/// network workspace — for all steps instead of a fresh one per step. Returns false (nothing
+/// done) for other models and malformed shapes, which [`Model::rollout`] then handles.
+fn rollout_one_field(model: &Model, s0: &[f64], actions: &[f64], out: &mut [f64]) -> bool {
+    let Some(net) = model.network() else {
+        return false;
+    };
+    let kind = model.kind();
+    let node = matches!(kind, ModelKind::NodeEuler | ModelKind::NodeRk4);
+    if model.world() != World::Car
+        || model.physics().is_some()
+        || !(node || kind == ModelKind::Residual)
+        || s0.is_empty()
+        || !s0.len().is_multiple_of(6)
+    {
+        return false;
+    }
+    let n = s0.len() / 6;
+    if !actions.len().is_multiple_of(n * 2) || out.len() != actions.len() / 2 * 6 {
+        return false;
+    }
+    if s0.iter().chain(actions).any(|v| !v.is_finite()) {
+        return false;
+    }
+    // as Model::step
+    let solver = model.solver().unwrap_or(Solver::rk4());
+    let field = NetField::new(net);
+    let dt = model.dt();
+    let mut cur = s0.to_vec();
+    let mut z = vec![0.0f32; n * 3];
+    let mut uf = vec![0.0f32; n * 2];
+    let mut zn = vec![0.0f32; n * 3];
+    for (j, u) in actions.chunks_exact(n * 2).enumerate() {
+        for i in 0..n {
+            for d in 0..3 {
+                z[i * 3 + d] = cur[i * 6 + 3 + d] as f32;
+            }
+        }
+        for (a, b) in uf.iter_mut().zip(u) {
+            *a = *b as f32;
+        }
+        if node {
+            integrate(&field, &solver, n, &z, &uf, 1.0, &mut zn);
+        } else {
+            field.eval(n, &z, &uf, &mut zn);
+            for (a, b) in zn.iter_mut().zip(&z) {
+                *a += b;
+            }
+        }
+        let dst = &mut out[j * n * 6..(j + 1) * n * 6];
+        for i in 0..n {
+            let si = &cur[i * 6..i * 6 + 6];
+            let vn = [
+                f64::from(zn[i * 3]),
+                f64::from(zn[i * 3 + 1]),
+                f64::from(zn[i * 3 + 2]),
+            ];
+            let p = car_pose_update(dt, [si[0], si[1], si[2]], [si[3], si[4], si[5]], vn);
+            dst[i * 6..i * 6 + 3].copy_from_slice(&p);
+            dst[i * 6 + 3..i * 6 + 6].copy_from_slice(&vn);
+        }
+        cur.copy_from_slice(dst);
+    }
+    true
 }
 
 /// A car model whose input is held for `hold` model steps: one control step is `hold · dt`.
@@ -147,23 +219,63 @@ impl<'a> Plant<'a> {
             .collect())
     }
 
-    /// Rolls out `inputs` and linearises about the trajectory: the exact Jacobians of every
-    /// model step in one batched call, composed over each hold.
-    pub fn linearize(&self, s0: &State, inputs: &[Input]) -> Result<Linearization, RacingError> {
-        let n = inputs.len();
+    /// Every model step's state `x₀, x_{0,1}, …` under `inputs` held for `hold` steps
+    /// (`(n · hold + 1) × 6`, flat): what [`Plant::linearize_fine`] needs.
+    pub fn rollout_fine(&self, s0: &State, inputs: &[Input]) -> Result<Vec<f64>, RacingError> {
         let h = self.hold;
-        let steps = n * h;
-        // fine states x_{k,j}
+        let steps = inputs.len() * h;
         let mut fine = vec![0.0; (steps + 1) * 6];
         fine[..6].copy_from_slice(s0);
-        let mut u_fine = vec![0.0; steps * 2];
-        for j in 0..steps {
-            u_fine[j * 2..j * 2 + 2].copy_from_slice(&inputs[j / h]);
-        }
         if steps > 0 {
+            let u_fine = self.fine_inputs(inputs);
             let (head, tail) = fine.split_at_mut(6);
             self.model.rollout(head, &u_fine, tail)?;
         }
+        Ok(fine)
+    }
+
+    /// The control-step states `x₀ … x_n` of a fine trajectory from [`Plant::rollout_fine`].
+    pub fn coarse(&self, fine: &[f64]) -> Vec<State> {
+        fine.chunks_exact(6)
+            .step_by(self.hold)
+            .map(|c| [c[0], c[1], c[2], c[3], c[4], c[5]])
+            .collect()
+    }
+
+    fn fine_inputs(&self, inputs: &[Input]) -> Vec<f64> {
+        let h = self.hold;
+        let mut u_fine = vec![0.0; inputs.len() * h * 2];
+        for j in 0..inputs.len() * h {
+            u_fine[j * 2..j * 2 + 2].copy_from_slice(&inputs[j / h]);
+        }
+        u_fine
+    }
+
+    /// Rolls out `inputs` and linearises about the trajectory: the exact Jacobians of every
+    /// model step in one batched call, composed over each hold.
+    pub fn linearize(&self, s0: &State, inputs: &[Input]) -> Result<Linearization, RacingError> {
+        let fine = self.rollout_fine(s0, inputs)?;
+        self.linearize_fine(&fine, inputs)
+    }
+
+    /// As [`Plant::linearize`] about an already rolled-out fine trajectory `fine` of `inputs`
+    /// (from [`Plant::rollout_fine`]): only the Jacobians are evaluated.
+    pub fn linearize_fine(
+        &self,
+        fine: &[f64],
+        inputs: &[Input],
+    ) -> Result<Linearization, RacingError> {
+        let n = inputs.len();
+        let h = self.hold;
+        let steps = n * h;
+        if fine.len() != (steps + 1) * 6 {
+            return Err(RacingError::setting(
+                "fine trajectory",
+                fine.len(),
+                "pass the output of Plant::rollout_fine for the same inputs",
+            ));
+        }
+        let u_fine = self.fine_inputs(inputs);
         let jac = self.model.jacobians(&fine[..steps * 6], &u_fine)?;
         let mut states = Vec::with_capacity(n + 1);
         let mut a = Vec::with_capacity(n);

@@ -5,6 +5,7 @@ use dynlab_sim::Track;
 use super::cost::{InputLimits, Objective, Regulariser, TrackTerms};
 use super::gd::{GdSettings, solve_gd};
 use super::plant::{CarDynamics, Input, Plant, State};
+use super::profile::SpeedProfile;
 use super::sqp::{SqpSettings, solve_sqp};
 use super::{Problem, RacingError, SolveStatus};
 
@@ -45,6 +46,20 @@ pub struct RacerSettings {
     /// Reference speed along the centre line \[m/s\] (the paper's "predefined high velocity").
     /// Default 2 (faster reference speeds spin the ORCA car in the default track's bends).
     pub reference_speed: f64,
+    /// Lateral acceleration the reference speed allows in bends \[m/s²\]: the reference speed
+    /// at arc length s is `min(reference_speed, √(a / |κ(s)|))` (`inf`: constant). Default
+    /// `inf` (the default track's bends are driven at the reference speed; for tracks with
+    /// hairpins set it, e.g. 5 with `braking = 3`, `acceleration = 1.5`).
+    pub lateral_acceleration: f64,
+    /// Deceleration the reference speed profile allows before bends \[m/s²\] (`inf`: none).
+    /// Default `inf`.
+    pub braking: f64,
+    /// Acceleration the reference speed profile allows out of bends \[m/s²\] (`inf`: none;
+    /// gentle: full throttle in a bend spins the car). Default `inf`.
+    pub acceleration: f64,
+    /// Arc length over which the centre line's curvature is averaged (either side) for the
+    /// reference speed \[m\] (the driven line is wider than the centre line). Default 0.15.
+    pub curvature_smoothing: f64,
     /// Weight of the reference-progress term per step (0: off). Default 1.
     pub reference_weight: f64,
     /// Distance kept from the borders \[m\]. Default 0.03 (about half the car's width).
@@ -71,6 +86,10 @@ impl Default for RacerSettings {
             optimizer: Optimizer::Sqp,
             progress_weight: 0.0,
             reference_speed: 2.0,
+            lateral_acceleration: f64::INFINITY,
+            braking: f64::INFINITY,
+            acceleration: f64::INFINITY,
+            curvature_smoothing: 0.15,
             reference_weight: 1.0,
             margin: 0.03,
             excursion_weight: 1000.0,
@@ -119,6 +138,7 @@ pub struct Racer<'a> {
     warm: Vec<Input>,
     last: Option<Input>,
     segment: Option<usize>,
+    profile: SpeedProfile,
 }
 
 impl<'a> Racer<'a> {
@@ -143,7 +163,16 @@ impl<'a> Racer<'a> {
             ));
         }
         let plant = Plant::new(model, settings.hold)?;
+        let profile = SpeedProfile::new(
+            track,
+            settings.reference_speed,
+            settings.lateral_acceleration,
+            settings.braking,
+            settings.acceleration,
+            settings.curvature_smoothing,
+        )?;
         Ok(Self {
+            profile,
             plant,
             track,
             warm: vec![settings.limits.clamp(settings.initial); settings.horizon],
@@ -151,6 +180,11 @@ impl<'a> Racer<'a> {
             last: None,
             segment: None,
         })
+    }
+
+    /// The reference speed profile along the track.
+    pub fn profile(&self) -> &SpeedProfile {
+        &self.profile
     }
 
     /// Control period \[s\].
@@ -175,6 +209,11 @@ impl<'a> Racer<'a> {
     /// status.
     pub fn step(&mut self, s: State) -> Result<RaceStep, RacingError> {
         let st = &self.settings;
+        let here = match self.segment {
+            Some(h) => self.track.locate_near([s[0], s[1]], h, 12),
+            None => self.track.locate([s[0], s[1]]),
+        };
+        let reference = self.profile.progress(here.arc, self.plant.dt(), st.horizon);
         let problem = Problem {
             plant: self.plant,
             s0: s,
@@ -187,11 +226,12 @@ impl<'a> Racer<'a> {
                     excursion_weight: st.excursion_weight,
                     reference_weight: st.reference_weight,
                     reference_step: st.reference_speed * self.plant.dt(),
+                    reference_progress: &reference,
                 }),
                 limits: st.limits,
                 reg: st.reg,
                 u_prev: self.last,
-                start_segment: self.segment,
+                start_segment: Some(here.segment),
             },
         };
         let sol = match st.optimizer {
@@ -204,10 +244,7 @@ impl<'a> Racer<'a> {
         warm.push(*sol.inputs.last().unwrap_or(&input));
         self.warm = warm;
         self.last = Some(input);
-        self.segment = Some(match self.segment {
-            Some(h) => self.track.locate_near([s[0], s[1]], h, 12).segment,
-            None => self.track.locate([s[0], s[1]]).segment,
-        });
+        self.segment = Some(here.segment);
         Ok(RaceStep {
             input,
             status: sol.status,

@@ -279,13 +279,13 @@ pub fn solve_sqp(
     let mut scale = 1.0f64;
     let mut status = SolveStatus::MaxIterations;
     let mut iterations = 0;
-    let mut stale = false;
+    // the fine trajectory of the last accepted step, linearised lazily
+    let mut stale: Option<Vec<f64>> = None;
     while iterations < settings.iterations {
         iterations += 1;
         let radius = [r0[0] * scale, r0[1] * scale];
-        if stale {
-            lin = problem.plant.linearize(&problem.s0, &u)?;
-            stale = false;
+        if let Some(fine) = stale.take() {
+            lin = problem.plant.linearize_fine(&fine, &u)?;
         }
         let mut out = solve_qp(problem, &u, &lin, radius, settings, false);
         if matches!(out, QpOutcome::Infeasible) && settings.elastic_penalty.is_some() {
@@ -318,7 +318,8 @@ pub fn solve_sqp(
             .enumerate()
             .map(|(k, x)| limits.clamp([x[0] + du[2 * k], x[1] + du[2 * k + 1]]))
             .collect();
-        let states = problem.plant.rollout(&problem.s0, &cand)?;
+        let fine = problem.plant.rollout_fine(&problem.s0, &cand)?;
+        let states = problem.plant.coarse(&fine);
         let new_cost = problem.objective.cost(&states, &cand);
         let actual = cost - new_cost;
         let rho = actual / predicted;
@@ -326,7 +327,7 @@ pub fn solve_sqp(
             u = cand;
             // linearise lazily: the last accepted step needs only its states
             lin.states = states;
-            stale = true;
+            stale = Some(fine);
             cost = new_cost;
             history.push(cost);
             let at_edge = du
