@@ -267,28 +267,36 @@ fn results_do_not_depend_on_the_thread_count() {
 
 #[test]
 fn mppi_pushes_an_analytic_model_to_the_goal() {
+    // The model is the plant: every seed must bring the block within 5 cm of the goal in 20
+    // pushes, and most must reach the strict tolerance (2 cm, 0.1 rad) — the last centimetres
+    // need short, precise pushes that sampling does not always find in time.
     let model = physics();
     let goal = [0.8, 0.0, 0.0];
-    let cfg = MppiConfig {
-        samples: 300,
-        horizon: 8,
-        ..MppiConfig::default()
-    };
-    let mut m = Mppi::new(cfg, PushTask::free(goal, [0.05, 0.05])).expect("mppi");
-    let mut s = [0.4, 0.0, 0.2 * PI];
-    let mut reached = None;
-    for step in 0..20 {
-        let a = m.step(&model, s).expect("step").action;
-        let mut next = [0.0; 3];
-        model.step(&s, &a, &mut next).expect("model step");
-        s = next;
-        let e = goal_error(s, goal);
-        if e[0].hypot(e[1]) < 0.02 && e[2].abs() < 0.1 {
-            reached = Some(step + 1);
-            break;
+    let mut strict = 0;
+    for seed in 0..5 {
+        let cfg = MppiConfig {
+            samples: 500,
+            horizon: 10,
+            seed,
+            ..MppiConfig::default()
+        };
+        let mut m = Mppi::new(cfg, PushTask::free(goal, [0.05, 0.05])).expect("mppi");
+        let mut s = [0.4, 0.0, 0.2 * PI];
+        for _ in 0..20 {
+            let a = m.step(&model, s).expect("step").action;
+            let mut next = [0.0; 3];
+            model.step(&s, &a, &mut next).expect("model step");
+            s = next;
+            let e = goal_error(s, goal);
+            if e[0].hypot(e[1]) < 0.02 && e[2].abs() < 0.1 {
+                strict += 1;
+                break;
+            }
         }
+        let e = goal_error(s, goal);
+        assert!(e[0].hypot(e[1]) < 0.05, "seed {seed} ended at {s:?}");
     }
-    assert!(reached.is_some(), "ended at {s:?}");
+    assert!(strict >= 4, "{strict} of 5 seeds reached 2 cm and 0.1 rad");
 }
 
 #[test]
