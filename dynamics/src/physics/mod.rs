@@ -359,3 +359,21 @@ impl std::fmt::Display for Effect {
         f.write_str(self.name())
     }
 }
+
+/// One row of a vector–Jacobian product from a dense Jacobian `j` (`ȳ.len()` rows; columns: the
+/// state, then the input, then the parameters): sets `s̄ = ȳᵀ ∂f/∂s`, `ū = ȳᵀ ∂f/∂u` and adds
+/// `ȳᵀ ∂f/∂p` to `p̄` (parameters only when `p̄` is not empty).
+fn vjp_row(ybar: &[f64], j: &[f64], sbar: &mut [f64], ubar: &mut [f64], pbar: &mut [f64]) {
+    let (ds, du) = (sbar.len(), ubar.len());
+    let nz = j.len() / ybar.len().max(1);
+    for c in 0..nz {
+        let g: f64 = (0..ybar.len()).map(|r| ybar[r] * j[r * nz + c]).sum();
+        if c < ds {
+            sbar[c] = g;
+        } else if c < ds + du {
+            ubar[c - ds] = g;
+        } else {
+            pbar[c - ds - du] += g;
+        }
+    }
+}

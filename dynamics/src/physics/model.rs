@@ -736,17 +736,13 @@ impl VectorField<f64> for PhysicsModel {
             let s = &tape.s[i * ds..(i + 1) * ds];
             let u = &tape.u[i * du..(i + 1) * du];
             self.jacobian_full(s, u, &act, with_p, &mut f, &mut j);
-            let yb = &ybar[i * ds..(i + 1) * ds];
-            for c in 0..nz {
-                let g: f64 = (0..ds).map(|r| yb[r] * j[r * nz + c]).sum();
-                if c < ds {
-                    sbar[i * ds + c] = g;
-                } else if c < ds + du {
-                    ubar[i * du + c - ds] = g;
-                } else {
-                    pbar[c - ds - du] += g;
-                }
-            }
+            super::vjp_row(
+                &ybar[i * ds..(i + 1) * ds],
+                &j,
+                &mut sbar[i * ds..(i + 1) * ds],
+                &mut ubar[i * du..(i + 1) * du],
+                pbar,
+            );
         }
     }
     fn jvp(

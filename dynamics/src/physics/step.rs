@@ -125,17 +125,13 @@ impl VectorField<f64> for PushLine<'_> {
             let z = &tape.s[i * dz..(i + 1) * dz];
             let u = &tape.u[i * DU..(i + 1) * DU];
             self.jac(z, u, with_p, &mut f, &mut j);
-            let yb = &ybar[i * dz..(i + 1) * dz];
-            for c in 0..nz {
-                let g: f64 = (0..dz).map(|r| yb[r] * j[r * nz + c]).sum();
-                if c < dz {
-                    sbar[i * dz + c] = g;
-                } else if c < dz + DU {
-                    ubar[i * DU + c - dz] = g;
-                } else {
-                    pbar[c - dz - DU] += g;
-                }
-            }
+            super::vjp_row(
+                &ybar[i * dz..(i + 1) * dz],
+                &j,
+                &mut sbar[i * dz..(i + 1) * dz],
+                &mut ubar[i * DU..(i + 1) * DU],
+                pbar,
+            );
         }
     }
     fn jvp(
