@@ -5,6 +5,7 @@ peers: Eclipse Cyclone DDS for DDS, rosbags and mcap-ros2-support for bags.
 """
 import os
 import pathlib
+import signal
 import subprocess
 
 import pytest
@@ -31,3 +32,27 @@ def run(name: str, *args, timeout=60, check=True, **kw) -> subprocess.CompletedP
     if check and proc.returncode != 0:
         raise AssertionError(f"{name} {' '.join(map(str, args))} exited {proc.returncode}:\n{proc.stderr}")
     return proc
+
+
+def start(name: str, *args, domain: int, **kw) -> subprocess.Popen:
+    """Starts one of our binaries on DDS domain `domain`, capturing its output."""
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain))
+    return subprocess.Popen([str(binary(name)), *map(str, args)], env=env, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, **kw)
+
+
+def stop(proc: subprocess.Popen, sig=signal.SIGINT, timeout=20.0, check=True) -> str:
+    """Signals a process, waits for it and returns its stderr; with `check`, fails the test when it
+    does not exit in time or exits non-zero."""
+    if proc.poll() is None:
+        proc.send_signal(sig)
+    try:
+        _, err = proc.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        _, err = proc.communicate()
+        if check:
+            pytest.fail(f"process did not exit {timeout} s after {sig!r}:\n{err}")
+    if check:
+        assert proc.returncode == 0, f"exit {proc.returncode}:\n{err}"
+    return err

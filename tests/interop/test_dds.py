@@ -7,10 +7,8 @@ waits on matched publications/subscriptions or on our processes' exit, with boun
 """
 from __future__ import annotations
 
-import os
 import pathlib
 import signal
-import subprocess
 import time
 import uuid
 
@@ -25,7 +23,7 @@ from rosbags.rosbag2 import StoragePlugin
 from rosbags.rosbag2 import Writer as Rosbag2Writer
 from rosbags.typesys import Stores, get_typestore
 
-from conftest import binary
+from conftest import start, stop
 from peers.ros_types import (RELIABLE_KEEP_ALL, SENSOR_DATA, Clock, Peer, Time, pose,
                              pose_tuple, take_until, wait_matched)
 
@@ -37,24 +35,8 @@ def unique(name: str) -> str:
     return f"{name}_{uuid.uuid4().hex[:8]}"
 
 
-def start(name: str, *args, domain: int, **kw) -> subprocess.Popen:
-    env = dict(os.environ, ROS_DOMAIN_ID=str(domain))
-    return subprocess.Popen([str(binary(name)), *map(str, args)], env=env, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, **kw)
 
 
-def stop(proc: subprocess.Popen, sig=signal.SIGINT, timeout=20.0) -> str:
-    """Signals a process, waits for it, returns its stderr; fails on a non-zero exit."""
-    if proc.poll() is None:
-        proc.send_signal(sig)
-    try:
-        _, err = proc.communicate(timeout=timeout)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        _, err = proc.communicate()
-        pytest.fail(f"process did not exit {timeout} s after {sig!r}:\n{err}")
-    assert proc.returncode == 0, f"exit {proc.returncode}:\n{err}"
-    return err
 
 
 def wait_for_recorder_subscription(writer, proc, timeout=15.0):

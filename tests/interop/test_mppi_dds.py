@@ -9,34 +9,17 @@ the repository.
 from __future__ import annotations
 
 import math
-import os
-import signal
-import subprocess
 import time
 
-import pytest
 
-from conftest import binary, run
+from conftest import run, start, stop
 from peers.ros_types import Header, Peer, Point, Pose, PoseStamped, Quaternion, Time, wait_matched
 
 DOMAIN = 57
 
 
-def start(name: str, *args) -> subprocess.Popen:
-    env = dict(os.environ, ROS_DOMAIN_ID=str(DOMAIN))
-    return subprocess.Popen([str(binary(name)), *map(str, args)], env=env, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
 
 
-def stop(proc: subprocess.Popen) -> str:
-    if proc.poll() is None:
-        proc.send_signal(signal.SIGINT)
-    try:
-        _, err = proc.communicate(timeout=20)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        _, err = proc.communicate()
-    return err
 
 
 def yaw_of(q) -> float:
@@ -55,9 +38,9 @@ def test_mppi_pusher_drives_the_simulated_block_to_a_goal_over_dds(tmp_path):
 
     goal = (0.6, 0.05, 0.0)
     sim = start("sim_node", "--ros-args", "-p", "rate:=10.0", "-p", "pose_rate:=10.0",
-                "-p", "pose_qos:=reliable")
+                "-p", "pose_qos:=reliable", domain=DOMAIN)
     pusher = start("mppi_pusher", "--ros-args", "-p", f"model:={model}", "-p", "samples:=300",
-                   "-p", "horizon:=8", "-p", "push_wait:=1.8", "-p", "stale_timeout:=2.0")
+                   "-p", "horizon:=8", "-p", "push_wait:=1.8", "-p", "stale_timeout:=2.0", domain=DOMAIN)
     peer = Peer(DOMAIN)
     try:
         from cyclonedds.core import Qos, Policy
@@ -91,6 +74,6 @@ def test_mppi_pusher_drives_the_simulated_block_to_a_goal_over_dds(tmp_path):
             assert pusher.poll() is None, "mppi_pusher exited"
         assert reached, f"block never reached the goal (closest {best:.3f} m)"
     finally:
-        err_p = stop(pusher)
-        err_s = stop(sim)
+        err_p = stop(pusher, check=False)
+        stop(sim, check=False)
     assert "push 1 from" in err_p, err_p[-2000:]

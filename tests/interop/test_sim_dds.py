@@ -18,7 +18,6 @@ import json
 import math
 import os
 import pathlib
-import signal
 import subprocess
 import time
 import uuid
@@ -28,7 +27,7 @@ from mcap_ros2.reader import read_ros2_messages
 from rosbags.rosbag2 import Reader as Rosbag2Reader
 from rosbags.typesys import Stores, get_typestore
 
-from conftest import REPO, binary, run
+from conftest import REPO, binary, run, start, stop
 from peers.ros_types import (RELIABLE, RELIABLE_KEEP_ALL, AckermannDrive, AckermannDriveStamped, Peer, PoseStamped,
                              PushAction, take_until, wait_matched)
 
@@ -39,23 +38,8 @@ def unique(prefix: str) -> str:
     return f"{prefix}_{uuid.uuid4().hex[:8]}"
 
 
-def start(name: str, *args, domain: int) -> subprocess.Popen:
-    env = dict(os.environ, ROS_DOMAIN_ID=str(domain))
-    return subprocess.Popen([str(binary(name)), *map(str, args)], env=env, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
 
 
-def stop(proc: subprocess.Popen, timeout: float = 20.0) -> str:
-    if proc.poll() is None:
-        proc.send_signal(signal.SIGINT)
-    try:
-        _, err = proc.communicate(timeout=timeout)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        _, err = proc.communicate()
-        pytest.fail(f"process did not exit {timeout} s after SIGINT:\n{err}")
-    assert proc.returncode == 0, f"exit {proc.returncode}:\n{err}"
-    return err
 
 
 def bag_poses(bag: pathlib.Path, topic: str) -> dict[int, tuple]:
