@@ -121,6 +121,14 @@ pub struct DiagnoseConfig {
     pub iterations: usize,
     /// Candidate effects (default: every effect of the world's library).
     pub effects: Option<Vec<Effect>>,
+    /// Refit the model's free nominal parameters (pushing: `c`, `κ`) on the fit half, for the
+    /// baseline and jointly with every candidate, so that an effect is credited only with what
+    /// the nominal model cannot absorb (default: pushing physics models yes, the car no).
+    pub refit_nominal: Option<bool>,
+    /// Divide the bootstrap's error probability `1 − confidence` by the number of candidates
+    /// tested (Bonferroni), so that the chance of *any* false candidate stays at
+    /// `1 − confidence` (default true).
+    pub correct_for_candidates: bool,
 }
 
 impl Default for DiagnoseConfig {
@@ -137,6 +145,8 @@ impl Default for DiagnoseConfig {
             confidence: 0.95,
             iterations: 20,
             effects: None,
+            refit_nominal: None,
+            correct_for_candidates: true,
         }
     }
 }
@@ -148,6 +158,21 @@ impl DiagnoseConfig {
             World::Car => 50,
             World::Push => 3,
         })
+    }
+
+    /// Whether the nominal parameters are refitted for a world (see
+    /// [`refit_nominal`](Self::refit_nominal)).
+    pub fn refit_nominal_for(&self, world: World) -> bool {
+        self.refit_nominal.unwrap_or(world == World::Push)
+    }
+
+    /// The one-sided confidence of each candidate's interval when `candidates` are tested.
+    pub fn confidence_for(&self, candidates: usize) -> f64 {
+        if self.correct_for_candidates && candidates > 1 {
+            1.0 - (1.0 - self.confidence) / candidates as f64
+        } else {
+            self.confidence
+        }
     }
 
     fn validate(&self) -> Result<(), DiagnosisError> {
@@ -199,6 +224,10 @@ pub struct Candidate {
     pub param_std: BTreeMap<String, f64>,
     /// Units of the parameters.
     pub param_units: BTreeMap<String, String>,
+    /// Nominal parameters refitted jointly with the effect (pushing physics: `c`, `kappa`;
+    /// empty when the nominal parameters are held).
+    #[serde(default)]
+    pub nominal_params: BTreeMap<String, f64>,
     /// The reduction before clipping (negative: the effect makes held-out predictions worse).
     pub raw_reduction: f64,
     /// Lower end of the one-sided bootstrap interval of the reduction.
@@ -245,8 +274,12 @@ pub struct Diagnosis {
     pub segments: [usize; 2],
     /// Windows used to fit and to score.
     pub windows: [usize; 2],
-    /// The held-out k-step error of the model (normalised units).
+    /// The held-out k-step error of the baseline (normalised units): the model, or the model
+    /// with its nominal parameters refitted on the fit half (see `nominal_refit`).
     pub baseline_error: f64,
+    /// The baseline's refitted nominal parameters (empty: the model as given).
+    #[serde(default)]
+    pub nominal_refit: BTreeMap<String, f64>,
     /// The strongest correlations of the one-step residual (always computed; what to look at
     /// when there is no verdict).
     pub correlations: Vec<Correlation>,
@@ -264,6 +297,20 @@ struct Data<'a> {
     k: usize,
     scale: Vec<f64>,
     angle: usize,
+}
+
+/// Parameters fitted on the fit half (refitted nominal ones first, then the effect's), with the
+/// per-window errors they give.
+struct Fitted {
+    names: Vec<String>,
+    units: Vec<String>,
+    /// How many of the leading parameters are refitted nominal ones.
+    n_refit: usize,
+    theta: Vec<f64>,
+    std: Vec<f64>,
+    /// Per-window held-out and fit-half errors.
+    test: Vec<f64>,
+    fit: Vec<f64>,
 }
 
 /// An augmented predictor: the model plus an effect's contribution.
@@ -513,64 +560,82 @@ pub fn diagnose(
     };
     let pure_physics =
         model.physics().is_some() && model.network().is_none() && base.dim_state() == ds;
-    let baseline = Augmented {
-        model,
-        base: base.clone(),
-        with: None,
-        pure_physics,
-    };
-    let before_test = baseline.errors(&d, &test_w, None);
-    let before_fit = baseline.errors(&d, &fit_w, None);
     let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
-    let baseline_error = mean(&before_test);
-    // candidates
-    let have = base.effects();
-    let lib: Vec<Effect> = cfg.effects.clone().unwrap_or_else(|| {
-        Effect::ALL
-            .into_iter()
-            .filter(|e| e.robot() == world.robot())
+    // nominal parameters refitted with every candidate and for the baseline (pushing physics)
+    let refit: Vec<usize> = if pure_physics && cfg.refit_nominal_for(world) {
+        base.default_free()
+            .iter()
+            .zip(base.param_specs())
+            .enumerate()
+            .filter(|(_, (f, (owner, _)))| **f && owner.is_none())
+            .map(|(i, _)| i)
             .collect()
-    });
-    let test_traj: Vec<usize> = split.validation.clone();
-    let mut candidates = Vec::new();
-    let fit_one = |e: Effect| -> Result<Option<Candidate>, DiagnosisError> {
-        if have.contains(&e) || e.robot() != world.robot() {
-            return Ok(None);
-        }
+    } else {
+        Vec::new()
+    };
+    let have = base.effects();
+    // fits the refitted nominal parameters and (with `Some(e)`) the effect `e`'s on the fit half
+    let fit_params = |e: Option<Effect>| -> Result<Option<Fitted>, DiagnosisError> {
         let mut effects = have.clone();
-        effects.push(e);
+        effects.extend(e);
         let mut with = PhysicsModel::new(world.robot(), &effects)?;
         let mut p0 = with.params().to_vec();
         p0[..base.params().len()].copy_from_slice(base.params());
         with.set_params(&p0)?;
-        let range = with
-            .effect_param_range(e)
-            .ok_or(ModelError::NotEnabled(e))?;
-        let specs: Vec<_> = e.params().to_vec();
+        let mut idx = refit.clone();
+        if let Some(e) = e {
+            idx.extend(
+                with.effect_param_range(e)
+                    .ok_or(ModelError::NotEnabled(e))?,
+            );
+        }
+        if idx.is_empty() {
+            return Ok(None);
+        }
+        let all_specs = with.param_specs();
+        let specs: Vec<_> = idx.iter().map(|&i| all_specs[i].1).collect();
         let lower: Vec<f64> = specs.iter().map(|s| s.lower).collect();
         let upper: Vec<f64> = specs.iter().map(|s| s.upper).collect();
         let free: Vec<bool> = specs.iter().map(|s| s.name != "w").collect();
-        let cost_of = |theta: &[f64], ws: &[Window], resid: Option<&mut Vec<f64>>| {
+        let model_of = |theta: &[f64]| -> Option<PhysicsModel> {
             let mut m = with.clone();
             let mut p = m.params().to_vec();
-            p[range.clone()].copy_from_slice(theta);
-            if m.set_params(&p).is_err() {
-                return None;
+            for (&i, &v) in idx.iter().zip(theta) {
+                p[i] = v;
             }
+            m.set_params(&p).ok().map(|_| m)
+        };
+        let cost_of = |theta: &[f64], ws: &[Window], resid: Option<&mut Vec<f64>>| {
             let a = Augmented {
                 model,
                 base: base.clone(),
-                with: Some(m),
+                with: Some(model_of(theta)?),
                 pure_physics,
             };
             Some(a.errors(&d, ws, resid))
         };
         // starts: screen by cost, refine the best two
+        let n_refit = refit.len();
+        let effect_starts = match e {
+            Some(e) => starts(e, &trajs),
+            None => vec![Vec::new()],
+        };
         let mut scored: Vec<(f64, Vec<f64>)> = Vec::new();
-        for st in starts(e, &trajs) {
-            let mut th: Vec<f64> = specs.iter().map(|s| s.default).collect();
+        for st in effect_starts {
+            let mut th: Vec<f64> = idx
+                .iter()
+                .zip(&specs)
+                .map(|(&i, s)| {
+                    if i < base.params().len() {
+                        p0[i]
+                    } else {
+                        s.default
+                    }
+                })
+                .collect();
             for (name, v) in st {
-                if let Some(i) = specs.iter().position(|s| s.name == name) {
+                if let Some(i) = specs.iter().skip(n_refit).position(|s| s.name == name) {
+                    let i = i + n_refit;
                     th[i] = v.clamp(lower[i], upper[i]);
                 }
             }
@@ -638,44 +703,105 @@ pub fn diagnose(
         let Some((_, theta, std)) = best else {
             return Ok(None);
         };
-        let Some(after_test) = cost_of(&theta, &test_w, None) else {
+        let Some(test) = cost_of(&theta, &test_w, None) else {
             return Ok(None);
         };
-        let after_fit = cost_of(&theta, &fit_w, None).unwrap_or_default();
-        let (eb, ea) = (mean(&before_test), mean(&after_test));
+        let fit = cost_of(&theta, &fit_w, None).unwrap_or_default();
+        Ok(Some(Fitted {
+            names: specs.iter().map(|s| s.name.to_string()).collect(),
+            units: specs.iter().map(|s| s.unit.to_string()).collect(),
+            n_refit,
+            theta,
+            std,
+            test,
+            fit,
+        }))
+    };
+    // the baseline: the model as given, or with its nominal parameters refitted on the fit half
+    let null = if refit.is_empty() {
+        None
+    } else {
+        fit_params(None)?
+    };
+    let (before_test, before_fit, nominal_refit) = match &null {
+        Some(f) => (
+            f.test.clone(),
+            f.fit.clone(),
+            f.names
+                .iter()
+                .cloned()
+                .zip(f.theta.iter().copied())
+                .collect(),
+        ),
+        None => {
+            let baseline = Augmented {
+                model,
+                base: base.clone(),
+                with: None,
+                pure_physics,
+            };
+            (
+                baseline.errors(&d, &test_w, None),
+                baseline.errors(&d, &fit_w, None),
+                BTreeMap::new(),
+            )
+        }
+    };
+    let baseline_error = mean(&before_test);
+    // candidates
+    let lib: Vec<Effect> = cfg.effects.clone().unwrap_or_else(|| {
+        Effect::ALL
+            .into_iter()
+            .filter(|e| e.robot() == world.robot())
+            .collect()
+    });
+    let test_traj: Vec<usize> = split.validation.clone();
+    let mut candidates = Vec::new();
+    let fit_one = |e: Effect| -> Result<Option<Candidate>, DiagnosisError> {
+        if have.contains(&e) || e.robot() != world.robot() {
+            return Ok(None);
+        }
+        let Some(f) = fit_params(Some(e))? else {
+            return Ok(None);
+        };
+        let (after_test, after_fit) = (&f.test, &f.fit);
+        let (eb, ea) = (mean(&before_test), mean(after_test));
         let raw = if eb > 0.0 { 1.0 - ea / eb } else { 0.0 };
         let ci_lower = bootstrap_lower(
             &test_w,
             &before_test,
-            &after_test,
+            after_test,
             cfg.bootstrap,
-            cfg.confidence,
+            cfg.confidence_for(lib.len()),
             cfg.seed ^ (e as u64 + 1).wrapping_mul(0x9E37_79B9_7F4A_7C15),
         );
         let significant = raw >= cfg.min_reduction && ci_lower > 0.0 && test_traj.len() >= 2;
+        let pick = |v: &[String]| -> Vec<String> { v[f.n_refit..].to_vec() };
+        let names = pick(&f.names);
+        let units = pick(&f.units);
+        let theta = &f.theta[f.n_refit..];
+        let std = &f.std[f.n_refit..];
         Ok(Some(Candidate {
             effect: e.name().to_string(),
             error_reduction: raw.clamp(0.0, 1.0),
             significant,
-            params: specs
+            params: names.iter().cloned().zip(theta.iter().copied()).collect(),
+            param_std: names
                 .iter()
-                .zip(&theta)
-                .map(|(s, v)| (s.name.to_string(), *v))
+                .zip(std)
+                .map(|(s, v)| (s.clone(), if v.is_finite() { *v } else { -1.0 }))
                 .collect(),
-            param_std: specs
+            param_units: names.iter().cloned().zip(units).collect(),
+            nominal_params: f.names[..f.n_refit]
                 .iter()
-                .zip(&std)
-                .map(|(s, v)| (s.name.to_string(), if v.is_finite() { *v } else { -1.0 }))
-                .collect(),
-            param_units: specs
-                .iter()
-                .map(|s| (s.name.to_string(), s.unit.to_string()))
+                .cloned()
+                .zip(f.theta[..f.n_refit].iter().copied())
                 .collect(),
             raw_reduction: raw,
             ci_lower,
             error_before: eb,
             error_after: ea,
-            fit_error: [mean(&before_fit), mean(&after_fit)],
+            fit_error: [mean(&before_fit), mean(after_fit)],
             description: e.description().to_string(),
         }))
     };
@@ -732,6 +858,7 @@ pub fn diagnose(
         segments: [split.train.len(), split.validation.len()],
         windows: [fit_w.len(), test_w.len()],
         baseline_error,
+        nominal_refit,
         correlations,
         summary,
         config: cfg.clone(),
