@@ -185,18 +185,18 @@ fn push_com_offset_is_found() {
 
 #[test]
 fn push_table_tilt_is_found() {
-    // a weak effect (1.1° slope): it removes 30–55 % of the held-out error, not half (the
-    // nominal model's own angle error is of the same size); gx is under-estimated by ~25 %
+    // a weak effect (1.1° slope): it removes at least half of the held-out error now that the
+    // nominal model has the support grid's limit surface and refits c, κ with the effect
     let d = run(Some(Effect::TableTilt), 3);
-    assert_found_min(&d, Effect::TableTilt, "gx", 0.2, 0.08, 0.3);
+    assert_found(&d, Effect::TableTilt, "gx", 0.2, 0.08);
 }
 
 #[test]
 fn push_friction_patch_is_found() {
     // how much of the held-out error the patch explains depends on how many held-out pushes
-    // cross its edge: 47–84 % over the seeds tried
+    // cross its edge
     let d = run(Some(Effect::FrictionPatch), 4);
-    assert_found_min(&d, Effect::FrictionPatch, "cx", 0.5, 0.02, 0.4);
+    assert_found(&d, Effect::FrictionPatch, "cx", 0.5, 0.02);
     let p = &d.candidates[0].params;
     assert!((p["cy"] - 0.1).abs() < 0.02, "{}", d.table());
     assert!((p["r"] - 0.1).abs() < 0.02, "{}", d.table());
