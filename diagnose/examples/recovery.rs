@@ -3,7 +3,12 @@
 //! effect first and significant (and nothing on nominal data)?
 //!
 //! `cargo run --release -p dynlab-diagnose --example recovery -- [--seeds N] [--noise X]
-//! [--car-episodes N] [--car-duration S] [--push-episodes N] [--only NAME] [--world car|push]`
+//! [--car-episodes N] [--car-duration S] [--push-episodes N] [--only NAME] [--world car|push]
+//! [--steps K] [--fit-baseline] [--no-refit] [--no-bonferroni]`
+//!
+//! `--no-refit` holds the nominal parameters (no joint refit of the pushing `c`, `κ`),
+//! `--no-bonferroni` tests every candidate at the plain confidence: both together are the
+//! diagnosis of the previous version.
 //!
 //! The model under diagnosis is the nominal physics model at its documented values (what a fit
 //! on nominal data returns; the simulator's nominal world is those values).
@@ -36,6 +41,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let only_world: String = arg("--world", String::new());
     let steps: usize = arg("--steps", 0);
     let fit_baseline = std::env::args().any(|a| a == "--fit-baseline");
+    // the significance rule of the previous version, for before/after tables
+    let no_refit = std::env::args().any(|a| a == "--no-refit");
+    let no_bonferroni = std::env::args().any(|a| a == "--no-bonferroni");
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
     println!(
         "recovery over {seeds} seeds, noise ×{noise}: car {car_eps} × {car_dur} s, pushing {push_eps} × 10 pushes"
@@ -127,6 +135,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             let cfg = DiagnoseConfig {
                 seed,
                 steps: (steps > 0).then_some(steps),
+                refit_nominal: no_refit.then_some(false),
+                correct_for_candidates: !no_bonferroni,
                 ..DiagnoseConfig::default()
             };
             let d = diagnose(&model, &data, &cfg)?;

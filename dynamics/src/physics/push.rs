@@ -195,8 +195,6 @@ pub(crate) fn rhs_line<R: Real>(
     if vpx.value() <= 0.0 {
         return;
     }
-    // the support grid's limit surface along the face: the ratio grows with the arm
-    let c = c * grid_ratio_shape(py / a);
     let c2 = c * c;
     let m11 = py * py / c2 + 1.0;
     let m12 = -(px * py) / c2;
@@ -251,22 +249,6 @@ pub(crate) fn rhs_line<R: Real>(
     out[1] = st * vx + ct * vy;
     out[2] = om;
 }
-
-/// Shape of the limit-surface ratio of an `N × N` point support against the contact's lateral
-/// arm `u = p_y/a` (relative to the centre of friction), normalised to the uniform-pressure
-/// square's `0.383 a`: `c_eff = c·h(u)`. An ellipsoid with one ratio matches a continuous square;
-/// the simulator's 5 × 5 grid of support points turns more for a push near the middle
-/// (`c_eff = 0.283 a` at `u → 0`) and less near a corner (`0.41 a` at `u = 0.5`). `h` is the
-/// quadratic fit (max. error 0.011 a) of the grid's exact quasi-static ratio `p_y v_x/|ω|` for a
-/// frictionless normal push (the twist minimising the support's dissipation for the pusher's
-/// wrench), computed once offline. The absolute value is smoothed at 0 (`|u| ≈ √(u² + 10⁻⁶)`).
-fn grid_ratio_shape<R: Real>(u: R) -> R {
-    let au = (u * u + 1e-6).sqrt();
-    (au * au * GRID_SHAPE[2] + au * GRID_SHAPE[1]) / 0.383 + GRID_SHAPE[0] / 0.383
-}
-
-/// `c_eff/a = h₀ + h₁|u| + h₂u²` of the 5 × 5 support grid (see [`grid_ratio_shape`]).
-const GRID_SHAPE: [f64; 3] = [0.27833, 0.24960, 0.08163];
 
 /// Centre of friction `(o_x, o_y)` (block frame) and limit-surface ratio of a block of side
 /// `a` at `(x, y, θ)` whose support is an `N × N` grid (as in the simulator) with friction
