@@ -47,6 +47,18 @@ pub fn diagnosis_html(d: &Diagnosis) -> String {
         d.segments[0],
         g4(d.baseline_error)
     );
+    if !d.nominal_refit.is_empty() {
+        let p: Vec<String> = d
+            .nominal_refit
+            .iter()
+            .map(|(k, v)| format!("{} = {}", esc(k), g4(*v)))
+            .collect();
+        let _ = writeln!(
+            o,
+            "<p>The model's nominal parameters are refitted on the fit half for the baseline ({}) and jointly with every candidate, so an effect is credited only with what the nominal model cannot absorb.</p>",
+            p.join(", ")
+        );
+    }
     let _ = writeln!(
         o,
         "<table style=\"border-collapse:collapse\"><tr><th align=left>effect</th><th align=left>held-out error removed</th><th>bootstrap lower bound</th><th>significant</th><th align=left>fitted parameters (± std)</th></tr>"
