@@ -8,7 +8,7 @@ use clap::Args;
 use dynlab_diagnose::diagnosis::{DiagnoseConfig, diagnose, diagnosis_page};
 use dynlab_learn::dynamics::data::SavGol;
 use dynlab_learn::dynamics::physics::PhysicsModel;
-use dynlab_learn::{Topics, load_bags, load_model};
+use dynlab_learn::{Topics, load_bags, load_bags_timed_at, load_model};
 
 /// `dynlab diagnose …`
 #[derive(Debug, Args)]
@@ -49,7 +49,25 @@ pub fn run(args: DiagnoseArgs) -> anyhow::Result<()> {
         pose: args.pose_topic.clone(),
         cmd: args.cmd_topic.clone(),
     };
-    let data = load_bags(&args.bags, Some(model.world()), &topics, &SavGol::default())?;
+    let mut data = load_bags(&args.bags, Some(model.world()), &topics, &SavGol::default())?;
+    // a car model steps a fixed dt: poses at another rate are resampled to it (as compare does)
+    if model.world() == dynlab_learn::World::Car
+        && (data.pose_dt_s - model.dt()).abs() > 0.01 * model.dt()
+    {
+        println!(
+            "data: poses every {:.2} ms; the model steps {:.2} ms: resampled to the model's step",
+            data.pose_dt_s * 1e3,
+            model.dt() * 1e3
+        );
+        data = load_bags_timed_at(
+            &args.bags,
+            Some(model.world()),
+            &topics,
+            &SavGol::default(),
+            Some(model.dt()),
+        )?
+        .data;
+    }
     let effects = match &args.effects {
         Some(names) => {
             let n: Vec<&str> = names.iter().map(|s| s.as_str()).collect();

@@ -70,6 +70,16 @@ pub enum DiagnosisError {
         /// The data's world.
         data: World,
     },
+    /// Car data at another rate than the model's fixed step.
+    #[error(
+        "the data have a pose every {data_s:.5} s but the car model steps {model_s:.5} s; load the bag resampled to the model's step (dynlab_learn::load_bags_timed_at; dynlab diagnose and dynlab compare do this themselves)"
+    )]
+    StepMismatch {
+        /// The data's pose interval \[s\].
+        data_s: f64,
+        /// The model's step \[s\].
+        model_s: f64,
+    },
     /// Too little data for a split and k-step windows.
     #[error(
         "too little data: {segments} segments, {windows} windows of {k} steps; record more (at least 4 trajectories of more than {k} steps) or lower --steps"
@@ -501,6 +511,12 @@ pub fn diagnose(
         return Err(DiagnosisError::WorldMismatch {
             model: world,
             data: data.world,
+        });
+    }
+    if world == World::Car && (data.pose_dt_s - model.dt()).abs() > 0.01 * model.dt() {
+        return Err(DiagnosisError::StepMismatch {
+            data_s: data.pose_dt_s,
+            model_s: model.dt(),
         });
     }
     let k = cfg.steps_for(world);

@@ -75,3 +75,26 @@ fn a_network_model_is_diagnosed_on_car_data() {
     assert_eq!(d.candidates.len(), 4, "{}", d.table());
     assert!(d.candidates.iter().all(|c| c.error_after.is_finite()));
 }
+
+#[test]
+fn car_data_at_another_rate_than_the_model_get_a_clear_error() {
+    use dynlab_diagnose::diagnosis::DiagnosisError;
+    use dynlab_learn::World;
+    use dynlab_learn::dynamics::physics::PhysicsModel;
+    use dynlab_learn::train::default_physics_solver;
+    let data = car_dataset(&car_scenario(None, 1.0), 1, 3.0, 73, 2).unwrap();
+    // a model stepping twice the data's pose interval
+    let model = Model::new(
+        ModelKind::Physics,
+        World::Car,
+        2.0 * data.pose_dt_s,
+        None,
+        None,
+        Some(PhysicsModel::car(&[]).unwrap()),
+        default_physics_solver(World::Car),
+    )
+    .unwrap();
+    let err = diagnose(&model, &data, &DiagnoseConfig::default()).unwrap_err();
+    assert!(matches!(err, DiagnosisError::StepMismatch { .. }), "{err}");
+    assert!(err.to_string().contains("resampled"), "{err}");
+}
