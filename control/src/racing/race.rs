@@ -232,9 +232,12 @@ impl<'a> Racer<'a> {
             Some(h) => self.track.locate_near([s[0], s[1]], h, 12),
             None => self.track.locate([s[0], s[1]]),
         };
-        let reference =
-            self.profile
-                .progress_from_speed(here.arc, s[3].hypot(s[4]), self.plant.dt(), st.horizon);
+        let reference = self.profile.progress_from_speed(
+            here.arc,
+            s[3].hypot(s[4]),
+            self.plant.dt(),
+            st.horizon,
+        );
         let problem = Problem {
             plant: self.plant,
             s0: s,
