@@ -140,7 +140,7 @@ pub fn run(args: RaceArgs) -> anyhow::Result<()> {
         args.laps
     );
     println!(
-        "{:<8} {:>6} {:>22} {:>6} {:>10} {:>10} {:>9} {:>9} {:>9} {:>8}",
+        "{:<8} {:>6} {:>22} {:>6} {:>10} {:>10} {:>9} {:>9} {:>9} {:>8} {:>8}",
         "model",
         "laps",
         "lap times (s)",
@@ -150,7 +150,8 @@ pub fn run(args: RaceArgs) -> anyhow::Result<()> {
         "top v",
         "p50 (ms)",
         "p99 (ms)",
-        "elastic"
+        "elastic",
+        "recover"
     );
     for (name, r) in &runs {
         let times = r
@@ -160,7 +161,7 @@ pub fn run(args: RaceArgs) -> anyhow::Result<()> {
             .collect::<Vec<_>>()
             .join(" ");
         println!(
-            "{:<8} {:>6} {:>22} {:>6} {:>10.2} {:>10.3} {:>9.2} {:>9.2} {:>9.2} {:>8}",
+            "{:<8} {:>6} {:>22} {:>6} {:>10.2} {:>10.3} {:>9.2} {:>9.2} {:>9.2} {:>8} {:>8}",
             name,
             format!("{}/{}", r.lap_times.len(), args.laps),
             times,
@@ -170,7 +171,8 @@ pub fn run(args: RaceArgs) -> anyhow::Result<()> {
             r.top_speed,
             1e3 * r.solve_quantile(0.5),
             1e3 * r.solve_quantile(0.99),
-            r.elastic_qps
+            r.elastic_qps,
+            r.recoveries
         );
         plot(&args.out.join(format!("race_{name}.png")), &track, r, name)?;
     }
@@ -197,6 +199,7 @@ pub fn run(args: RaceArgs) -> anyhow::Result<()> {
             "solve_p99_s": r.solve_quantile(0.99),
             "statuses": r.statuses,
             "elastic_qps": r.elastic_qps,
+            "recoveries": r.recoveries,
         })).collect::<Vec<_>>(),
     });
     std::fs::write(

@@ -174,6 +174,7 @@ fn racing_gradient_with_progress_and_excursion_matches_finite_differences() {
                 reference_weight: 1.0,
                 reference_step: 0.1,
                 reference_progress: &[],
+                slip_weight: 2.0,
             }),
             limits: InputLimits::default(),
             reg: Regulariser::default(),
@@ -262,6 +263,7 @@ fn infeasible_track_qp_is_reported_as_a_status() {
                 reference_weight: 1.0,
                 reference_step: 0.1,
                 reference_progress: &[],
+                slip_weight: 0.0,
             }),
             limits: InputLimits::default(),
             reg: Regulariser::default(),
@@ -322,6 +324,45 @@ fn racer_drives_forward_on_an_oval_without_leaving_it() {
     }
 }
 
+/// Standing still near the left border, facing the right border and slightly backwards:
+/// steering has no first-order effect at standstill, so the warm start alone stays put; the
+/// recovery starts find the turn.
+#[test]
+fn a_stalled_racer_recovers_from_facing_the_border_with_the_recovery_starts() {
+    let model = physics_car();
+    let track = Track::oval(1.0, 0.5, 0.2, 120).unwrap();
+    let plant = Plant::new(&model, 5).unwrap();
+    let drive = |recovery_fraction: f64| {
+        let mut racer = Racer::new(
+            &model,
+            &track,
+            RacerSettings {
+                recovery_fraction,
+                initial: [0.0, -0.1],
+                ..RacerSettings::default()
+            },
+        )
+        .unwrap();
+        let mut s: State = [0.0, -0.4, -1.7, 0.0, 0.0, 0.0];
+        let mut recovered = 0;
+        for _ in 0..30 {
+            let step = racer.step(s).unwrap();
+            recovered += usize::from(step.recovered);
+            s = plant.rollout(&s, &[step.input]).unwrap()[1];
+        }
+        (track.locate([s[0], s[1]]).arc, recovered, s)
+    };
+    let (stuck, none, s_stuck) = drive(0.0);
+    let (moved, recovered, s_moved) = drive(0.5);
+    println!("without {stuck} {s_stuck:?}; with {moved} ({recovered} recoveries) {s_moved:?}");
+    assert_eq!(none, 0);
+    assert!(recovered > 0);
+    assert!(
+        moved > stuck + 0.5,
+        "without {stuck} m, with recovery {moved} m"
+    );
+}
+
 #[test]
 fn the_speed_profile_slows_for_bends_and_brakes_into_them_in_time() {
     let (straight, radius) = (3.0, 0.4);
@@ -354,6 +395,12 @@ fn the_speed_profile_slows_for_bends_and_brakes_into_them_in_time() {
         (prog[0] - 0.1).abs() < 1e-6 && (prog[9] - 1.0).abs() < 1e-6,
         "{prog:?}"
     );
+    // from a standing start the reference speed ramps up at the acceleration (2 m/s²) until it
+    // meets the profile: 0.5 · 2 · 0.5² = 0.25 m after 0.5 s
+    let ramp = p.progress_from_speed(1.0, 0.0, 0.05, 10);
+    assert!((ramp[9] - 0.25).abs() < 1e-6, "{ramp:?}");
+    // a car already at the profile's speed gets the profile itself
+    assert_eq!(p.progress_from_speed(1.0, vmax, 0.05, 10), prog);
     // unlimited accelerations: constant speed
     let flat = SpeedProfile::new(
         &track,

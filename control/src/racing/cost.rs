@@ -100,6 +100,10 @@ pub struct TrackTerms<'t> {
     /// curvature-aware [`SpeedProfile`](super::SpeedProfile); replaces `k · reference_step`
     /// for the steps it covers. Empty: constant reference speed.
     pub reference_progress: &'t [f64],
+    /// Weight of the body-frame lateral velocity `v_y²` at every step \[s²/m²\] (0: off): keeps
+    /// the plan in the tyres' linear range, away from slides and spins (which a learned model
+    /// predicts worst and a receding horizon cannot recover from).
+    pub slip_weight: f64,
 }
 
 /// The total cost `ℓ(x(u), u)`.
@@ -202,6 +206,12 @@ impl<'t> Objective<'t> {
                 st.value -= tt.progress_weight * prog;
                 st.grad[0] -= tt.progress_weight * l.tangent[0];
                 st.grad[1] -= tt.progress_weight * l.tangent[1];
+            }
+            if tt.slip_weight > 0.0 {
+                let c = tt.slip_weight;
+                st.value += c * x[4] * x[4];
+                st.grad[4] += 2.0 * c * x[4];
+                st.hess[4 * 6 + 4] += 2.0 * c;
             }
             let w = l.half_width - tt.margin;
             let e = l.lateral.abs() - w;

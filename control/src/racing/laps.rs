@@ -65,6 +65,9 @@ pub struct LapReport {
     pub statuses: [usize; 5],
     /// QPs that needed the elastic fallback.
     pub elastic_qps: usize,
+    /// Cycles whose plan came from a recovery start (the racer had stalled).
+    #[serde(default)]
+    pub recoveries: usize,
     /// Top speed \[m/s\].
     pub top_speed: f64,
     /// The driven line, one point per model step.
@@ -111,6 +114,7 @@ pub fn run_laps(
         solve_times: Vec::new(),
         statuses: [0; 5],
         elastic_qps: 0,
+        recoveries: 0,
         top_speed: 0.0,
         trace: Vec::new(),
     };
@@ -144,6 +148,7 @@ pub fn run_laps(
                 SolveStatus::ModelFailure => 4,
             }] += 1;
             rep.elastic_qps += r.elastic_qps;
+            rep.recoveries += usize::from(r.recovered);
             input = CarInput::new(r.input[0], r.input[1]);
         }
         let next = world.step(input, dt)?;

@@ -13,6 +13,7 @@ pub struct SpeedProfile {
     arc: Vec<f64>,
     speed: Vec<f64>,
     length: f64,
+    acceleration: f64,
 }
 
 impl SpeedProfile {
@@ -75,7 +76,12 @@ impl SpeedProfile {
                 }
             }
         }
-        Ok(Self { arc, speed, length })
+        Ok(Self {
+            arc,
+            speed,
+            length,
+            acceleration,
+        })
     }
 
     /// Reference speed at arc length `s` \[m\] (any `s`: wrapped around the track; linear
@@ -102,14 +108,33 @@ impl SpeedProfile {
     /// Reference progress from arc length `s0` after each of `n` control steps of `dt` \[s\]
     /// (`n` values, metres ahead of `s0`), integrating the profile with 4 sub-steps per step.
     pub fn progress(&self, s0: f64, dt: f64, n: usize) -> Vec<f64> {
+        self.progress_from_speed(s0, f64::INFINITY, dt, n)
+    }
+
+    /// As [`SpeedProfile::progress`], for a car now driving at `v0` \[m/s\]: the reference
+    /// speed at time `t` is at most `v0 + a·t` (`a`: the profile's acceleration), so a car slower
+    /// than the profile (after a slow cycle, a standing start) is asked to catch up at the
+    /// acceleration the profile allows instead of at once (which demands full throttle, in a
+    /// bend a spin). `v0 = ∞` (or an unlimited acceleration): the profile itself.
+    pub fn progress_from_speed(&self, s0: f64, v0: f64, dt: f64, n: usize) -> Vec<f64> {
+        let v0 = if v0.is_nan() { 0.0 } else { v0.max(0.0) };
+        let cap = |t: f64| {
+            if self.acceleration.is_finite() {
+                v0 + self.acceleration * t
+            } else {
+                f64::INFINITY
+            }
+        };
         let mut out = Vec::with_capacity(n);
         let mut p = 0.0;
         let h = dt / 4.0;
+        let mut t = 0.0;
         for _ in 0..n {
             for _ in 0..4 {
                 // midpoint rule
-                let mid = p + 0.5 * h * self.speed_at(s0 + p);
-                p += h * self.speed_at(s0 + mid);
+                let mid = p + 0.5 * h * self.speed_at(s0 + p).min(cap(t));
+                p += h * self.speed_at(s0 + mid).min(cap(t + 0.5 * h));
+                t += h;
             }
             out.push(p);
         }

@@ -62,6 +62,14 @@ pub struct RacerSettings {
     pub curvature_smoothing: f64,
     /// Weight of the reference-progress term per step (0: off). Default 1.
     pub reference_weight: f64,
+    /// Start the reference progress from the car's current speed (at most `v₀ + a·t` with the
+    /// profile's `acceleration`; see [`SpeedProfile::progress_from_speed`]) rather than at the
+    /// profile's speed. Default false (no effect with an unlimited acceleration; on the ORCA track
+    /// it slowed the true-model racer by ≈ 1.5 s per lap).
+    pub reference_from_speed: bool,
+    /// Weight of the body-frame lateral velocity `v_y²` per step (0: off): plans that slide
+    /// cost more. Default 0.
+    pub slip_weight: f64,
     /// Distance kept from the borders \[m\]. Default 0.03 (about half the car's width).
     pub margin: f64,
     /// Excursion cost weight. Default 1000.
@@ -76,6 +84,14 @@ pub struct RacerSettings {
     pub gd: GdSettings,
     /// Initial guess on the first cycle: `[δ, d]` held. Default `[0, 0.5]`.
     pub initial: Input,
+    /// Recovery: when the previous plan reached less than this fraction of the reference
+    /// progress (the car stalled, e.g. after a spin, facing a border), the cycle also solves
+    /// from full-lock left, straight and full-lock right starts at `recovery_throttle` and keeps
+    /// the cheapest plan (0: off). From standstill the linearisation sees no effect of the
+    /// steering, so the warm start alone stays stuck. Default 0.5.
+    pub recovery_fraction: f64,
+    /// Throttle of the recovery starts. Default 0.4.
+    pub recovery_throttle: f64,
 }
 
 impl Default for RacerSettings {
@@ -91,6 +107,8 @@ impl Default for RacerSettings {
             acceleration: f64::INFINITY,
             curvature_smoothing: 0.15,
             reference_weight: 1.0,
+            reference_from_speed: false,
+            slip_weight: 0.0,
             margin: 0.03,
             excursion_weight: 1000.0,
             limits: InputLimits::default(),
@@ -108,6 +126,8 @@ impl Default for RacerSettings {
                 ..GdSettings::default()
             },
             initial: [0.0, 0.5],
+            recovery_fraction: 0.5,
+            recovery_throttle: 0.4,
         }
     }
 }
@@ -127,6 +147,8 @@ pub struct RaceStep {
     pub predicted: Vec<State>,
     /// QPs that needed the elastic fallback.
     pub elastic_qps: usize,
+    /// Whether a recovery start gave the plan (see [`RacerSettings::recovery_fraction`]).
+    pub recovered: bool,
 }
 
 /// Receding-horizon racer over a car model on a track.
@@ -139,6 +161,7 @@ pub struct Racer<'a> {
     last: Option<Input>,
     segment: Option<usize>,
     profile: SpeedProfile,
+    stalled: bool,
 }
 
 impl<'a> Racer<'a> {
@@ -179,6 +202,7 @@ impl<'a> Racer<'a> {
             settings,
             last: None,
             segment: None,
+            stalled: false,
         })
     }
 
@@ -202,6 +226,7 @@ impl<'a> Racer<'a> {
         self.warm = vec![self.settings.limits.clamp(self.settings.initial); self.settings.horizon];
         self.last = None;
         self.segment = None;
+        self.stalled = false;
     }
 
     /// One control cycle from the measured state `s`: solve from the shifted previous solution
@@ -213,7 +238,14 @@ impl<'a> Racer<'a> {
             Some(h) => self.track.locate_near([s[0], s[1]], h, 12),
             None => self.track.locate([s[0], s[1]]),
         };
-        let reference = self.profile.progress(here.arc, self.plant.dt(), st.horizon);
+        let v0 = if st.reference_from_speed {
+            s[3].hypot(s[4])
+        } else {
+            f64::INFINITY
+        };
+        let reference = self
+            .profile
+            .progress_from_speed(here.arc, v0, self.plant.dt(), st.horizon);
         let problem = Problem {
             plant: self.plant,
             s0: s,
@@ -227,6 +259,7 @@ impl<'a> Racer<'a> {
                     reference_weight: st.reference_weight,
                     reference_step: st.reference_speed * self.plant.dt(),
                     reference_progress: &reference,
+                    slip_weight: st.slip_weight,
                 }),
                 limits: st.limits,
                 reg: st.reg,
@@ -234,10 +267,27 @@ impl<'a> Racer<'a> {
                 start_segment: Some(here.segment),
             },
         };
-        let sol = match st.optimizer {
-            Optimizer::Sqp => solve_sqp(&problem, &self.warm, &st.sqp)?,
-            Optimizer::Gd => solve_gd(&problem, &self.warm, &st.gd)?,
+        let solve = |start: &[Input]| match st.optimizer {
+            Optimizer::Sqp => solve_sqp(&problem, start, &st.sqp),
+            Optimizer::Gd => solve_gd(&problem, start, &st.gd),
         };
+        let mut sol = solve(&self.warm)?;
+        let mut recovered = false;
+        if self.stalled {
+            let d = st.recovery_throttle;
+            for delta in [-st.limits.steering_max, 0.0, st.limits.steering_max] {
+                let start = vec![st.limits.clamp([delta, d]); st.horizon];
+                let alt = solve(&start)?;
+                if alt.cost < sol.cost {
+                    sol = alt;
+                    recovered = true;
+                }
+            }
+        }
+        let goal = reference.last().copied().unwrap_or(0.0);
+        self.stalled = st.recovery_fraction > 0.0
+            && goal > 0.0
+            && problem.objective.progress(&sol.states) < st.recovery_fraction * goal;
         let input = st.limits.clamp(sol.inputs[0]);
         // shift: drop the applied input, repeat the last
         let mut warm = sol.inputs[1..].to_vec();
@@ -252,6 +302,7 @@ impl<'a> Racer<'a> {
             cost: sol.cost,
             predicted: sol.states,
             elastic_qps: sol.elastic_qps,
+            recovered,
         })
     }
 }
