@@ -57,6 +57,9 @@ pub struct RaceArgs {
     /// Offline: largest number of gradient-descent iterations (each tries 512 step sizes).
     #[arg(long, default_value_t = 300)]
     gd_iterations: usize,
+    /// Offline: largest number of SQP iterations (QPs solved).
+    #[arg(long, default_value_t = 50)]
+    sqp_iterations: usize,
     /// Output directory for report.json and the plots (race_MODEL.png).
     #[arg(long, default_value = "race_eval")]
     out: PathBuf,
@@ -318,7 +321,14 @@ fn offline(model: &Model, args: &RaceArgs) -> anyhow::Result<()> {
                     },
                 )?
             } else {
-                solve_sqp(&problem, &m.initial_inputs(), &SqpSettings::default())?
+                solve_sqp(
+                    &problem,
+                    &m.initial_inputs(),
+                    &SqpSettings {
+                        iterations: args.sqp_iterations,
+                        ..SqpSettings::default()
+                    },
+                )?
             };
             let secs = t0.elapsed().as_secs_f64();
             let mut world = CarWorld::new(&scenario)?;
