@@ -62,6 +62,14 @@ fn random_push_data(windows: usize, k: usize) -> Dataset {
     }
 }
 
+/// Training threads: 2, or `DYNLAB_BENCH_THREADS` (to compare the scaling of our side).
+fn bench_threads() -> usize {
+    std::env::var("DYNLAB_BENCH_THREADS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(2)
+}
+
 /// Training samples/s over epochs of one batch of 500.
 fn train_rate(kind: ModelKind, k: usize) -> f64 {
     // 505 windows, 1 % validation → 500 training windows = one batch per epoch
@@ -73,15 +81,24 @@ fn train_rate(kind: ModelKind, k: usize) -> f64 {
         epochs,
         split: Split::OverlappingWindows,
         validation_fraction: 0.01,
-        threads: 2,
+        threads: bench_threads(),
         ..Default::default()
     };
-    let secs = timed(
-        || {
-            black_box(train(&data, &cfg, &mut |_| {}).map(|o| o.best_epoch).ok());
-        },
-        0.5,
-    );
+    let mut once = || {
+        black_box(train(&data, &cfg, &mut |_| {}).map(|o| o.best_epoch).ok());
+    };
+    // DYNLAB_BENCH_REPS=n: exactly n calls (fixed work, for `perf stat -e task-clock`)
+    if let Some(reps) = std::env::var("DYNLAB_BENCH_REPS")
+        .ok()
+        .and_then(|v| v.parse::<usize>().ok())
+    {
+        let t0 = Instant::now();
+        for _ in 0..reps {
+            once();
+        }
+        return (500 * epochs * reps) as f64 / t0.elapsed().as_secs_f64();
+    }
+    let secs = timed(once, 0.5);
     (500 * epochs) as f64 / secs
 }
 

@@ -380,7 +380,6 @@ impl Mlp {
         let mut cur = std::mem::take(&mut ws.g0);
         let mut next = std::mem::take(&mut ws.g1);
         let bwd = std::mem::take(&mut ws.bwd);
-        let mut zeros = std::mem::take(&mut ws.bias_pad);
         let mut dx = dx;
         for (l, layer) in self.layers.iter().enumerate().rev() {
             let (n_in, n_out) = (layer.n_in, layer.n_out);
@@ -391,29 +390,23 @@ impl Mlp {
                 &cur[..batch * n_out]
             };
             let input: &[f32] = if l == 0 { &ws.x } else { &ws.a[l - 1] };
-            // dW += dzᵀ·input on the forward kernel, (n_out × rows) · (rows × n_in), in blocks of
-            // KC batch rows so that the padded input block stays in L1.
-            let n_pad = kernels::pack_padded(&input[..batch * n_in], batch, n_in, &mut ws.t1);
-            zeros.clear();
-            zeros.resize(n_pad, 0.0);
-            ws.t2.resize(n_out * n_in, 0.0);
+            // dW += dzᵀ·input, (n_out × rows) · (rows × n_in), in blocks of KC batch rows so that
+            // the input block stays in L1. Both operands are read in place (dz transposed, the
+            // input rows over their padded width: the workspace keeps `NR` floats of slack after
+            // each buffer for that) and each block's product is added to `grad` as it is stored.
             let mut p0 = 0;
             while p0 < batch {
                 let kc = KC.min(batch - p0);
-                kernels::transpose(&dz[p0 * n_out..(p0 + kc) * n_out], kc, n_out, &mut ws.t0);
-                kernels::dense_forward(
-                    Activation::Identity,
+                kernels::gemm_tn_add(
                     n_out,
                     kc,
                     n_in,
-                    n_pad,
-                    &ws.t0,
-                    &ws.t1[p0 * n_pad..(p0 + kc) * n_pad],
-                    &zeros,
-                    &mut ws.t2[..n_out * n_in],
-                    &mut [],
+                    &dz[p0 * n_out..],
+                    n_out,
+                    &input[p0 * n_in..],
+                    n_in,
+                    &mut grad[layer.weight.clone()],
                 );
-                kernels::add_column_sums(&mut grad[layer.weight.clone()], &ws.t2[..n_out * n_in]);
                 p0 += kc;
             }
             kernels::add_column_sums(&mut grad[layer.bias.clone()], dz);
@@ -426,8 +419,7 @@ impl Mlp {
                 continue;
             };
             let packed = &bwd[l];
-            zeros.clear();
-            zeros.resize(packed.n_pad, 0.0);
+            let zeros = &ws.bias_pad[..packed.n_pad];
             kernels::dense_forward(
                 Activation::Identity,
                 batch,
@@ -436,7 +428,7 @@ impl Mlp {
                 packed.n_pad,
                 dz,
                 &packed.w,
-                &zeros,
+                zeros,
                 target,
                 &mut [],
             );
@@ -459,7 +451,6 @@ impl Mlp {
         ws.g0 = cur;
         ws.g1 = next;
         ws.bwd = bwd;
-        ws.bias_pad = zeros;
         Ok(())
     }
 
@@ -496,6 +487,9 @@ impl Mlp {
                 &mut packed.w,
             );
         }
+        let widest = ws.bwd.iter().map(|p| p.n_pad).max().unwrap_or(0);
+        ws.bias_pad.clear();
+        ws.bias_pad.resize(widest, 0.0);
         ws.bwd_stamp = self.stamp;
     }
 
@@ -750,10 +744,8 @@ pub struct Workspace {
     /// Per layer: W padded for the input-gradient product, valid for parameters `bwd_stamp`.
     bwd: Vec<PackedLayer>,
     bwd_stamp: u64,
+    /// Zeros, the bias of the input-gradient product (as long as the widest padded layer).
     bias_pad: Vec<f32>,
-    t0: Vec<f32>,
-    t1: Vec<f32>,
-    t2: Vec<f32>,
 }
 
 impl Workspace {
@@ -779,9 +771,6 @@ impl Workspace {
             bwd: vec![PackedLayer::default(); n_layers],
             bwd_stamp: 0,
             bias_pad: Vec::new(),
-            t0: Vec::new(),
-            t1: Vec::new(),
-            t2: Vec::new(),
         }
     }
 
@@ -793,10 +782,12 @@ impl Workspace {
         }
         let n_layers = self.sizes.len() - 1;
         let max_width = self.sizes.iter().copied().max().unwrap_or(0);
-        grow(&mut self.x, batch * self.sizes[0]);
+        // `NR` floats of slack after the input and every layer output: `backward` reads their
+        // rows over the padded width (the extra lanes are never stored).
+        grow(&mut self.x, batch * self.sizes[0] + kernels::NR);
         for l in 0..n_layers {
             let width = self.sizes[l + 1];
-            grow(&mut self.a[l], batch * width);
+            grow(&mut self.a[l], batch * width + kernels::NR);
             let hidden = l + 1 < n_layers;
             if hidden && self.activations[l].needs_preactivation() {
                 grow(&mut self.z[l], batch * width);
