@@ -570,6 +570,8 @@ impl Mlp {
             } else {
                 0
             };
+            // grown here, not in `reserve`: only Jacobians need it (training never touches it)
+            grow(&mut ws.deriv[l], len);
             kernels::act_derivative(
                 layer.activation,
                 &ws.a[l][..len],
@@ -791,9 +793,6 @@ impl Workspace {
             let hidden = l + 1 < n_layers;
             if hidden && self.activations[l].needs_preactivation() {
                 grow(&mut self.z[l], batch * width);
-            }
-            if hidden {
-                grow(&mut self.deriv[l], batch * width);
             }
         }
         grow(&mut self.g0, batch * max_width);
