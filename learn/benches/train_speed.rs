@@ -92,7 +92,7 @@ fn train_rate(kind: ModelKind, k: usize) -> f64 {
         threads: bench_threads(),
         ..Default::default()
     };
-    let mut once = || {
+    let once = || {
         black_box(train(&data, &cfg, &mut |_| {}).map(|o| o.best_epoch).ok());
     };
     // DYNLAB_BENCH_REPS=n: exactly n calls (fixed work, for `perf stat -e task-clock`)
