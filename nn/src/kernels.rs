@@ -463,14 +463,36 @@ fn dense_block<const F: bool, const R: usize, const C: usize>(
                 out[o..o + C].copy_from_slice(accr);
             } else {
                 if keep_z {
-                    for (d, s) in z[o..o + cols].iter_mut().zip(accr.iter()) {
-                        *d = *s;
-                    }
+                    store_partial::<C>(&mut z[o..o + cols], accr);
                 }
                 act_block::<F, C>(act, accr);
-                for (d, s) in out[o..o + cols].iter_mut().zip(accr.iter()) {
-                    *d = *s;
-                }
+                store_partial::<C>(&mut out[o..o + cols], accr);
+            }
+        }
+    }
+}
+
+/// `dst = acc[..dst.len()]` (`dst.len() < C`): whole vectors of [`NR`] as fixed-length copies,
+/// the rest through a one-vector copy, so `acc` is only ever indexed at constant positions (a
+/// variable-length copy from it called `memcpy` per row, and dynamic indexing would keep the
+/// accumulators in memory).
+#[inline(always)]
+fn store_partial<const C: usize>(dst: &mut [f32], acc: &[f32; C]) {
+    let cols = dst.len();
+    for v in 0..C / NR {
+        let c0 = v * NR;
+        if c0 >= cols {
+            break;
+        }
+        let mut src = [0.0f32; NR];
+        for q in 0..NR {
+            src[q] = acc[c0 + q];
+        }
+        if c0 + NR <= cols {
+            dst[c0..c0 + NR].copy_from_slice(&src);
+        } else {
+            for (d, s) in dst[c0..].iter_mut().zip(src.iter()) {
+                *d = *s;
             }
         }
     }
