@@ -485,9 +485,7 @@ fn store_partial<const C: usize>(dst: &mut [f32], acc: &[f32; C]) {
             break;
         }
         let mut src = [0.0f32; NR];
-        for q in 0..NR {
-            src[q] = acc[c0 + q];
-        }
+        src.copy_from_slice(&acc[c0..c0 + NR]);
         if c0 + NR <= cols {
             dst[c0..c0 + NR].copy_from_slice(&src);
         } else {
@@ -607,27 +605,25 @@ fn tn_block<const F: bool, const R: usize, const NC: usize>(
     let mut acc = [[0.0f32; NC]; R];
     let (ap, bp) = (a.as_ptr(), b.as_ptr());
     for p in 0..k {
-        // SAFETY: `gemm_tn_add` asserts a.len() ≥ (k − 1)·lda + m and b.len() ≥ (k − 1)·ldb +
-        // n_pad; here p < k, i + R ≤ m and jb + NC ≤ n_pad, so every read is in bounds. [f32; NC]
-        // has the alignment of f32.
+        // SAFETY: `gemm_tn_add` asserts b.len() ≥ (k − 1)·ldb + n_pad (and the bound on `a` used
+        // below); here p < k and jb + NC ≤ n_pad, so the NC floats read from b are in bounds.
+        // [f32; NC] has the alignment of f32.
         let bv: &[f32; NC] = unsafe { &*bp.add(p * ldb + jb).cast::<[f32; NC]>() };
         let arow = unsafe { ap.add(p * lda + i) };
-        for r in 0..R {
+        for (r, accr) in acc.iter_mut().enumerate() {
             // SAFETY: i + r < m and unit ≥ 1, so p·lda + i + r·unit ≤ (k − 1)·lda + (m − 1)·unit
             // < a.len() (asserted by `gemm_tn_add`).
             let av = unsafe { *arow.add(r * unit) };
             for q in 0..NC {
-                acc[r][q] = math::fmadd::<F>(av, bv[q], acc[r][q]);
+                accr[q] = math::fmadd::<F>(av, bv[q], accr[q]);
             }
         }
     }
     // Through a tile written at constant indices only: a run-time-length access to `acc` itself
     // would keep the accumulators in memory during the k-loop (measured: gathers, 2× slower).
     let mut tile = [0.0f32; TILE];
-    for r in 0..R {
-        for q in 0..NC {
-            tile[r * NC + q] = acc[r][q];
-        }
+    for (r, accr) in acc.iter().enumerate() {
+        tile[r * NC..(r + 1) * NC].copy_from_slice(accr);
     }
     let cols = NC.min(n - jb);
     for r in 0..R {
@@ -664,7 +660,7 @@ fn gemm_tn_add_impl<const F: bool, const W: bool>(
     // made the compiler vectorise across the rows (8-lane FMAs with the accumulators transposed
     // and gathers: 2× slower). An opaque unit stride keeps them scalar broadcasts.
     let unit = std::hint::black_box(1usize);
-    assert!(unit >= 1 && a.len() >= (k - 1) * lda + (m - 1) * unit + 1);
+    assert!(unit >= 1 && a.len() > (k - 1) * lda + (m - 1) * unit);
     let mut i = 0;
     if W {
         // AVX-512, at most 7 vectors per row: whole rows of 2–6 in 12–14 accumulators (each
@@ -720,6 +716,7 @@ dispatch! {
     /// its last row. Every element of C gets `c + (Σ_p a_p·b_p)` with the sum from 0 in
     /// increasing `p` in one fused multiply–add chain: the rounding of computing the product on
     /// its own and then adding it to C.
+    #[allow(clippy::too_many_arguments)]
     fn gemm_tn_add(m: usize, k: usize, n: usize, a: &[f32], lda: usize, b: &[f32], ldb: usize, c: &mut [f32]) => gemm_tn_add_impl
 }
 
