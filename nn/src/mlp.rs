@@ -8,6 +8,13 @@ use crate::kernels::{self, gemm_a_b, gemm_a_bt};
 use crate::rng::SplitMix64;
 use crate::{Activation, NnError};
 
+thread_local! {
+    /// The two layer-gradient buffers of [`Mlp::backward`] on this thread (taken for a call and
+    /// put back after it).
+    static SCRATCH: std::cell::Cell<(Vec<f32>, Vec<f32>)> =
+        const { std::cell::Cell::new((Vec::new(), Vec::new())) };
+}
+
 /// Batch rows per block of the weight-gradient product (the padded layer input of a block,
 /// 64 × 112 floats for the pushing network, stays in the L1 cache).
 const KC: usize = 64;
@@ -380,8 +387,13 @@ impl Mlp {
             check_len("dx", batch * self.n_in(), dx.len())?;
         }
         let packs = self.packed();
-        let mut cur = std::mem::take(&mut ws.g0);
-        let mut next = std::mem::take(&mut ws.g1);
+        // The layer gradients are scratch, not tape: one pair of buffers per thread serves every
+        // workspace (the 4·k stage workspaces of a NeuralODE chunk), so they stay in cache
+        // instead of each workspace's own pair being touched once per training step.
+        let (mut cur, mut next) = SCRATCH.with(|c| c.take());
+        let width = self.spec.sizes.iter().copied().max().unwrap_or(0);
+        grow(&mut cur, batch * width);
+        grow(&mut next, batch * width);
         let mut dx = dx;
         for (l, layer) in self.layers.iter().enumerate().rev() {
             let (n_in, n_out) = (layer.n_in, layer.n_out);
@@ -450,8 +462,7 @@ impl Mlp {
                 std::mem::swap(&mut cur, &mut next);
             }
         }
-        ws.g0 = cur;
-        ws.g1 = next;
+        SCRATCH.with(|c| c.set((cur, next)));
         Ok(())
     }
 
@@ -492,6 +503,9 @@ impl Mlp {
         check_len("dx", x.len(), dx.len())?;
         self.forward(x, ws)?;
         let batch = ws.batch.ok_or(NnError::NoTape)?;
+        let width = self.spec.sizes.iter().copied().max().unwrap_or(0);
+        grow(&mut ws.g0, batch * width);
+        grow(&mut ws.g1, batch * width);
         let mut cur = std::mem::take(&mut ws.g0);
         let mut next = std::mem::take(&mut ws.g1);
         for (l, layer) in self.layers.iter().enumerate() {
@@ -758,7 +772,6 @@ impl Workspace {
             return;
         }
         let n_layers = self.sizes.len() - 1;
-        let max_width = self.sizes.iter().copied().max().unwrap_or(0);
         // `NR` floats of slack after the input and every layer output: `backward` reads their
         // rows over the padded width (the extra lanes are never stored).
         grow(&mut self.x, batch * self.sizes[0] + kernels::NR);
@@ -770,8 +783,6 @@ impl Workspace {
                 grow(&mut self.z[l], batch * width);
             }
         }
-        grow(&mut self.g0, batch * max_width);
-        grow(&mut self.g1, batch * max_width);
         self.capacity = batch;
     }
 
