@@ -797,6 +797,200 @@ fn run_chunks(
     });
 }
 
+/// Polls before [`recv_soon`] blocks (each poll yields the core, ≈ 1 µs when nobody else
+/// wants it).
+const POLLS: usize = 200;
+
+/// Receives from `rx`, polling up to [`POLLS`] times (yielding the core between polls) before
+/// blocking. The other side usually answers within microseconds — the chunks of a batch are
+/// balanced, and between batches there is only the gradient sum and the Adam step — while waking
+/// a blocked thread takes tens of microseconds of a ≈ 1 ms batch. On a busy machine the yields
+/// hand the core to other work instead of spinning on it.
+fn recv_soon<T>(rx: &std::sync::mpsc::Receiver<T>) -> Result<T, std::sync::mpsc::RecvError> {
+    for _ in 0..POLLS {
+        match rx.try_recv() {
+            Ok(v) => return Ok(v),
+            Err(std::sync::mpsc::TryRecvError::Disconnected) => {
+                return Err(std::sync::mpsc::RecvError);
+            }
+            Err(std::sync::mpsc::TryRecvError::Empty) => std::thread::yield_now(),
+        }
+    }
+    rx.recv()
+}
+
+/// Work for a [`Helper`]: the current parameters, the windows of its chunks, and gradient
+/// buffers to fill (handed back and forth so that nothing is allocated per batch).
+struct HelperJob {
+    params: Vec<f32>,
+    windows: Vec<Window>,
+    grads: Vec<Vec<f32>>,
+    chunk: usize,
+    norm_n: f64,
+}
+
+/// A [`HelperJob`] done: its buffers back, with one gradient and one loss per chunk.
+struct HelperDone {
+    job: HelperJob,
+    losses: Vec<f64>,
+}
+
+/// A training thread that lives as long as `train`: it keeps its own copy of the model (the
+/// parameters arrive with every job) and its own chunk buffers, and computes the gradients of the
+/// chunks it is given exactly as the calling thread would (same chunks, same arithmetic).
+struct Helper {
+    jobs: std::sync::mpsc::Sender<HelperJob>,
+    done: std::sync::mpsc::Receiver<HelperDone>,
+    /// Buffers for the next job (`None` while a job is out).
+    spare: Option<HelperJob>,
+}
+
+impl Helper {
+    fn spawn<'scope>(
+        scope: &'scope std::thread::Scope<'scope, '_>,
+        model: &Model,
+        data: &'scope Data,
+        loss: &'scope Loss,
+        k: usize,
+        cfg: &'scope TrainConfig,
+    ) -> Self {
+        let (jobs, job_rx) = std::sync::mpsc::channel::<HelperJob>();
+        let (done_tx, done) = std::sync::mpsc::channel::<HelperDone>();
+        let mut model = model.clone();
+        scope.spawn(move || {
+            let mut states: Vec<ChunkState> = Vec::new();
+            while let Ok(mut job) = recv_soon(&job_rx) {
+                if let Some(net) = model.network_mut() {
+                    net.mlp.params_mut().copy_from_slice(&job.params);
+                }
+                let ctx = Ctx {
+                    model: &model,
+                    adjoint: cfg.adjoint,
+                    data,
+                    k,
+                    gamma: cfg.gamma,
+                    loss,
+                };
+                let chunks: Vec<&[Window]> = job.windows.chunks(job.chunk).collect();
+                let m = chunks.len();
+                if states.len() < m {
+                    states.resize_with(m, ChunkState::default);
+                }
+                let n = job.params.len();
+                job.grads.resize_with(m, || vec![0.0; n]);
+                let mut losses = vec![0.0; m];
+                run_chunks(
+                    &ctx,
+                    &chunks,
+                    &mut states[..m],
+                    Some(&mut job.grads[..m]),
+                    &mut losses,
+                    job.norm_n,
+                    1,
+                );
+                drop(chunks);
+                if done_tx.send(HelperDone { job, losses }).is_err() {
+                    break;
+                }
+            }
+        });
+        Self {
+            jobs,
+            done,
+            spare: Some(HelperJob {
+                params: Vec::new(),
+                windows: Vec::new(),
+                grads: Vec::new(),
+                chunk: 1,
+                norm_n: 1.0,
+            }),
+        }
+    }
+}
+
+/// Gradients and losses of the chunks of one training batch (`windows` cut into `chunk`s; one
+/// state, gradient and loss slot per chunk). The chunks are split into contiguous groups, one per
+/// thread: the first on the calling thread, the others on the `pool`. Each chunk's gradient is
+/// computed on its own, so the results do not depend on the number of threads. A helper that
+/// cannot take or return work (it can only have panicked) has its group done here.
+fn train_batch(
+    ctx: &Ctx,
+    pool: &mut [Helper],
+    windows: &[Window],
+    chunk: usize,
+    states: &mut [ChunkState],
+    grads: &mut [Vec<f32>],
+    losses: &mut [f64],
+) {
+    let m = grads.len();
+    let norm_n = windows.len() as f64;
+    let groups = m.min(pool.len() + 1).max(1);
+    let per = m.div_ceil(groups);
+    let range = |g: usize| (g * per).min(m)..((g + 1) * per).min(m);
+    let params = ctx.model.network().map(|n| n.mlp.params()).unwrap_or(&[]);
+    let mut sent = vec![false; groups];
+    for (g, h) in (1..groups).zip(pool.iter_mut()) {
+        let r = range(g);
+        if r.is_empty() {
+            continue;
+        }
+        let Some(mut job) = h.spare.take() else {
+            continue;
+        };
+        job.params.clear();
+        job.params.extend_from_slice(params);
+        job.windows.clear();
+        job.windows
+            .extend_from_slice(&windows[r.start * chunk..(r.end * chunk).min(windows.len())]);
+        job.chunk = chunk;
+        job.norm_n = norm_n;
+        match h.jobs.send(job) {
+            Ok(()) => sent[g] = true,
+            Err(e) => h.spare = Some(e.0),
+        }
+    }
+    let chunks: Vec<&[Window]> = windows.chunks(chunk).collect();
+    let mine = range(0);
+    run_chunks(
+        ctx,
+        &chunks[mine.clone()],
+        &mut states[mine.clone()],
+        Some(&mut grads[mine.clone()]),
+        &mut losses[mine],
+        norm_n,
+        1,
+    );
+    for (g, h) in (1..groups).zip(pool.iter_mut()) {
+        let r = range(g);
+        if r.is_empty() {
+            continue;
+        }
+        let done = if sent[g] {
+            recv_soon(&h.done).ok()
+        } else {
+            None
+        };
+        match done {
+            Some(mut d) if d.job.grads.len() == r.len() => {
+                for (mine, theirs) in grads[r.clone()].iter_mut().zip(d.job.grads.iter_mut()) {
+                    std::mem::swap(mine, theirs);
+                }
+                losses[r].copy_from_slice(&d.losses);
+                h.spare = Some(d.job);
+            }
+            _ => run_chunks(
+                ctx,
+                &chunks[r.clone()],
+                &mut states[r.clone()],
+                Some(&mut grads[r.clone()]),
+                &mut losses[r],
+                norm_n,
+                1,
+            ),
+        }
+    }
+}
+
 fn parse_activation(name: &str) -> Result<Activation, LearnError> {
     name.parse::<Activation>()
         .map_err(|_| LearnError::setting("activation", name, "use tanh, gelu, relu or identity"))
@@ -1055,17 +1249,65 @@ pub fn train(
     let mut samples: u64 = 0;
     let mut order = train_w.clone();
     let mut losses = vec![0.0; slots];
-    for epoch in 1..=cfg.epochs.max(1) {
-        SplitMix64::new(cfg.seed ^ (epoch as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15))
-            .shuffle(&mut order);
-        let mut epoch_loss = 0.0;
-        let mut epoch_n = 0usize;
-        // The sample budget ends training mid-epoch, after this epoch's validation and record.
-        let mut budget_spent = false;
-        for batch in order.chunks(cfg.batch) {
-            let chunks: Vec<&[Window]> = batch.chunks(chunk).collect();
-            let m = chunks.len();
-            {
+    // Training batches run on persistent helper threads (one per extra thread, each with its own
+    // copy of the model and chunk buffers), started once for the whole training instead of once
+    // per batch; validation passes keep `loss_over`.
+    let helpers = threads.min(slots).saturating_sub(1);
+    let trained = std::thread::scope(|scope| -> Result<(), LearnError> {
+        let mut pool: Vec<Helper> = (0..helpers)
+            .map(|_| Helper::spawn(scope, &model, &data_f, &loss, k, cfg))
+            .collect();
+        for epoch in 1..=cfg.epochs.max(1) {
+            SplitMix64::new(cfg.seed ^ (epoch as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15))
+                .shuffle(&mut order);
+            let mut epoch_loss = 0.0;
+            let mut epoch_n = 0usize;
+            // The sample budget ends training mid-epoch, after this epoch's validation and record.
+            let mut budget_spent = false;
+            for batch in order.chunks(cfg.batch) {
+                let chunks: Vec<&[Window]> = batch.chunks(chunk).collect();
+                let m = chunks.len();
+                {
+                    let ctx = Ctx {
+                        model: &model,
+                        adjoint: cfg.adjoint,
+                        data: &data_f,
+                        k,
+                        gamma: cfg.gamma,
+                        loss: &loss,
+                    };
+                    train_batch(
+                        &ctx,
+                        &mut pool,
+                        batch,
+                        chunk,
+                        &mut states[..m],
+                        &mut grads[..m],
+                        &mut losses[..m],
+                    );
+                }
+                total_grad.copy_from_slice(&grads[0]);
+                for g in &grads[1..m] {
+                    for (a, b) in total_grad.iter_mut().zip(g) {
+                        *a += b;
+                    }
+                }
+                let bl: f64 = losses[..m].iter().sum();
+                if !bl.is_finite() {
+                    return Err(LearnError::Diverged { epoch, loss: bl });
+                }
+                epoch_loss += bl * batch.len() as f64;
+                epoch_n += batch.len();
+                if let Some(net) = model.network_mut() {
+                    adam.step(net.mlp.params_mut(), &total_grad)?;
+                }
+                samples += batch.len() as u64;
+                if cfg.max_samples.is_some_and(|m| samples >= m) {
+                    budget_spent = true;
+                    break;
+                }
+            }
+            let val = {
                 let ctx = Ctx {
                     model: &model,
                     adjoint: cfg.adjoint,
@@ -1074,68 +1316,31 @@ pub fn train(
                     gamma: cfg.gamma,
                     loss: &loss,
                 };
-                run_chunks(
-                    &ctx,
-                    &chunks,
-                    &mut states[..m],
-                    Some(&mut grads[..m]),
-                    &mut losses[..m],
-                    batch.len() as f64,
-                    threads,
-                );
+                loss_over(&ctx, &val_w, &mut states, chunk, threads)
+            };
+            if !val.is_finite() {
+                return Err(LearnError::Diverged { epoch, loss: val });
             }
-            total_grad.copy_from_slice(&grads[0]);
-            for g in &grads[1..m] {
-                for (a, b) in total_grad.iter_mut().zip(g) {
-                    *a += b;
-                }
-            }
-            let bl: f64 = losses[..m].iter().sum();
-            if !bl.is_finite() {
-                return Err(LearnError::Diverged { epoch, loss: bl });
-            }
-            epoch_loss += bl * batch.len() as f64;
-            epoch_n += batch.len();
-            if let Some(net) = model.network_mut() {
-                adam.step(net.mlp.params_mut(), &total_grad)?;
-            }
-            samples += batch.len() as u64;
-            if cfg.max_samples.is_some_and(|m| samples >= m) {
-                budget_spent = true;
+            record(
+                &mut curve,
+                progress,
+                epoch,
+                cfg.epochs,
+                epoch_loss / epoch_n.max(1) as f64,
+                val,
+                &mut best_val,
+                &mut best_epoch,
+                &mut best_params,
+                &model,
+                samples,
+            );
+            if budget_spent {
                 break;
             }
         }
-        let val = {
-            let ctx = Ctx {
-                model: &model,
-                adjoint: cfg.adjoint,
-                data: &data_f,
-                k,
-                gamma: cfg.gamma,
-                loss: &loss,
-            };
-            loss_over(&ctx, &val_w, &mut states, chunk, threads)
-        };
-        if !val.is_finite() {
-            return Err(LearnError::Diverged { epoch, loss: val });
-        }
-        record(
-            &mut curve,
-            progress,
-            epoch,
-            cfg.epochs,
-            epoch_loss / epoch_n.max(1) as f64,
-            val,
-            &mut best_val,
-            &mut best_epoch,
-            &mut best_params,
-            &model,
-            samples,
-        );
-        if budget_spent {
-            break;
-        }
-    }
+        Ok(())
+    });
+    trained?;
     if let Some(net) = model.network_mut() {
         net.mlp.params_mut().copy_from_slice(&best_params);
     }

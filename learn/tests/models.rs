@@ -367,7 +367,7 @@ fn training_is_bit_identical_for_a_seed_and_any_thread_count() {
     let push = push_data(tmp.path());
     for kind in [ModelKind::NodeRk4, ModelKind::NodeDopri5, ModelKind::Hybrid] {
         let mut files = Vec::new();
-        for (i, threads) in [1usize, 1, 2].into_iter().enumerate() {
+        for (i, threads) in [1usize, 1, 2, 3].into_iter().enumerate() {
             let mut cfg = small(kind, World::Push);
             cfg.epochs = 4;
             cfg.batch = 200;
@@ -388,6 +388,10 @@ fn training_is_bit_identical_for_a_seed_and_any_thread_count() {
         assert!(
             files[0] == files[2],
             "{kind}: 2 threads changed the model file"
+        );
+        assert!(
+            files[0] == files[3],
+            "{kind}: 3 threads changed the model file"
         );
         let mut cfg = small(kind, World::Push);
         cfg.epochs = 4;

@@ -463,14 +463,34 @@ fn dense_block<const F: bool, const R: usize, const C: usize>(
                 out[o..o + C].copy_from_slice(accr);
             } else {
                 if keep_z {
-                    for (d, s) in z[o..o + cols].iter_mut().zip(accr.iter()) {
-                        *d = *s;
-                    }
+                    store_partial::<C>(&mut z[o..o + cols], accr);
                 }
                 act_block::<F, C>(act, accr);
-                for (d, s) in out[o..o + cols].iter_mut().zip(accr.iter()) {
-                    *d = *s;
-                }
+                store_partial::<C>(&mut out[o..o + cols], accr);
+            }
+        }
+    }
+}
+
+/// `dst = acc[..dst.len()]` (`dst.len() < C`): whole vectors of [`NR`] as fixed-length copies,
+/// the rest through a one-vector copy, so `acc` is only ever indexed at constant positions (a
+/// variable-length copy from it called `memcpy` per row, and dynamic indexing would keep the
+/// accumulators in memory).
+#[inline(always)]
+fn store_partial<const C: usize>(dst: &mut [f32], acc: &[f32; C]) {
+    let cols = dst.len();
+    for v in 0..C / NR {
+        let c0 = v * NR;
+        if c0 >= cols {
+            break;
+        }
+        let mut src = [0.0f32; NR];
+        src.copy_from_slice(&acc[c0..c0 + NR]);
+        if c0 + NR <= cols {
+            dst[c0..c0 + NR].copy_from_slice(&src);
+        } else {
+            for (d, s) in dst[c0..].iter_mut().zip(src.iter()) {
+                *d = *s;
             }
         }
     }
@@ -567,23 +587,180 @@ pub(crate) fn pack_padded(w: &[f32], k: usize, n: usize, wp: &mut Vec<f32>) -> u
     n_pad
 }
 
-/// `dst` (cols × rows, row-major) = `src`ᵀ (`src` rows × cols row-major), in 8 × 8 tiles so that
-/// both the reads and the writes stay within a few cache lines.
-pub(crate) fn transpose(src: &[f32], rows: usize, cols: usize, dst: &mut Vec<f32>) {
-    const T: usize = 8;
-    dst.resize(rows * cols, 0.0);
-    let src = &src[..rows * cols];
-    for r0 in (0..rows).step_by(T) {
-        let r1 = (r0 + T).min(rows);
-        for c0 in (0..cols).step_by(T) {
-            let c1 = (c0 + T).min(cols);
-            for r in r0..r1 {
-                for c in c0..c1 {
-                    // SAFETY: r < rows and c < cols, so r·cols + c < rows·cols = src.len() and
-                    // c·rows + r < rows·cols = dst.len(). (The checked version spent most of its
-                    // time on the bounds checks of these scattered writes.)
-                    unsafe {
-                        *dst.get_unchecked_mut(c * rows + r) = *src.get_unchecked(r * cols + c);
+/// One register block of [`gemm_tn_add`]: rows `i..i + R` of `C`, columns `jb..jb + NC`.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn tn_block<const F: bool, const R: usize, const NC: usize>(
+    i: usize,
+    jb: usize,
+    k: usize,
+    n: usize,
+    a: &[f32],
+    lda: usize,
+    b: &[f32],
+    ldb: usize,
+    c: &mut [f32],
+    unit: usize,
+) {
+    let mut acc = [[0.0f32; NC]; R];
+    let (ap, bp) = (a.as_ptr(), b.as_ptr());
+    for p in 0..k {
+        // SAFETY: `gemm_tn_add` asserts b.len() ≥ (k − 1)·ldb + n_pad (and the bound on `a` used
+        // below); here p < k and jb + NC ≤ n_pad, so the NC floats read from b are in bounds.
+        // [f32; NC] has the alignment of f32.
+        let bv: &[f32; NC] = unsafe { &*bp.add(p * ldb + jb).cast::<[f32; NC]>() };
+        let arow = unsafe { ap.add(p * lda + i) };
+        for (r, accr) in acc.iter_mut().enumerate() {
+            // SAFETY: i + r < m and unit ≥ 1, so p·lda + i + r·unit ≤ (k − 1)·lda + (m − 1)·unit
+            // < a.len() (asserted by `gemm_tn_add`).
+            let av = unsafe { *arow.add(r * unit) };
+            for q in 0..NC {
+                accr[q] = math::fmadd::<F>(av, bv[q], accr[q]);
+            }
+        }
+    }
+    // Through a tile written at constant indices only: a run-time-length access to `acc` itself
+    // would keep the accumulators in memory during the k-loop (measured: gathers, 2× slower).
+    let mut tile = [0.0f32; TILE];
+    for (r, accr) in acc.iter().enumerate() {
+        tile[r * NC..(r + 1) * NC].copy_from_slice(accr);
+    }
+    let cols = NC.min(n - jb);
+    for r in 0..R {
+        let o = (i + r) * n + jb;
+        for (d, s) in c[o..o + cols].iter_mut().zip(&tile[r * NC..r * NC + cols]) {
+            *d += *s;
+        }
+    }
+}
+
+/// Floats of the largest register block of [`gemm_tn_add`] (2 rows × 112, 8 rows × 16).
+const TILE: usize = 2 * 112;
+
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn gemm_tn_add_impl<const F: bool, const W: bool>(
+    m: usize,
+    k: usize,
+    n: usize,
+    a: &[f32],
+    lda: usize,
+    b: &[f32],
+    ldb: usize,
+    c: &mut [f32],
+) {
+    let n_pad = n.div_ceil(NR) * NR;
+    if m == 0 || k == 0 || n == 0 {
+        return;
+    }
+    assert!(lda >= m && a.len() >= (k - 1) * lda + m);
+    assert!(ldb >= n && b.len() >= (k - 1) * ldb + n_pad);
+    assert!(c.len() >= m * n);
+    // The R values of A a block multiplies are adjacent in memory; known to be adjacent, they
+    // made the compiler vectorise across the rows (8-lane FMAs with the accumulators transposed
+    // and gathers: 2× slower). An opaque unit stride keeps them scalar broadcasts.
+    let unit = std::hint::black_box(1usize);
+    assert!(unit >= 1 && a.len() > (k - 1) * lda + (m - 1) * unit);
+    let mut i = 0;
+    if W {
+        // AVX-512, at most 7 vectors per row: whole rows of 2–6 in 12–14 accumulators (each
+        // B vector loaded serves several rows), as in `dense_forward`.
+        macro_rules! whole_rows {
+            ($r:literal, $c:literal) => {{
+                while i + $r <= m {
+                    tn_block::<F, $r, $c>(i, 0, k, n, a, lda, b, ldb, c, unit);
+                    i += $r;
+                }
+                while i < m {
+                    tn_block::<F, 1, $c>(i, 0, k, n, a, lda, b, ldb, c, unit);
+                    i += 1;
+                }
+                return;
+            }};
+        }
+        match n_pad {
+            112 => whole_rows!(2, 112),
+            96 => whole_rows!(2, 96),
+            80 => whole_rows!(2, 80),
+            64 => whole_rows!(3, 64),
+            48 => whole_rows!(4, 48),
+            32 => whole_rows!(6, 32),
+            _ => {}
+        }
+        while i + 2 * MR <= m {
+            for jb in (0..n_pad).step_by(NR) {
+                tn_block::<F, { 2 * MR }, NR>(i, jb, k, n, a, lda, b, ldb, c, unit);
+            }
+            i += 2 * MR;
+        }
+    }
+    while i + MR <= m {
+        for jb in (0..n_pad).step_by(NR) {
+            tn_block::<F, MR, NR>(i, jb, k, n, a, lda, b, ldb, c, unit);
+        }
+        i += MR;
+    }
+    while i < m {
+        for jb in (0..n_pad).step_by(NR) {
+            tn_block::<F, 1, NR>(i, jb, k, n, a, lda, b, ldb, c, unit);
+        }
+        i += 1;
+    }
+}
+
+dispatch! {
+    /// `C (m × n, row-major) += Aᵀ · B` for `A` stored k × m (row stride `lda`) and `B` k × n (row
+    /// stride `ldb`), both read in place: the parameter gradient dW += dZᵀ·X of a layer with no
+    /// transposed or padded copies. `B`'s rows are read over `n` rounded up to a multiple of
+    /// [`NR`] (lanes beyond `n` are never stored), so `b` needs that many floats of slack after
+    /// its last row. Every element of C gets `c + (Σ_p a_p·b_p)` with the sum from 0 in
+    /// increasing `p` in one fused multiply–add chain: the rounding of computing the product on
+    /// its own and then adding it to C.
+    #[allow(clippy::too_many_arguments)]
+    fn gemm_tn_add(m: usize, k: usize, n: usize, a: &[f32], lda: usize, b: &[f32], ldb: usize, c: &mut [f32]) => gemm_tn_add_impl
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `gemm_tn_add` against the scalar fused multiply–add chain it promises, bit for bit, on
+    /// shapes that hit every block kind (whole rows, 8 × 16, 4 × 16, single rows, partial
+    /// columns), with `b` holding exactly the slack the kernel may read.
+    #[test]
+    fn gemm_tn_add_is_c_plus_the_in_order_product() {
+        let mut rng = crate::rng::SplitMix64::new(11);
+        for &m in &[1usize, 3, 5, 8, 13, 100] {
+            for &n in &[1usize, 6, 16, 17, 33, 100, 112] {
+                for &k in &[1usize, 7, 64] {
+                    let (lda, ldb) = (m + 2, n + 1);
+                    let n_pad = n.div_ceil(NR) * NR;
+                    let a: Vec<f32> = (0..(k - 1) * lda + m)
+                        .map(|_| rng.uniform_symmetric(1.0))
+                        .collect();
+                    let b: Vec<f32> = (0..(k - 1) * ldb + n_pad)
+                        .map(|_| rng.uniform_symmetric(1.0))
+                        .collect();
+                    let c0: Vec<f32> = (0..m * n).map(|_| rng.uniform_symmetric(1.0)).collect();
+                    let mut c = c0.clone();
+                    gemm_tn_add(m, k, n, &a, lda, &b, ldb, &mut c);
+                    for i in 0..m {
+                        for j in 0..n {
+                            let mut acc = 0.0f32;
+                            for p in 0..k {
+                                acc = if use_fma() {
+                                    math::fmadd::<true>(a[p * lda + i], b[p * ldb + j], acc)
+                                } else {
+                                    math::fmadd::<false>(a[p * lda + i], b[p * ldb + j], acc)
+                                };
+                            }
+                            let want = c0[i * n + j] + acc;
+                            assert_eq!(
+                                c[i * n + j].to_bits(),
+                                want.to_bits(),
+                                "m {m} n {n} k {k} at ({i}, {j})"
+                            );
+                        }
                     }
                 }
             }

@@ -2,11 +2,18 @@
 //! mode (JVP) and batched input Jacobians.
 
 use std::ops::Range;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::OnceLock;
 
 use crate::kernels::{self, gemm_a_b, gemm_a_bt};
 use crate::rng::SplitMix64;
 use crate::{Activation, NnError};
+
+thread_local! {
+    /// The two layer-gradient buffers of [`Mlp::backward`] on this thread (taken for a call and
+    /// put back after it).
+    static SCRATCH: std::cell::Cell<(Vec<f32>, Vec<f32>)> =
+        const { std::cell::Cell::new((Vec::new(), Vec::new())) };
+}
 
 /// Batch rows per block of the weight-gradient product (the padded layer input of a block,
 /// 64 × 112 floats for the pushing network, stays in the L1 cache).
@@ -152,31 +159,35 @@ pub enum JacobianMode {
 /// that owns the buffers (grown on first use, then reused without allocating) and records the
 /// activations needed by [`Mlp::backward`].
 ///
-/// The workspace also keeps the weights in the layouts the kernels read (transposed and padded),
-/// packed on the first evaluation after a parameter change and reused until the next: every
-/// parameter write goes through [`Mlp::params_mut`] (or creates a network), which gives the
-/// parameters a new process-unique stamp, and a workspace repacks when the stamp it packed
-/// differs. So an MPPI step or a training step packs each layer once, not on every forward call.
+/// The network also keeps its weights in the layouts the kernels read (transposed and padded),
+/// packed on the first evaluation after a parameter change and shared by every workspace and
+/// thread until the next: every parameter write goes through [`Mlp::params_mut`] (or creates a
+/// network), which drops the packing. So an MPPI step packs each layer once per model, and a
+/// training step once per parameter update (not once per workspace: an RK4 step has four).
 #[derive(Debug, Clone)]
 pub struct Mlp {
     spec: MlpSpec,
     layers: Vec<LayerShape>,
     params: Vec<f32>,
-    /// Identifies the parameter values (see the type's documentation); a clone shares it, since
-    /// its parameters are equal until one of them is written.
-    stamp: u64,
+    /// The packed weights for the current parameter values (empty until first needed).
+    packed: OnceLock<Packed>,
+}
+
+/// Every layer's weights in the layouts the kernels read, for one set of parameter values.
+#[derive(Debug, Clone, Default)]
+struct Packed {
+    /// Per layer: Wᵀ and bias for the forward kernel.
+    fwd: Vec<PackedLayer>,
+    /// Per layer: W padded for the input-gradient product of `backward`.
+    bwd: Vec<PackedLayer>,
+    /// Zeros, the bias of the input-gradient product (as long as the widest padded layer).
+    zeros: Vec<f32>,
 }
 
 impl PartialEq for Mlp {
     fn eq(&self, other: &Self) -> bool {
         self.spec == other.spec && self.layers == other.layers && self.params == other.params
     }
-}
-
-/// A new process-unique parameter stamp (never 0, the workspace's "nothing packed").
-fn next_stamp() -> u64 {
-    static NEXT: AtomicU64 = AtomicU64::new(1);
-    NEXT.fetch_add(1, Ordering::Relaxed)
 }
 
 impl Mlp {
@@ -203,7 +214,6 @@ impl Mlp {
                 *w = rng.uniform_symmetric(bound);
             }
         }
-        mlp.stamp = next_stamp();
         mlp
     }
 
@@ -234,7 +244,7 @@ impl Mlp {
             params: vec![0.0; offset],
             layers,
             spec,
-            stamp: next_stamp(),
+            packed: OnceLock::new(),
         }
     }
 
@@ -278,10 +288,10 @@ impl Mlp {
         &self.params
     }
 
-    /// All parameters, flat and mutable (for an optimiser step). Marks the parameters as changed,
-    /// so workspaces repack the weights at their next evaluation.
+    /// All parameters, flat and mutable (for an optimiser step). Drops the packed weights, so
+    /// the next evaluation packs the new values.
     pub fn params_mut(&mut self) -> &mut [f32] {
-        self.stamp = next_stamp();
+        self.packed = OnceLock::new();
         &mut self.params
     }
 
@@ -327,12 +337,12 @@ impl Mlp {
         ws.reserve(batch);
         ws.batch = None;
         ws.x[..x.len()].copy_from_slice(x);
-        self.pack_forward(ws);
+        let packs = self.packed();
         for (l, layer) in self.layers.iter().enumerate() {
             let (input, rest) = ws.a.split_at_mut(l);
             let input: &[f32] = if l == 0 { &ws.x } else { &input[l - 1] };
             let out = &mut rest[0][..batch * layer.n_out];
-            let packed = &ws.fwd[l];
+            let packed = &packs.fwd[l];
             let z_len = if layer.activation.needs_preactivation() {
                 batch * layer.n_out
             } else {
@@ -376,11 +386,14 @@ impl Mlp {
         if let Some(dx) = &dx {
             check_len("dx", batch * self.n_in(), dx.len())?;
         }
-        self.pack_backward(ws);
-        let mut cur = std::mem::take(&mut ws.g0);
-        let mut next = std::mem::take(&mut ws.g1);
-        let bwd = std::mem::take(&mut ws.bwd);
-        let mut zeros = std::mem::take(&mut ws.bias_pad);
+        let packs = self.packed();
+        // The layer gradients are scratch, not tape: one pair of buffers per thread serves every
+        // workspace (the 4·k stage workspaces of a NeuralODE chunk), so they stay in cache
+        // instead of each workspace's own pair being touched once per training step.
+        let (mut cur, mut next) = SCRATCH.with(|c| c.take());
+        let width = self.spec.sizes.iter().copied().max().unwrap_or(0);
+        grow(&mut cur, batch * width);
+        grow(&mut next, batch * width);
         let mut dx = dx;
         for (l, layer) in self.layers.iter().enumerate().rev() {
             let (n_in, n_out) = (layer.n_in, layer.n_out);
@@ -391,29 +404,23 @@ impl Mlp {
                 &cur[..batch * n_out]
             };
             let input: &[f32] = if l == 0 { &ws.x } else { &ws.a[l - 1] };
-            // dW += dzᵀ·input on the forward kernel, (n_out × rows) · (rows × n_in), in blocks of
-            // KC batch rows so that the padded input block stays in L1.
-            let n_pad = kernels::pack_padded(&input[..batch * n_in], batch, n_in, &mut ws.t1);
-            zeros.clear();
-            zeros.resize(n_pad, 0.0);
-            ws.t2.resize(n_out * n_in, 0.0);
+            // dW += dzᵀ·input, (n_out × rows) · (rows × n_in), in blocks of KC batch rows so that
+            // the input block stays in L1. Both operands are read in place (dz transposed, the
+            // input rows over their padded width: the workspace keeps `NR` floats of slack after
+            // each buffer for that) and each block's product is added to `grad` as it is stored.
             let mut p0 = 0;
             while p0 < batch {
                 let kc = KC.min(batch - p0);
-                kernels::transpose(&dz[p0 * n_out..(p0 + kc) * n_out], kc, n_out, &mut ws.t0);
-                kernels::dense_forward(
-                    Activation::Identity,
+                kernels::gemm_tn_add(
                     n_out,
                     kc,
                     n_in,
-                    n_pad,
-                    &ws.t0,
-                    &ws.t1[p0 * n_pad..(p0 + kc) * n_pad],
-                    &zeros,
-                    &mut ws.t2[..n_out * n_in],
-                    &mut [],
+                    &dz[p0 * n_out..],
+                    n_out,
+                    &input[p0 * n_in..],
+                    n_in,
+                    &mut grad[layer.weight.clone()],
                 );
-                kernels::add_column_sums(&mut grad[layer.weight.clone()], &ws.t2[..n_out * n_in]);
                 p0 += kc;
             }
             kernels::add_column_sums(&mut grad[layer.bias.clone()], dz);
@@ -425,9 +432,8 @@ impl Mlp {
             } else {
                 continue;
             };
-            let packed = &bwd[l];
-            zeros.clear();
-            zeros.resize(packed.n_pad, 0.0);
+            let packed = &packs.bwd[l];
+            let zeros = &packs.zeros[..packed.n_pad];
             kernels::dense_forward(
                 Activation::Identity,
                 batch,
@@ -436,7 +442,7 @@ impl Mlp {
                 packed.n_pad,
                 dz,
                 &packed.w,
-                &zeros,
+                zeros,
                 target,
                 &mut [],
             );
@@ -456,47 +462,34 @@ impl Mlp {
                 std::mem::swap(&mut cur, &mut next);
             }
         }
-        ws.g0 = cur;
-        ws.g1 = next;
-        ws.bwd = bwd;
-        ws.bias_pad = zeros;
+        SCRATCH.with(|c| c.set((cur, next)));
         Ok(())
     }
 
-    /// Packs every layer's Wᵀ and bias for [`kernels::dense_forward`] into `ws`, unless `ws`
-    /// already holds them for these parameter values.
-    fn pack_forward(&self, ws: &mut Workspace) {
-        if ws.fwd_stamp == self.stamp {
-            return;
-        }
-        for (layer, packed) in self.layers.iter().zip(ws.fwd.iter_mut()) {
-            packed.n_pad = kernels::pack_transposed(
-                &self.params[layer.weight.clone()],
-                &self.params[layer.bias.clone()],
-                layer.n_out,
-                layer.n_in,
-                &mut packed.w,
-                &mut packed.bias,
-            );
-        }
-        ws.fwd_stamp = self.stamp;
-    }
-
-    /// Packs every layer's W padded for the input-gradient product of [`Mlp::backward`] into
-    /// `ws`, unless `ws` already holds them for these parameter values.
-    fn pack_backward(&self, ws: &mut Workspace) {
-        if ws.bwd_stamp == self.stamp {
-            return;
-        }
-        for (layer, packed) in self.layers.iter().zip(ws.bwd.iter_mut()) {
-            packed.n_pad = kernels::pack_padded(
-                &self.params[layer.weight.clone()],
-                layer.n_out,
-                layer.n_in,
-                &mut packed.w,
-            );
-        }
-        ws.bwd_stamp = self.stamp;
+    /// The packed weights of the current parameters (packed here on first use).
+    fn packed(&self) -> &Packed {
+        self.packed.get_or_init(|| {
+            let mut p = Packed::default();
+            for layer in &self.layers {
+                let w = &self.params[layer.weight.clone()];
+                let mut f = PackedLayer::default();
+                f.n_pad = kernels::pack_transposed(
+                    w,
+                    &self.params[layer.bias.clone()],
+                    layer.n_out,
+                    layer.n_in,
+                    &mut f.w,
+                    &mut f.bias,
+                );
+                p.fwd.push(f);
+                let mut b = PackedLayer::default();
+                b.n_pad = kernels::pack_padded(w, layer.n_out, layer.n_in, &mut b.w);
+                p.bwd.push(b);
+            }
+            let widest = p.bwd.iter().map(|b| b.n_pad).max().unwrap_or(0);
+            p.zeros = vec![0.0; widest];
+            p
+        })
     }
 
     /// Forward mode (Jacobian–vector product): returns `(y, dy)` with y = f(x) and dy = J(x)·dx,
@@ -510,6 +503,9 @@ impl Mlp {
         check_len("dx", x.len(), dx.len())?;
         self.forward(x, ws)?;
         let batch = ws.batch.ok_or(NnError::NoTape)?;
+        let width = self.spec.sizes.iter().copied().max().unwrap_or(0);
+        grow(&mut ws.g0, batch * width);
+        grow(&mut ws.g1, batch * width);
         let mut cur = std::mem::take(&mut ws.g0);
         let mut next = std::mem::take(&mut ws.g1);
         for (l, layer) in self.layers.iter().enumerate() {
@@ -576,6 +572,8 @@ impl Mlp {
             } else {
                 0
             };
+            // grown here, not in `reserve`: only Jacobians need it (training never touches it)
+            grow(&mut ws.deriv[l], len);
             kernels::act_derivative(
                 layer.activation,
                 &ws.a[l][..len],
@@ -744,16 +742,6 @@ pub struct Workspace {
     j0: Vec<f32>,
     j1: Vec<f32>,
     jac: Vec<f32>,
-    /// Per layer: Wᵀ and bias packed for the forward kernel, valid for parameters `fwd_stamp`.
-    fwd: Vec<PackedLayer>,
-    fwd_stamp: u64,
-    /// Per layer: W padded for the input-gradient product, valid for parameters `bwd_stamp`.
-    bwd: Vec<PackedLayer>,
-    bwd_stamp: u64,
-    bias_pad: Vec<f32>,
-    t0: Vec<f32>,
-    t1: Vec<f32>,
-    t2: Vec<f32>,
 }
 
 impl Workspace {
@@ -774,14 +762,6 @@ impl Workspace {
             j0: Vec::new(),
             j1: Vec::new(),
             jac: Vec::new(),
-            fwd: vec![PackedLayer::default(); n_layers],
-            fwd_stamp: 0,
-            bwd: vec![PackedLayer::default(); n_layers],
-            bwd_stamp: 0,
-            bias_pad: Vec::new(),
-            t0: Vec::new(),
-            t1: Vec::new(),
-            t2: Vec::new(),
         }
     }
 
@@ -792,21 +772,17 @@ impl Workspace {
             return;
         }
         let n_layers = self.sizes.len() - 1;
-        let max_width = self.sizes.iter().copied().max().unwrap_or(0);
-        grow(&mut self.x, batch * self.sizes[0]);
+        // `NR` floats of slack after the input and every layer output: `backward` reads their
+        // rows over the padded width (the extra lanes are never stored).
+        grow(&mut self.x, batch * self.sizes[0] + kernels::NR);
         for l in 0..n_layers {
             let width = self.sizes[l + 1];
-            grow(&mut self.a[l], batch * width);
+            grow(&mut self.a[l], batch * width + kernels::NR);
             let hidden = l + 1 < n_layers;
             if hidden && self.activations[l].needs_preactivation() {
                 grow(&mut self.z[l], batch * width);
             }
-            if hidden {
-                grow(&mut self.deriv[l], batch * width);
-            }
         }
-        grow(&mut self.g0, batch * max_width);
-        grow(&mut self.g1, batch * max_width);
         self.capacity = batch;
     }
 
