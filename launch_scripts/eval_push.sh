@@ -125,7 +125,7 @@ awk -F, 'NR > 1 { key = $1; kind[key] = $2; k[key] = $3
     rank["physics"] = 5; rank["hybrid"] = 6
     print "| data | kind | k | free: success / strict / steps to success / collisions | obstacle: success / strict / steps to success / collisions |"
     print "|---|---|---|---|---|"
-    n = 0; for (key in kind) { keys[++n] = key; sk[key] = sprintf("%s|%d|%d", data[key], rank[kind[key]], k[key]) }
+    n = 0; for (key in kind) { keys[++n] = key; sk[key] = sprintf("%d|%s|%d|%d", index(data[key], "+") > 0, data[key], rank[kind[key]], k[key]) }
     for (i = 1; i <= n; i++) for (j = i + 1; j <= n; j++) if (sk[keys[j]] < sk[keys[i]]) { t = keys[i]; keys[i] = keys[j]; keys[j] = t }
     for (i = 1; i <= n; i++) { key = keys[i]
       printf "| %s | %s | %s | %s | %s |\n", data[key], kind[key], k[key], free[key], obst[key] }
