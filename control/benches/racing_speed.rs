@@ -5,6 +5,8 @@
 //! random weights (the Kohler size; speed does not depend on the weights), the nominal physics
 //! model and the simulator itself, races 30 control cycles (3 for GD, whose 512-candidate line search is far slower) on an oval from a standing start and
 //! prints p50/p99 of the per-cycle solve time. `DYNLAB_RACE_MODEL=<dir>` adds a trained model.
+//! Row `node-rk4 fwd-jac` is the node-rk4 model linearised by forward mode through the RK4 stages
+//! (`Model::jacobians`) instead of `Model::jacobians_stagewise`: compare it with `node-rk4 8x64`.
 
 use std::time::Instant;
 
