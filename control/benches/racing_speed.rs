@@ -5,14 +5,16 @@
 //! random weights (the Kohler size; speed does not depend on the weights), the nominal physics
 //! model and the simulator itself, races 30 control cycles (3 for GD, whose 512-candidate line search is far slower) on an oval from a standing start and
 //! prints p50/p99 of the per-cycle solve time. `DYNLAB_RACE_MODEL=<dir>` adds a trained model.
+//! Row `node-rk4 fwd-jac` is the node-rk4 model linearised by forward mode through the RK4 stages
+//! (`Model::jacobians`) instead of `Model::jacobians_stagewise`: compare it with `node-rk4 8x64`.
 
 use std::time::Instant;
 
 use dynlab_control::racing::{
-    CarDynamics, GdSettings, Optimizer, Racer, RacerSettings, SimCar, true_car_model,
+    CarDynamics, GdSettings, Optimizer, Racer, RacerSettings, RacingError, SimCar, true_car_model,
 };
 use dynlab_learn::dynamics::ode::Solver;
-use dynlab_learn::{Model, ModelKind, Network, Normalization, World, load_model};
+use dynlab_learn::{Model, ModelKind, Network, Normalization, StepJacobians, World, load_model};
 use dynlab_nn::{Activation, Init, Mlp, MlpSpec};
 use dynlab_sim::{CarScenario, Track};
 
@@ -33,6 +35,27 @@ fn net_model(kind: ModelKind) -> Model {
     .unwrap()
 }
 
+/// The node-rk4 model linearised by [`Model::jacobians`] (forward mode through the RK4 stages,
+/// one pass per input direction) instead of the plant's stage-wise Jacobians: the previous
+/// linearisation, side by side.
+#[derive(Debug)]
+struct ForwardModeJacobians<'a>(&'a Model);
+
+impl CarDynamics for ForwardModeJacobians<'_> {
+    fn dt(&self) -> f64 {
+        CarDynamics::dt(self.0)
+    }
+    fn check(&self) -> Result<(), RacingError> {
+        CarDynamics::check(self.0)
+    }
+    fn rollout(&self, s0: &[f64], actions: &[f64], out: &mut [f64]) -> Result<(), RacingError> {
+        CarDynamics::rollout(self.0, s0, actions, out)
+    }
+    fn jacobians(&self, s: &[f64], u: &[f64]) -> Result<StepJacobians, RacingError> {
+        Ok(Model::jacobians(self.0, s, u)?)
+    }
+}
+
 fn quantile(v: &mut [f64], q: f64) -> f64 {
     v.sort_by(f64::total_cmp);
     v[((q * v.len() as f64).ceil() as usize).clamp(1, v.len()) - 1]
@@ -45,6 +68,7 @@ fn main() {
     let sim = SimCar::new(&scenario, 0.01).unwrap();
     let residual = net_model(ModelKind::Residual);
     let rk4 = net_model(ModelKind::NodeRk4);
+    let rk4_forward = ForwardModeJacobians(&rk4);
     let trained = std::env::var("DYNLAB_RACE_MODEL")
         .ok()
         .map(|p| load_model(std::path::Path::new(&p), None, None).unwrap().0);
@@ -52,11 +76,18 @@ fn main() {
         ("physics", &physics),
         ("residual 8x64", &residual),
         ("node-rk4 8x64", &rk4),
+        ("node-rk4 fwd-jac", &rk4_forward),
         ("simulator (FD)", &sim),
     ];
     if let Some(m) = &trained {
         models.push(("trained", m));
     }
+    // recovery starts off: every cycle is exactly one solve from the warm start (with random
+    // weights, whether the car "stalls" depends on rounding, and a recovery cycle solves 4×)
+    let single_solve = RacerSettings {
+        recovery_fraction: 0.0,
+        ..RacerSettings::default()
+    };
     let configs: Vec<(&str, RacerSettings)> = vec![
         (
             "sqp 1 it",
@@ -65,10 +96,10 @@ fn main() {
                     iterations: 1,
                     ..RacerSettings::default().sqp
                 },
-                ..RacerSettings::default()
+                ..single_solve
             },
         ),
-        ("sqp 3 it", RacerSettings::default()),
+        ("sqp 3 it", single_solve),
         (
             "gd 5 it × 512",
             RacerSettings {
@@ -77,12 +108,12 @@ fn main() {
                     iterations: 5,
                     ..GdSettings::default()
                 },
-                ..RacerSettings::default()
+                ..single_solve
             },
         ),
     ];
     println!(
-        "one receding-horizon solve, n = 20, hold 5 (100 model steps); 30 cycles per SQP row, 3 per GD row"
+        "one receding-horizon solve, n = 20, hold 5 (100 model steps); 30 cycles per SQP row, 3 per GD row; recovery starts off"
     );
     println!(
         "{:<16} {:<14} {:>10} {:>10} {:>12}",

@@ -451,3 +451,78 @@ fn the_plants_rollout_equals_the_models_rollout_bit_for_bit() {
         assert_eq!(plant.coarse(&fine), plant.rollout(&s0, &inputs).unwrap());
     }
 }
+
+fn node_car(kind: ModelKind, solver: Solver) -> Model {
+    let spec = MlpSpec::uniform(5, &[16, 16], 3, Activation::Gelu).unwrap();
+    let mut norm = Normalization::identity(5, 3);
+    norm.input_mean = vec![0.5, 0.0, 0.1, 0.0, 0.3];
+    norm.input_std = vec![1.5, 0.5, 2.0, 0.3, 0.6];
+    norm.output_mean = vec![0.01, -0.02, 0.005];
+    norm.output_std = vec![0.05, 0.02, 0.08];
+    Model::new(
+        kind,
+        World::Car,
+        0.01,
+        None,
+        Some(Network::new(Mlp::new(spec, Init::Auto, 9), norm)),
+        None,
+        solver,
+    )
+    .unwrap()
+}
+
+#[test]
+fn stagewise_node_jacobians_equal_forward_mode_and_finite_differences() {
+    let n = 5;
+    let s: Vec<f64> = (0..n)
+        .flat_map(|i| {
+            let t = i as f64;
+            [
+                0.1 * t,
+                -0.2,
+                0.3 - 0.1 * t,
+                1.2 + 0.2 * t,
+                0.1,
+                -0.4 + 0.15 * t,
+            ]
+        })
+        .collect();
+    let u: Vec<f64> = (0..n)
+        .flat_map(|i| [0.05 * i as f64 - 0.1, 0.6 - 0.05 * i as f64])
+        .collect();
+    for (kind, solver) in [
+        (ModelKind::NodeRk4, Solver::rk4()),
+        (ModelKind::NodeRk4, Solver::Rk4 { substeps: 3 }),
+        (ModelKind::NodeEuler, Solver::euler()),
+        (ModelKind::NodeEuler, Solver::Euler { substeps: 2 }),
+    ] {
+        let model = node_car(kind, solver);
+        let fast = model.jacobians_stagewise(&s, &u).unwrap();
+        let reference = model.jacobians(&s, &u).unwrap();
+        // the next states come from the same stage arithmetic as the model step
+        let mut out = vec![0.0; n * 6];
+        model.rollout(&s, &u, &mut out).unwrap();
+        assert_eq!(fast.next, out, "{solver:?}");
+        assert_eq!(fast.next, reference.next, "{solver:?}");
+        // the Jacobians agree with forward mode to f32 rounding
+        for (a, b) in fast
+            .ds
+            .iter()
+            .zip(&reference.ds)
+            .chain(fast.du.iter().zip(&reference.du))
+        {
+            assert!(
+                (a - b).abs() <= 1e-5 * (1.0 + b.abs()),
+                "{solver:?}: {a} vs {b}"
+            );
+        }
+        assert!(
+            fast.ds
+                .iter()
+                .chain(&fast.du)
+                .any(|v| *v != 0.0 && *v != 1.0)
+        );
+    }
+    // and the plant's composed linearisation matches finite differences
+    check_linearization(&node_car(ModelKind::NodeRk4, Solver::rk4()), 2e-2, 1e-3);
+}

@@ -624,6 +624,27 @@ impl Model {
                 }
             }
         }
+        Ok(self.finish_jacobians(n, s, &zn, &jz, &jzu, next, js, ju))
+    }
+
+    /// Completes [`Model::jacobians`] from the learned core `z⁺` (`zn`, or the residual for
+    /// hybrids) and its Jacobians `jz`, `jzu`: adds the residual to the physics step (hybrid),
+    /// copies (pushing) or applies the car pose kinematics by the chain rule (car).
+    #[allow(clippy::too_many_arguments)]
+    fn finish_jacobians(
+        &self,
+        n: usize,
+        s: &[f64],
+        zn: &[f64],
+        jz: &[f64],
+        jzu: &[f64],
+        mut next: Vec<f64>,
+        mut js: Vec<f64>,
+        mut ju: Vec<f64>,
+    ) -> StepJacobians {
+        let (ds, du) = (self.dim_s(), self.dim_u());
+        let lr = self.world.learned_dims();
+        let dz = lr.len();
         if self.kind == ModelKind::Hybrid {
             for b in 0..n {
                 for o in 0..dz {
@@ -637,17 +658,17 @@ impl Model {
                     }
                 }
             }
-            return Ok(StepJacobians {
+            return StepJacobians {
                 next,
                 ds: js,
                 du: ju,
-            });
+            };
         }
         match self.world {
             World::Push => {
-                next.copy_from_slice(&zn);
-                js.copy_from_slice(&jz);
-                ju.copy_from_slice(&jzu);
+                next.copy_from_slice(zn);
+                js.copy_from_slice(jz);
+                ju.copy_from_slice(jzu);
             }
             World::Car => {
                 for b in 0..n {
@@ -686,11 +707,160 @@ impl Model {
                 }
             }
         }
-        Ok(StepJacobians {
+        StepJacobians {
             next,
             ds: js,
             du: ju,
-        })
+        }
+    }
+
+    /// [`Model::jacobians`] with the NeuralODE step (Euler or RK4, fixed steps) differentiated
+    /// stage by stage: at each stage the network's input Jacobian is evaluated once (reverse
+    /// mode over the `dz` outputs, which also gives the stage output) and chained through the
+    /// stage sums in `f64`, instead of one forward-mode pass through all stages per input
+    /// direction. The same Jacobians to `f32` rounding of the network Jacobian; next states
+    /// bit-identical to [`Model::step`] (the same stage arithmetic). Other kinds and solvers are
+    /// [`Model::jacobians`] itself.
+    pub fn jacobians_stagewise(&self, s: &[f64], u: &[f64]) -> Result<StepJacobians, LearnError> {
+        // the solver as Model::jacobians uses it
+        let fixed = match self.solver.unwrap_or(Solver::rk4()) {
+            Solver::Rk4 { substeps } => Some((substeps.max(1) as usize, true)),
+            Solver::Euler { substeps } => Some((substeps.max(1) as usize, false)),
+            Solver::Dopri5(_) => None,
+        };
+        let (Some(net), Some((substeps, rk4)), true) = (
+            &self.net,
+            fixed,
+            matches!(self.kind, ModelKind::NodeEuler | ModelKind::NodeRk4)
+                && self.physics.is_none(),
+        ) else {
+            return self.jacobians(s, u);
+        };
+        let n = self.check_batch(s, u)?;
+        let (ds, du) = (self.dim_s(), self.dim_u());
+        let lr = self.world.learned_dims();
+        let dz = lr.len();
+        let ni = dz + du;
+        // stage coefficients as the fixed-step solvers of dynlab-dynamics
+        const RK4_A: [&[f64]; 4] = [&[], &[0.5], &[0.0, 0.5], &[0.0, 0.0, 1.0]];
+        const RK4_B: [f64; 4] = [1.0 / 6.0, 1.0 / 3.0, 1.0 / 3.0, 1.0 / 6.0];
+        const EULER_A: [&[f64]; 1] = [&[]];
+        const EULER_B: [f64; 1] = [1.0];
+        let (ta, tb): (&[&[f64]], &[f64]) = if rk4 {
+            (&RK4_A, &RK4_B)
+        } else {
+            (&EULER_A, &EULER_B)
+        };
+        let h = 1.0 / substeps as f64;
+        let stages = tb.len();
+        // y: the state in f32 as the solver carries it; ty: ∂y/∂[z₀, u] (n × dz × ni, f64)
+        let mut y: Vec<f32> = (0..n)
+            .flat_map(|i| {
+                s[i * ds + lr.start..i * ds + lr.end]
+                    .iter()
+                    .map(|&x| x as f32)
+            })
+            .collect();
+        let uf: Vec<f32> = u.iter().map(|&x| x as f32).collect();
+        let mut ty = vec![0.0f64; n * dz * ni];
+        for b in 0..n {
+            for d in 0..dz {
+                ty[b * dz * ni + d * ni + d] = 1.0;
+            }
+        }
+        let mut ks = vec![vec![0.0f32; n * dz]; stages];
+        let mut dks = vec![vec![0.0f64; n * dz * ni]; stages];
+        let mut ytmp = vec![0.0f32; n * dz];
+        let mut tstage = vec![0.0f64; n * dz * ni];
+        let mut x = Vec::new();
+        let mut ws = net.mlp.workspace();
+        let mut jbuf: Vec<f32> = Vec::new();
+        let mut jp = vec![0.0f64; ni];
+        // the stage sum `y + Σ_j (h·a_j)·k_j` (f32, in order) and its tangent
+        let combine = |y: &[f32],
+                       ty: &[f64],
+                       a: &[f64],
+                       ks: &[Vec<f32>],
+                       dks: &[Vec<f64>],
+                       out: &mut [f32],
+                       tout: &mut [f64]| {
+            out.copy_from_slice(y);
+            tout.copy_from_slice(ty);
+            for (j, &aj) in a.iter().enumerate() {
+                if aj != 0.0 {
+                    let c = (h * aj) as f32;
+                    for (o, k) in out.iter_mut().zip(&ks[j]) {
+                        *o += c * *k;
+                    }
+                    let c = f64::from(c);
+                    for (o, k) in tout.iter_mut().zip(&dks[j]) {
+                        *o += c * *k;
+                    }
+                }
+            }
+        };
+        for _ in 0..substeps {
+            for i in 0..stages {
+                combine(&y, &ty, ta[i], &ks, &dks, &mut ytmp, &mut tstage);
+                net.fill_input(n, &ytmp, &uf, &mut x);
+                let ok = match net.mlp.jacobian(&x, &mut ws) {
+                    Ok(j) => {
+                        jbuf.clear();
+                        jbuf.extend_from_slice(j);
+                        true
+                    }
+                    Err(_) => false,
+                };
+                let (k, dk) = (&mut ks[i], &mut dks[i]);
+                if ok {
+                    // k = out_mean + out_std · net (as Network::write_output)
+                    let yout = ws.output();
+                    for b in 0..n {
+                        for o in 0..dz {
+                            k[b * dz + o] = net.out_mean[o] + net.out_std[o] * yout[b * dz + o];
+                        }
+                    }
+                    let j = &jbuf;
+                    for b in 0..n {
+                        let jb = &j[b * dz * ni..(b + 1) * dz * ni];
+                        let tb_ = &tstage[b * dz * ni..(b + 1) * dz * ni];
+                        for o in 0..dz {
+                            let so = f64::from(net.out_std[o]);
+                            for (c, v) in jp.iter_mut().enumerate() {
+                                *v = f64::from(jb[o * ni + c]) * so * f64::from(net.in_inv_std[c]);
+                            }
+                            for c in 0..ni {
+                                let mut acc = if c >= dz { jp[c] } else { 0.0 };
+                                for m in 0..dz {
+                                    acc += jp[m] * tb_[m * ni + c];
+                                }
+                                dk[b * dz * ni + o * ni + c] = acc;
+                            }
+                        }
+                    }
+                } else {
+                    k.iter_mut().for_each(|v| *v = f32::NAN);
+                    dk.iter_mut().for_each(|v| *v = f64::NAN);
+                }
+            }
+            let ycur = y.clone();
+            let tcur = ty.clone();
+            combine(&ycur, &tcur, tb, &ks, &dks, &mut y, &mut ty);
+        }
+        let zn: Vec<f64> = y.iter().map(|&v| f64::from(v)).collect();
+        let mut jz = vec![0.0f64; n * dz * dz];
+        let mut jzu = vec![0.0f64; n * dz * du];
+        for b in 0..n {
+            for o in 0..dz {
+                let row = &ty[b * dz * ni + o * ni..b * dz * ni + (o + 1) * ni];
+                jz[b * dz * dz + o * dz..b * dz * dz + (o + 1) * dz].copy_from_slice(&row[..dz]);
+                jzu[b * dz * du + o * du..b * dz * du + (o + 1) * du].copy_from_slice(&row[dz..]);
+            }
+        }
+        let next = vec![0.0; n * ds];
+        let js = vec![0.0; n * ds * ds];
+        let ju = vec![0.0; n * ds * du];
+        Ok(self.finish_jacobians(n, s, &zn, &jz, &jzu, next, js, ju))
     }
 
     /// Whether [`Model::rollout_f32`] runs the allocation-free batched path for this kind

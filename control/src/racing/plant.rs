@@ -48,7 +48,7 @@ impl CarDynamics for Model {
         Ok(())
     }
     fn jacobians(&self, s: &[f64], u: &[f64]) -> Result<StepJacobians, RacingError> {
-        Ok(Model::jacobians(self, s, u)?)
+        Ok(Model::jacobians_stagewise(self, s, u)?)
     }
 }
 
