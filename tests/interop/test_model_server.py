@@ -151,6 +151,9 @@ def test_model_server_predictions_equal_the_offline_library(car_model, tmp_path)
                 cmd_w.write(AckermannDriveStamped(header=h, drive=AckermannDrive(
                     steering_angle=d.steering_angle, steering_angle_velocity=d.steering_angle_velocity,
                     speed=d.speed, acceleration=d.acceleration, jerk=d.jerk)))
+                # DDS does not order two topics: give the command a head start over the pose of the
+                # same stamp, which the server must predict with it (the bag's own order)
+                time.sleep(0.005)
             else:
                 p, q = m.pose.position, m.pose.orientation
                 pose_w.write(PoseStamped(header=h, pose=Pose(position=Point(x=p.x, y=p.y, z=p.z),
