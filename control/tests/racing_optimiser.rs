@@ -526,3 +526,47 @@ fn stagewise_node_jacobians_equal_forward_mode_and_finite_differences() {
     // and the plant's composed linearisation matches finite differences
     check_linearization(&node_car(ModelKind::NodeRk4, Solver::rk4()), 2e-2, 1e-3);
 }
+
+#[test]
+fn bad_racer_settings_are_refused_with_the_setting_named() {
+    let model = physics_car();
+    let track = Track::oval(1.0, 0.5, 0.2, 120).unwrap();
+    let bad = [
+        (
+            "slip_weight",
+            RacerSettings {
+                slip_weight: -1.0,
+                ..RacerSettings::default()
+            },
+        ),
+        (
+            "slip_weight",
+            RacerSettings {
+                slip_weight: f64::NAN,
+                ..RacerSettings::default()
+            },
+        ),
+        (
+            "recovery_fraction",
+            RacerSettings {
+                recovery_fraction: 1.5,
+                ..RacerSettings::default()
+            },
+        ),
+        (
+            "recovery_throttle",
+            RacerSettings {
+                recovery_throttle: f64::INFINITY,
+                ..RacerSettings::default()
+            },
+        ),
+    ];
+    for (name, settings) in bad {
+        let err = match Racer::new(&model, &track, settings) {
+            Ok(_) => panic!("{name}: bad settings must be refused"),
+            Err(e) => e.to_string(),
+        };
+        assert!(err.contains(name), "{name}: {err}");
+    }
+    assert!(Racer::new(&model, &track, RacerSettings::default()).is_ok());
+}

@@ -386,13 +386,7 @@ impl Model {
         let Some(net) = &self.net else {
             return status;
         };
-        let z: Vec<f32> = (0..n)
-            .flat_map(|i| {
-                s[i * ds + lr.start..i * ds + lr.end]
-                    .iter()
-                    .map(|&x| x as f32)
-            })
-            .collect();
+        let z: Vec<f32> = learned_part_f32(s, n, ds, lr.clone());
         let uf: Vec<f32> = u.iter().map(|&x| x as f32).collect();
         let mut zn = vec![0.0f32; n * dz];
         match self.kind {
@@ -565,13 +559,7 @@ impl Model {
                 du: ju,
             });
         };
-        let z: Vec<f32> = (0..n)
-            .flat_map(|i| {
-                s[i * ds + lr.start..i * ds + lr.end]
-                    .iter()
-                    .map(|&x| x as f32)
-            })
-            .collect();
+        let z: Vec<f32> = learned_part_f32(s, n, ds, lr.clone());
         let uf: Vec<f32> = u.iter().map(|&x| x as f32).collect();
         // core: z⁺ (or the residual for hybrid) and its Jacobians wrt z and u
         let mut zn = vec![0.0f64; n * dz];
@@ -754,13 +742,7 @@ impl Model {
         let h = 1.0 / substeps as f64;
         let stages = tb.len();
         // y: the state in f32 as the solver carries it; ty: ∂y/∂[z₀, u] (n × dz × ni, f64)
-        let mut y: Vec<f32> = (0..n)
-            .flat_map(|i| {
-                s[i * ds + lr.start..i * ds + lr.end]
-                    .iter()
-                    .map(|&x| x as f32)
-            })
-            .collect();
+        let mut y: Vec<f32> = learned_part_f32(s, n, ds, lr.clone());
         let uf: Vec<f32> = u.iter().map(|&x| x as f32).collect();
         let mut ty = vec![0.0f64; n * dz * ni];
         for b in 0..n {
@@ -1146,6 +1128,17 @@ pub fn pad_effect_states(p: &PhysicsModel, n: usize, s: &[f64], u: &[f64]) -> Ve
         }
     }
     out
+}
+
+/// The learned part `lr` of each of the `n` states of dimension `ds` in `s`, in f32, row after row.
+fn learned_part_f32(s: &[f64], n: usize, ds: usize, lr: std::ops::Range<usize>) -> Vec<f32> {
+    (0..n)
+        .flat_map(|i| {
+            s[i * ds + lr.start..i * ds + lr.end]
+                .iter()
+                .map(|&x| x as f32)
+        })
+        .collect()
 }
 
 fn check_finite(what: &'static str, v: &[f64]) -> Result<(), LearnError> {

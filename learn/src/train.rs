@@ -366,6 +366,31 @@ struct Ctx<'a> {
     loss: &'a Loss,
 }
 
+/// Everything of a [`Ctx`] but the model, which changes with every parameter update.
+struct Task<'a> {
+    adjoint: bool,
+    data: &'a Data,
+    k: usize,
+    gamma: f64,
+    loss: &'a Loss,
+}
+
+impl<'a> Task<'a> {
+    fn ctx<'m>(&self, model: &'m Model) -> Ctx<'m>
+    where
+        'a: 'm,
+    {
+        Ctx {
+            model,
+            adjoint: self.adjoint,
+            data: self.data,
+            k: self.k,
+            gamma: self.gamma,
+            loss: self.loss,
+        }
+    }
+}
+
 fn resize<T: Clone + Default>(v: &mut Vec<Vec<T>>, n: usize, len: usize) {
     v.resize_with(n, Vec::new);
     for x in v.iter_mut() {
@@ -1164,6 +1189,13 @@ pub fn train(
     let threads = cfg.threads.max(1);
     let slots = cfg.batch.div_ceil(chunk).max(1);
     let mut states: Vec<ChunkState> = (0..slots).map(|_| ChunkState::default()).collect();
+    let task = Task {
+        adjoint: cfg.adjoint,
+        data: &data_f,
+        k,
+        gamma: cfg.gamma,
+        loss: &loss,
+    };
     let baseline = {
         let zero_norm = Normalization::identity(dz + du, dz);
         let mut zero = Mlp::zeros(MlpSpec::uniform(dz + du, &[1], dz, Activation::Tanh)?);
@@ -1178,35 +1210,17 @@ pub fn train(
             phys_solver,
         )?;
         let ctx = Ctx {
-            model: &m,
             adjoint: false,
-            data: &data_f,
-            k,
-            gamma: cfg.gamma,
-            loss: &loss,
+            ..task.ctx(&m)
         };
         loss_over(&ctx, &val_w, &mut states, chunk, threads)
     };
     let val0 = {
-        let ctx = Ctx {
-            model: &model,
-            adjoint: cfg.adjoint,
-            data: &data_f,
-            k,
-            gamma: cfg.gamma,
-            loss: &loss,
-        };
+        let ctx = task.ctx(&model);
         loss_over(&ctx, &val_w, &mut states, chunk, threads)
     };
     if !cfg.kind.has_network() {
-        let ctx = Ctx {
-            model: &model,
-            adjoint: cfg.adjoint,
-            data: &data_f,
-            k,
-            gamma: cfg.gamma,
-            loss: &loss,
-        };
+        let ctx = task.ctx(&model);
         let train_loss = loss_over(&ctx, &train_w, &mut states, chunk, threads);
         let p = Progress {
             epoch: 1,
@@ -1268,14 +1282,7 @@ pub fn train(
                 let chunks: Vec<&[Window]> = batch.chunks(chunk).collect();
                 let m = chunks.len();
                 {
-                    let ctx = Ctx {
-                        model: &model,
-                        adjoint: cfg.adjoint,
-                        data: &data_f,
-                        k,
-                        gamma: cfg.gamma,
-                        loss: &loss,
-                    };
+                    let ctx = task.ctx(&model);
                     train_batch(
                         &ctx,
                         &mut pool,
@@ -1308,14 +1315,7 @@ pub fn train(
                 }
             }
             let val = {
-                let ctx = Ctx {
-                    model: &model,
-                    adjoint: cfg.adjoint,
-                    data: &data_f,
-                    k,
-                    gamma: cfg.gamma,
-                    loss: &loss,
-                };
+                let ctx = task.ctx(&model);
                 loss_over(&ctx, &val_w, &mut states, chunk, threads)
             };
             if !val.is_finite() {
@@ -1345,14 +1345,7 @@ pub fn train(
         net.mlp.params_mut().copy_from_slice(&best_params);
     }
     let final_train_loss = {
-        let ctx = Ctx {
-            model: &model,
-            adjoint: cfg.adjoint,
-            data: &data_f,
-            k,
-            gamma: cfg.gamma,
-            loss: &loss,
-        };
+        let ctx = task.ctx(&model);
         loss_over(&ctx, &train_w, &mut states, chunk, threads)
     };
     Ok(TrainOutcome {

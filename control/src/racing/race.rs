@@ -185,6 +185,27 @@ impl<'a> Racer<'a> {
                 "margin must be ≥ 0 and progress_weight finite",
             ));
         }
+        if !(settings.slip_weight >= 0.0 && settings.slip_weight.is_finite()) {
+            return Err(RacingError::setting(
+                "slip_weight",
+                settings.slip_weight,
+                "a weight on v_y² must be finite and ≥ 0 (0: off)",
+            ));
+        }
+        if !(0.0..=1.0).contains(&settings.recovery_fraction) {
+            return Err(RacingError::setting(
+                "recovery_fraction",
+                settings.recovery_fraction,
+                "a fraction of the reference progress in [0, 1] (0: no recovery starts)",
+            ));
+        }
+        if !settings.recovery_throttle.is_finite() {
+            return Err(RacingError::setting(
+                "recovery_throttle",
+                settings.recovery_throttle,
+                "a finite throttle (clamped to the input limits)",
+            ));
+        }
         let plant = Plant::new(model, settings.hold)?;
         let profile = SpeedProfile::new(
             track,

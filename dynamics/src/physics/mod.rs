@@ -360,6 +360,24 @@ impl std::fmt::Display for Effect {
     }
 }
 
+/// Writes one forward-mode pass: the values of `out` to `f` and their derivatives along the
+/// pass's directions to columns `base..base + N` of the dense row-major Jacobian `j` (`nz`
+/// columns; directions past `nz` are padding and dropped).
+fn scatter_duals<const N: usize>(
+    out: &[crate::real::Dual<N>],
+    base: usize,
+    nz: usize,
+    f: &mut [f64],
+    j: &mut [f64],
+) {
+    for (r, o) in out.iter().enumerate() {
+        f[r] = o.v;
+        for k in 0..N.min(nz.saturating_sub(base)) {
+            j[r * nz + base + k] = o.d[k];
+        }
+    }
+}
+
 /// One row of a vector–Jacobian product from a dense Jacobian `j` (`ȳ.len()` rows; columns: the
 /// state, then the input, then the parameters): sets `s̄ = ȳᵀ ∂f/∂s`, `ū = ȳᵀ ∂f/∂u` and adds
 /// `ȳᵀ ∂f/∂p` to `p̄` (parameters only when `p̄` is not empty).

@@ -415,14 +415,7 @@ impl PhysicsModel {
                 };
             }
             self.eval_generic(&pd, active, &sd, &ud, &mut out);
-            for (r, o) in out.iter().enumerate() {
-                f[r] = o.v;
-                for k in 0..DIRS {
-                    if base + k < nz {
-                        j[r * nz + base + k] = o.d[k];
-                    }
-                }
-            }
+            super::scatter_duals(&out, base, nz, f, j);
             base += DIRS;
         }
     }

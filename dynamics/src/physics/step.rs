@@ -69,14 +69,7 @@ impl PushLine<'_> {
                 };
             }
             self.eval_generic(&pd, &zd, &ud, &mut out);
-            for (r, o) in out.iter().enumerate() {
-                f[r] = o.v;
-                for k in 0..DIRS {
-                    if base + k < nz {
-                        j[r * nz + base + k] = o.d[k];
-                    }
-                }
-            }
+            super::scatter_duals(&out, base, nz, f, j);
             base += DIRS;
         }
     }
@@ -188,14 +181,7 @@ fn constants_jac(model: &PhysicsModel, s: &[f64], u: &[f64]) -> ([f64; NC], Vec<
             .map(|i| Dual::var(params[i], seed(DS + DU + i)))
             .collect();
         let out = push::start_constants(&pd, &sd, &ud);
-        for (r, o) in out.iter().enumerate() {
-            c[r] = o.v;
-            for k in 0..DIRS {
-                if base + k < nz {
-                    j[r * nz + base + k] = o.d[k];
-                }
-            }
-        }
+        super::scatter_duals(&out, base, nz, &mut c, &mut j);
         base += DIRS;
     }
     (c, j)
