@@ -4,6 +4,7 @@
 use dynlab_dynamics::ode::{self, OdeStatus, Solver};
 use dynlab_dynamics::physics::PhysicsModel;
 use dynlab_nn::Workspace;
+use dynlab_nn::parallel::Workers;
 use serde::{Deserialize, Serialize};
 
 use crate::net::{NetField, Network};
@@ -902,7 +903,8 @@ impl Model {
             return self.rollout_f32_fallback(n, horizon, s0, actions, out);
         };
         ws.prepare();
-        dynlab_nn::parallel::for_each_row_block(out, row, &mut ws.blocks, |rows, out, b| {
+        let RolloutWorkspace { blocks, workers } = ws;
+        workers.for_each_row_block(out, row, blocks, |rows, out, b| {
             self.fast_block(net, rows, horizon, s0, actions, out, b);
             Ok(())
         })?;
@@ -1047,24 +1049,32 @@ impl Model {
     }
 }
 
-/// Buffers of [`Model::rollout_f32`]: one set per thread, grown on first use.
-#[derive(Debug, Default)]
+/// Buffers of [`Model::rollout_f32`]: one set per thread, grown on first use, and the
+/// persistent worker threads that roll out all but the first block (so a rollout starts no
+/// thread; see [`dynlab_nn::parallel::Workers`]).
+#[derive(Debug)]
 pub struct RolloutWorkspace {
     blocks: Vec<BlockBuffers>,
-    threads: usize,
+    workers: Workers,
+}
+
+impl Default for RolloutWorkspace {
+    fn default() -> Self {
+        Self::new(1)
+    }
 }
 
 impl RolloutWorkspace {
-    /// Buffers for `threads` threads (at least 1).
+    /// Buffers for `threads` threads (at least 1); `threads − 1` worker threads are started.
     pub fn new(threads: usize) -> Self {
         Self {
             blocks: Vec::new(),
-            threads: threads.max(1),
+            workers: Workers::new(threads),
         }
     }
 
     fn prepare(&mut self) {
-        let threads = self.threads.max(1);
+        let threads = self.workers.threads();
         if self.blocks.len() != threads {
             self.blocks = (0..threads).map(|_| BlockBuffers::default()).collect();
         }

@@ -4,7 +4,7 @@
 mod common;
 
 use common::data;
-use dynlab_nn::parallel::{for_each_row_block, row_blocks};
+use dynlab_nn::parallel::{Workers, for_each_row_block, row_blocks};
 use dynlab_nn::{Activation, Init, Mlp, MlpSpec, NnError};
 
 #[test]
@@ -125,4 +125,72 @@ fn parallel_errors_are_reported() {
         }
     });
     assert!(matches!(r, Err(NnError::NoTape)));
+}
+
+#[test]
+fn worker_pool_matches_spawned_threads_across_calls_and_sleeps() {
+    let mlp = Mlp::new(
+        MlpSpec::uniform(6, &[100, 100], 3, Activation::Tanh).unwrap(),
+        Init::Auto,
+        5,
+    );
+    let batch = 203;
+    let x = data(9, batch * 6, -2.0, 2.0);
+    let mut reference = vec![0.0; batch * 3];
+    mlp.forward_parallel(&x, &mut reference, &mut [mlp.workspace()])
+        .unwrap();
+    for threads in [1, 2, 3] {
+        // A short spin, so that some calls find the workers asleep.
+        let mut pool = Workers::with_spin(threads, std::time::Duration::from_micros(50));
+        assert_eq!(pool.threads(), threads);
+        // More blocks than threads: the extra blocks run on the calling thread.
+        let mut ws: Vec<_> = (0..threads + 1).map(|_| mlp.workspace()).collect();
+        for call in 0..40 {
+            if call % 10 == 9 {
+                std::thread::sleep(std::time::Duration::from_millis(2));
+            }
+            let mut out = vec![f32::NAN; batch * 3];
+            pool.for_each_row_block(&mut out, 3, &mut ws, |rows, out, ws| {
+                out.copy_from_slice(mlp.forward(&x[rows.start * 6..rows.end * 6], ws)?);
+                Ok(())
+            })
+            .unwrap();
+            assert!(
+                out.iter()
+                    .zip(&reference)
+                    .all(|(a, b)| a.to_bits() == b.to_bits()),
+                "{threads} threads, call {call}"
+            );
+        }
+    }
+}
+
+#[test]
+fn worker_pool_reports_errors_and_re_raises_panics() {
+    let mut pool = Workers::new(3);
+    let mut out = vec![0.0f32; 6];
+    let mut states = [(); 3];
+    let r = pool.for_each_row_block(&mut out, 1, &mut states, |rows, _, _| {
+        if rows.start >= 2 {
+            Err(NnError::NoTape)
+        } else {
+            Ok(())
+        }
+    });
+    assert!(matches!(r, Err(NnError::NoTape)));
+    assert!(matches!(
+        pool.for_each_row_block(&mut out, 4, &mut states, |_, _, _| Ok(())),
+        Err(NnError::RaggedBatch { .. })
+    ));
+    let caught = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+        pool.run(3, &|i| assert!(i != 2, "job {i} fails"));
+    }));
+    let msg = caught.expect_err("the worker's panic reaches the caller");
+    assert_eq!(msg.downcast_ref::<String>().unwrap(), "job 2 fails");
+    // The pool still works after a job panicked.
+    let hits = std::sync::atomic::AtomicUsize::new(0);
+    pool.run(3, &|_| {
+        hits.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    });
+    assert_eq!(hits.into_inner(), 3);
 }
