@@ -24,6 +24,7 @@ pub use cost::{CostWeights, PushTask, Rect, goal_error, quadratic, trajectory_co
 pub use episode::{EpisodeError, EpisodeResult, EpisodeSettings, run_episode};
 
 use dynlab_learn::{LearnError, Model, RolloutWorkspace, World};
+use dynlab_nn::parallel::row_blocks;
 use dynlab_sim::{SimRng, derive_seed};
 
 /// Samples per chunk of the fallback rollout: fixed, so that batch-adaptive solvers (Dopri5) see
@@ -87,7 +88,8 @@ pub struct Mppi {
     s0: Vec<f32>,
     /// Sampled actions, `K × T × 3` (clamped).
     actions: Vec<f32>,
-    noise: Vec<f64>,
+    /// One noise stream position and `T × 3` noise buffer per block of samples.
+    sample_blocks: Vec<SampleBlock>,
     traj: Vec<f32>,
     costs: Vec<f64>,
     w: Vec<f64>,
@@ -115,7 +117,7 @@ impl Mppi {
             ws: RolloutWorkspace::new(cfg.threads),
             s0: vec![0.0; k * 3],
             actions: vec![0.0; k * t * 3],
-            noise: vec![0.0; k * t * 3],
+            sample_blocks: Vec::new(),
             traj: vec![0.0; k * t * 3],
             costs: vec![0.0; k],
             w: vec![0.0; k],
@@ -182,8 +184,8 @@ impl Mppi {
         if !state.iter().all(|v| v.is_finite()) {
             return Err(MppiError::State(state));
         }
-        let (k, t) = (self.cfg.samples, self.cfg.horizon);
-        self.sample();
+        let t = self.cfg.horizon;
+        self.sample()?;
         for row in self.s0.chunks_exact_mut(3) {
             for (x, s) in row.iter_mut().zip(state) {
                 *x = s as f32;
@@ -191,19 +193,18 @@ impl Mppi {
         }
         self.rollout(model)?;
         let row = t * 3;
-        let mut diverged = 0;
-        for i in 0..k {
-            let c = trajectory_cost(
-                &self.task,
-                &self.weights,
-                state,
-                &self.traj[i * row..(i + 1) * row],
-            );
-            if !c.is_finite() {
-                diverged += 1;
-            }
-            self.costs[i] = c;
-        }
+        let (task, weights, traj) = (&self.task, &self.weights, &self.traj);
+        let mut blocks = vec![(); self.cfg.threads];
+        self.ws
+            .workers()
+            .for_each_row_block(&mut self.costs, 1, &mut blocks, |rows, costs, _| {
+                for (i, c) in rows.zip(costs) {
+                    *c = trajectory_cost(task, weights, state, &traj[i * row..(i + 1) * row]);
+                }
+                Ok(())
+            })
+            .map_err(LearnError::from)?;
+        let diverged = self.costs.iter().filter(|c| !c.is_finite()).count();
         let cost_min = self.costs.iter().copied().fold(f64::INFINITY, f64::min);
         let mut sum = 0.0;
         for (w, c) in self.w.iter_mut().zip(&self.costs) {
@@ -252,41 +253,37 @@ impl Mppi {
         })
     }
 
-    /// Draws the noise (sequentially from the one seeded stream, so the thread count cannot
-    /// change it) and the clamped sampled sequences.
-    fn sample(&mut self) {
+    /// Draws the noise and the clamped sampled sequences, in blocks of samples on the workers.
+    /// Sample `i`'s normals are numbers `i·T·3 …` of the one seeded stream (each block seeks to
+    /// its first), so the thread count cannot change them.
+    fn sample(&mut self) -> Result<(), MppiError> {
         let c = &self.cfg;
         let (k, t) = (c.samples, c.horizon);
-        let beta = c.noise_correlation;
-        let gain = (1.0 - beta * beta).sqrt();
-        for i in 0..k {
-            for j in 0..t {
-                for d in 0..3 {
-                    let n = self.rng.normal();
-                    let idx = (i * t + j) * 3 + d;
-                    self.noise[idx] = if j == 0 {
-                        n
-                    } else {
-                        beta * self.noise[idx - 3] + gain * n
-                    };
-                }
-            }
+        let per_sample = t * 3;
+        let ranges = row_blocks(k, c.threads);
+        self.sample_blocks
+            .resize_with(ranges.len(), SampleBlock::default);
+        for (b, r) in self.sample_blocks.iter_mut().zip(&ranges) {
+            b.rng = self.rng.after_normals(r.start * per_sample);
+            b.noise.resize(per_sample, 0.0);
         }
-        let keep = usize::from(c.keep_nominal);
-        for i in 0..k {
-            for j in 0..t {
-                for d in 0..3 {
-                    let idx = (i * t + j) * 3 + d;
-                    let eps = if i < keep {
-                        0.0
-                    } else {
-                        c.sigma[d] * self.noise[idx]
-                    };
-                    let a = (self.nominal[j * 3 + d] + eps).clamp(c.action_min[d], c.action_max[d]);
-                    self.actions[idx] = a as f32;
-                }
-            }
-        }
+        self.rng = self.rng.after_normals(k * per_sample);
+        let nominal = &self.nominal;
+        self.ws
+            .workers()
+            .for_each_row_block(
+                &mut self.actions,
+                per_sample,
+                &mut self.sample_blocks,
+                |rows, actions, b| {
+                    for (i, acts) in rows.zip(actions.chunks_exact_mut(per_sample)) {
+                        b.draw(c, i, nominal, acts);
+                    }
+                    Ok(())
+                },
+            )
+            .map_err(LearnError::from)?;
+        Ok(())
     }
 
     fn rollout(&mut self, model: &Model) -> Result<(), MppiError> {
@@ -303,6 +300,50 @@ impl Mppi {
             &mut self.traj,
         );
         Ok(())
+    }
+}
+
+/// A block of samples' position in the noise stream and its noise buffer.
+#[derive(Debug, Clone)]
+struct SampleBlock {
+    rng: SimRng,
+    noise: Vec<f64>,
+}
+
+impl Default for SampleBlock {
+    fn default() -> Self {
+        Self {
+            rng: SimRng::new(0),
+            noise: Vec::new(),
+        }
+    }
+}
+
+impl SampleBlock {
+    /// Sample `i`'s noise (AR(1) along the horizon with correlation β and unit variance) and its
+    /// clamped actions; the first `keep_nominal` samples are the nominal sequence itself (their
+    /// noise is drawn all the same, so the stream does not depend on the setting).
+    fn draw(&mut self, c: &MppiConfig, i: usize, nominal: &[f64], actions: &mut [f32]) {
+        let beta = c.noise_correlation;
+        let gain = (1.0 - beta * beta).sqrt();
+        for idx in 0..self.noise.len() {
+            let n = self.rng.normal();
+            self.noise[idx] = if idx < 3 {
+                n
+            } else {
+                beta * self.noise[idx - 3] + gain * n
+            };
+        }
+        let keep = i < usize::from(c.keep_nominal);
+        for (idx, a) in actions.iter_mut().enumerate() {
+            let d = idx % 3;
+            let eps = if keep {
+                0.0
+            } else {
+                c.sigma[d] * self.noise[idx]
+            };
+            *a = (nominal[idx] + eps).clamp(c.action_min[d], c.action_max[d]) as f32;
+        }
     }
 }
 

@@ -1073,6 +1073,12 @@ impl RolloutWorkspace {
         }
     }
 
+    /// The worker threads, for other batched work between rollouts (an MPPI step's sampling
+    /// and scoring): one pool per controller, so no thread is started per step.
+    pub fn workers(&mut self) -> &mut Workers {
+        &mut self.workers
+    }
+
     fn prepare(&mut self) {
         let threads = self.workers.threads();
         if self.blocks.len() != threads {

@@ -53,6 +53,26 @@ impl SimRng {
         r * c
     }
 
+    /// The stream as it will be after `n` more calls of [`SimRng::normal`], without drawing
+    /// them (one seek of the ChaCha counter): the calls on the result give the numbers that
+    /// calls `n + 1, n + 2, …` on `self` would. Lets several threads draw consecutive parts of
+    /// one stream of normals, bitwise as one thread would.
+    pub fn after_normals(&self, n: usize) -> SimRng {
+        let mut r = self.clone();
+        let mut n = n;
+        if n > 0 && r.spare_normal.take().is_some() {
+            n -= 1;
+        }
+        // Every pair of normals takes two 64-bit words, four 32-bit ChaCha words.
+        let pairs = (n / 2) as u128;
+        let pos = r.inner.get_word_pos() + 4 * pairs;
+        r.inner.set_word_pos(pos);
+        if n % 2 == 1 {
+            r.normal();
+        }
+        r
+    }
+
     /// `true` with probability `p`.
     pub fn bernoulli(&mut self, p: f64) -> bool {
         self.uniform() < p

@@ -2,8 +2,8 @@
 //! not change them, and different seeds differ. Also the shape of generated episodes.
 
 use dynlab_sim::{
-    CarExplorer, CarScenario, Episode, PushExplorer, PushScenario, Record, Track, concatenate,
-    generate_car_episodes, generate_push_episodes,
+    CarExplorer, CarScenario, Episode, PushExplorer, PushScenario, Record, SimRng, Track,
+    concatenate, generate_car_episodes, generate_push_episodes,
 };
 
 fn bits(e: &[Episode]) -> String {
@@ -161,4 +161,33 @@ fn concatenation_lays_episodes_end_to_end() {
     }
     let second = all[eps[0].samples.len()].t_ns;
     assert_eq!(second, 1_000 + eps[0].duration_ns + 60_000_000_000);
+}
+
+#[test]
+fn a_stream_sought_past_normals_continues_it_bitwise() {
+    for start in [0usize, 1, 2, 7] {
+        let mut base = SimRng::new(41);
+        // A spare normal pending (odd start) or not, and a uniform drawn in between.
+        for _ in 0..start {
+            base.normal();
+        }
+        if start == 2 {
+            base.uniform();
+        }
+        let mut seq = base.clone();
+        let drawn: Vec<f64> = (0..40).map(|_| seq.normal()).collect();
+        for skip in [0usize, 1, 2, 3, 10, 33] {
+            let mut ahead = base.after_normals(skip);
+            let rest: Vec<f64> = (skip..40).map(|_| ahead.normal()).collect();
+            assert!(
+                rest.iter()
+                    .zip(&drawn[skip..])
+                    .all(|(a, b)| a.to_bits() == b.to_bits()),
+                "start {start}, skip {skip}"
+            );
+        }
+        // After the seek the stream goes on as the sequential one does.
+        let mut ahead = base.after_normals(40);
+        assert_eq!(ahead.next_u64(), seq.next_u64(), "start {start}");
+    }
 }
