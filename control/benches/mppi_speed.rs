@@ -2,8 +2,8 @@
 //! for K = 1000, T = 20 and the paper's K = 100, T = 10, on 1 and 2 threads, beside an
 //! equivalent PyTorch MPPI (`benches/torch_mppi.py`, run when `DYNLAB_TORCH_PYTHON` names a
 //! Python with torch). Prints a table with the ratios, a row for `MppiConfig::default()` (what
-//! `dynlab eval push` and `mppi_pusher` run), and a second table with the phases of a step
-//! (noise, rollout, costs, rest) timed on their own.
+//! `dynlab eval push` and `mppi_pusher` run), and a second table with the batched rollout timed
+//! on its own beside the whole step.
 //!
 //! ```sh
 //! DYNLAB_TORCH_PYTHON=/path/to/python cargo bench -p dynlab-control --bench mppi_speed
@@ -13,7 +13,7 @@ use std::path::Path;
 use std::process::Command;
 use std::time::Instant;
 
-use dynlab_control::mppi::{CostWeights, Mppi, MppiConfig, PushTask, trajectory_cost};
+use dynlab_control::mppi::{Mppi, MppiConfig, PushTask};
 use dynlab_learn::dynamics::ode::Solver;
 use dynlab_learn::train::default_physics_solver;
 use dynlab_learn::{Model, ModelKind, Network, Normalization, RolloutWorkspace, World};
@@ -90,28 +90,16 @@ fn median_ms(reps: usize, mut f: impl FnMut()) -> f64 {
     times[times.len() / 2]
 }
 
-/// The phases of one MPPI step (obstacle scene), each timed on its own with the same
-/// work `Mppi::step` does: the K·T·3 normal draws and clamped sequences, the batched rollout, the
-/// K trajectory costs; "rest" is the whole step minus these (weights, averaging, shift, checks).
-fn phases(model: &Model, k: usize, t: usize, threads: usize) -> [f64; 5] {
-    let cfg = MppiConfig {
-        samples: k,
-        horizon: t,
-        threads,
-        ..MppiConfig::default()
-    };
+/// One MPPI step (obstacle scene) and its batched rollout timed on its own; the rest of the
+/// step (noise, clamping and costs, split over the same worker threads, then the weighted
+/// average and the shift) is the difference.
+fn phases(model: &Model, k: usize, t: usize, threads: usize) -> [f64; 3] {
     let scene = PushScenario::obstacle();
-    let task = PushTask::from_scenario(&scene, cfg.obstacle_margin);
     let reps = if k * t >= 10_000 { 15 } else { 200 };
     let mut rng = SimRng::new(1);
-    let mut noise = vec![0.0f64; k * t * 3];
-    let mut actions = vec![0.0f32; k * t * 3];
-    let sample = median_ms(reps, || {
-        for (n, a) in noise.iter_mut().zip(actions.iter_mut()) {
-            *n = rng.normal();
-            *a = (0.3 * *n).clamp(-1.0, 1.0) as f32;
-        }
-    });
+    let actions: Vec<f32> = (0..k * t * 3)
+        .map(|_| (0.3 * rng.normal()).clamp(-1.0, 1.0) as f32)
+        .collect();
     let s0: Vec<f32> = (0..k).flat_map(|_| scene.start.map(|v| v as f32)).collect();
     let mut traj = vec![0.0f32; k * t * 3];
     let mut ws = RolloutWorkspace::new(threads);
@@ -120,26 +108,8 @@ fn phases(model: &Model, k: usize, t: usize, threads: usize) -> [f64; 5] {
             .rollout_f32(&s0, &actions, &mut traj, &mut ws)
             .expect("rollout");
     });
-    let weights = CostWeights {
-        q: cfg.q,
-        q_terminal: cfg.q_terminal,
-        collision: cfg.collision_cost,
-        swept: cfg.swept_collision,
-    };
-    let mut costs = vec![0.0; k];
-    let cost = median_ms(reps, || {
-        for (c, tr) in costs.iter_mut().zip(traj.chunks_exact(t * 3)) {
-            *c = trajectory_cost(&task, &weights, scene.start, tr);
-        }
-    });
     let whole = time_step(model, k, t, threads, true);
-    [
-        whole,
-        sample,
-        rollout,
-        cost,
-        whole - sample - rollout - cost,
-    ]
+    [whole, rollout, whole - rollout]
 }
 
 fn torch_times() -> Option<Vec<(usize, usize, f64)>> {
@@ -209,16 +179,14 @@ fn main() {
     );
     println!();
     println!(
-        "Phases of one step (node-rk4 + obstacle; milliseconds, medians; \"rest\" = whole − the others):"
+        "Phases of one step (node-rk4 + obstacle; milliseconds, medians; \"rest\" = noise, clamping, costs, averaging):"
     );
-    println!("| K | T | threads | whole step | noise + clamp | rollout_f32 | costs | rest |");
-    println!("|---|---|---|---|---|---|---|---|");
+    println!("| K | T | threads | whole step | rollout_f32 | rest |");
+    println!("|---|---|---|---|---|---|");
     for (k, t) in [(1000, 20), (100, 10)] {
         for threads in [1, 2] {
-            let [whole, sample, rollout, cost, rest] = phases(&rk4, k, t, threads);
-            println!(
-                "| {k} | {t} | {threads} | {whole:.3} | {sample:.3} | {rollout:.3} | {cost:.3} | {rest:.3} |"
-            );
+            let [whole, rollout, rest] = phases(&rk4, k, t, threads);
+            println!("| {k} | {t} | {threads} | {whole:.3} | {rollout:.3} | {rest:.3} |");
         }
     }
     if torch.is_none() {

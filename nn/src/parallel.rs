@@ -188,7 +188,10 @@ fn wait_until(slot: &Slot, spin: Duration, asleep: &AtomicBool, ready: impl Fn()
         // side sees `asleep` and wakes it.
         fence(Ordering::SeqCst);
         while !ready() {
-            guard = slot.wake.wait(guard).unwrap_or_else(PoisonError::into_inner);
+            guard = slot
+                .wake
+                .wait(guard)
+                .unwrap_or_else(PoisonError::into_inner);
         }
         asleep.store(false, Ordering::SeqCst);
         return;
@@ -252,9 +255,8 @@ impl Workers {
         let slots = &self.shared.slots;
         let on_workers = n.saturating_sub(1).min(slots.len());
         // SAFETY: only the lifetime is erased; `run` waits below for every job that holds it.
-        let erased: ErasedJob = unsafe {
-            std::mem::transmute::<*const (dyn Fn(usize) + Sync + '_), ErasedJob>(f)
-        };
+        let erased: ErasedJob =
+            unsafe { std::mem::transmute::<*const (dyn Fn(usize) + Sync + '_), ErasedJob>(f) };
         for (w, slot) in slots.iter().enumerate().take(on_workers) {
             // SAFETY: the worker is idle (`&mut self`: every earlier job is done), so it does not
             // read `job` until `posted` moves.
@@ -306,7 +308,10 @@ impl Workers {
         let results: Vec<Mutex<Result<(), NnError>>> =
             jobs.iter().map(|_| Mutex::new(Ok(()))).collect();
         self.run(jobs.len(), &|i| {
-            let job = jobs[i].lock().unwrap_or_else(PoisonError::into_inner).take();
+            let job = jobs[i]
+                .lock()
+                .unwrap_or_else(PoisonError::into_inner)
+                .take();
             if let Some((rows, chunk, state)) = job {
                 *results[i].lock().unwrap_or_else(PoisonError::into_inner) = f(rows, chunk, state);
             }
