@@ -12,7 +12,6 @@
 //! a separate multiply and add round twice, so the last bit may differ between machines with and
 //! without FMA).
 
-use std::ops::Range;
 use std::sync::OnceLock;
 
 use crate::Activation;
@@ -376,13 +375,9 @@ dispatch! {
 pub(crate) const NR: usize = 16;
 /// Rows per register block: 4 rows × 2 vectors = 8 accumulators (of 16 AVX2 registers).
 const MR: usize = 4;
-/// The half-width column block of the last columns of an AVX-512 forward layer.
-const HALF: usize = NR / 2;
 
 /// Packs `w` ([n, k] row-major) as Wᵀ into `wt` (k × n_pad, zero-padded) and the bias into
-/// `bias_pad` (n_pad). Returns n_pad: a multiple of [`NR`], or with AVX-512 of [`HALF`] (the
-/// last 8 columns then run in half-width registers: a 100-wide layer computes 104 columns, not
-/// 112, and the 3-wide output layer 8, not 16).
+/// `bias_pad` (n_pad). Returns n_pad.
 pub(crate) fn pack_transposed(
     w: &[f32],
     bias: &[f32],
@@ -391,8 +386,7 @@ pub(crate) fn pack_transposed(
     wt: &mut Vec<f32>,
     bias_pad: &mut Vec<f32>,
 ) -> usize {
-    let block = if use_avx512() { HALF } else { NR };
-    let n_pad = n.div_ceil(block) * block;
+    let n_pad = n.div_ceil(NR) * NR;
     wt.clear();
     wt.resize(k * n_pad, 0.0);
     for (o, row) in w.chunks_exact(k).enumerate().take(n) {
@@ -422,7 +416,6 @@ fn act_block<const F: bool, const C: usize>(act: Activation, acc: &mut [f32; C])
 #[allow(clippy::too_many_arguments)]
 fn dense_block<const F: bool, const R: usize, const C: usize>(
     act: Activation,
-    cols: Range<usize>,
     i: usize,
     k: usize,
     n: usize,
@@ -435,7 +428,7 @@ fn dense_block<const F: bool, const R: usize, const C: usize>(
 ) {
     let rows: [&[f32]; R] = std::array::from_fn(|r| &a[(i + r) * k..(i + r + 1) * k]);
     let keep_z = act.needs_preactivation();
-    for jb in cols.step_by(C) {
+    for jb in (0..n_pad).step_by(C) {
         let mut acc = [[0.0f32; C]; R];
         let b0: &[f32; C] = bias_pad[jb..jb + C].try_into().unwrap_or(&[0.0; C]);
         for accr in acc.iter_mut() {
@@ -479,22 +472,20 @@ fn dense_block<const F: bool, const R: usize, const C: usize>(
     }
 }
 
-/// `dst = acc[..dst.len()]` (`dst.len() < C`): whole vectors of [`NR`] (or [`HALF`]) as fixed-length copies,
+/// `dst = acc[..dst.len()]` (`dst.len() < C`): whole vectors of [`NR`] as fixed-length copies,
 /// the rest through a one-vector copy, so `acc` is only ever indexed at constant positions (a
 /// variable-length copy from it called `memcpy` per row, and dynamic indexing would keep the
 /// accumulators in memory).
 #[inline(always)]
 fn store_partial<const C: usize>(dst: &mut [f32], acc: &[f32; C]) {
     let cols = dst.len();
-    for v in 0..C.div_ceil(NR) {
+    for v in 0..C / NR {
         let c0 = v * NR;
         if c0 >= cols {
             break;
         }
-        // NR, or the HALF-wide last vector of a row padded to a multiple of HALF.
-        let width = NR.min(C - c0);
         let mut src = [0.0f32; NR];
-        src[..width].copy_from_slice(&acc[c0..c0 + width]);
+        src.copy_from_slice(&acc[c0..c0 + NR]);
         if c0 + NR <= cols {
             dst[c0..c0 + NR].copy_from_slice(&src);
         } else {
@@ -528,23 +519,11 @@ fn dense_forward_impl<const F: bool, const W: bool>(
         macro_rules! whole_rows {
             ($r:literal, $c:literal) => {{
                 while i + $r <= m {
-                    dense_block::<F, $r, $c>(
-                        act,
-                        0..n_pad,
-                        i,
-                        k,
-                        n,
-                        n_pad,
-                        a,
-                        wt,
-                        bias_pad,
-                        out,
-                        z,
-                    );
+                    dense_block::<F, $r, $c>(act, i, k, n, n_pad, a, wt, bias_pad, out, z);
                     i += $r;
                 }
                 while i < m {
-                    dense_block::<F, 1, $c>(act, 0..n_pad, i, k, n, n_pad, a, wt, bias_pad, out, z);
+                    dense_block::<F, 1, $c>(act, i, k, n, n_pad, a, wt, bias_pad, out, z);
                     i += 1;
                 }
                 return;
@@ -565,24 +544,23 @@ fn dense_forward_impl<const F: bool, const W: bool>(
         }
         // AVX-512: one 16-lane register per row, so twice the rows for 8 accumulators.
         while i + 2 * MR <= m {
-            rows_block::<F, { 2 * MR }>(act, i, k, n, n_pad, a, wt, bias_pad, out, z);
+            dense_block::<F, { 2 * MR }, NR>(act, i, k, n, n_pad, a, wt, bias_pad, out, z);
             i += 2 * MR;
         }
     }
     while i + MR <= m {
-        rows_block::<F, MR>(act, i, k, n, n_pad, a, wt, bias_pad, out, z);
+        dense_block::<F, MR, NR>(act, i, k, n, n_pad, a, wt, bias_pad, out, z);
         i += MR;
     }
-    // The last rows: in a block of R rows each column vector is a chain of dependent FMAs, so
-    // fewer rows than the block's are slow per row. A wide layer runs them one at a time over
-    // the whole padded row (up to 8 registers of chains); a narrow one (the 3-wide output
-    // layer) runs all of them in one block, as fast as a full block.
-    macro_rules! whole_row_tail {
+    // The last rows one at a time, each over its whole padded row when that fits in 8 registers:
+    // a 1 × NR block is one chain of dependent FMAs, several times slower per row (with 50 rows
+    // per thread, 2 such rows cost 14 % of a 6 → 100 → 100 → 3 rollout).
+    macro_rules! tail_rows {
         ($($c:literal),*) => {
             match n_pad {
                 $($c if W || $c <= 4 * NR => {
                     while i < m {
-                        dense_block::<F, 1, $c>(act, 0..n_pad, i, k, n, n_pad, a, wt, bias_pad, out, z);
+                        dense_block::<F, 1, $c>(act, i, k, n, n_pad, a, wt, bias_pad, out, z);
                         i += 1;
                     }
                 })*
@@ -590,44 +568,10 @@ fn dense_forward_impl<const F: bool, const W: bool>(
             }
         };
     }
-    whole_row_tail!(32, 40, 48, 56, 64, 72, 80, 88, 96, 104, 112, 120, 128);
-    match m - i {
-        0 => {}
-        1 => rows_block::<F, 1>(act, i, k, n, n_pad, a, wt, bias_pad, out, z),
-        2 => rows_block::<F, 2>(act, i, k, n, n_pad, a, wt, bias_pad, out, z),
-        3 => rows_block::<F, 3>(act, i, k, n, n_pad, a, wt, bias_pad, out, z),
-        4 => rows_block::<F, 4>(act, i, k, n, n_pad, a, wt, bias_pad, out, z),
-        5 => rows_block::<F, 5>(act, i, k, n, n_pad, a, wt, bias_pad, out, z),
-        6 => rows_block::<F, 6>(act, i, k, n, n_pad, a, wt, bias_pad, out, z),
-        _ => {
-            while i < m {
-                rows_block::<F, 1>(act, i, k, n, n_pad, a, wt, bias_pad, out, z);
-                i += 1;
-            }
-        }
-    }
-}
-
-/// Output rows `i..i + R` of a forward layer: the [`NR`]-wide column blocks, then the
-/// [`HALF`]-wide last block when `n_pad` is not a multiple of `NR`.
-#[inline(always)]
-#[allow(clippy::too_many_arguments)]
-fn rows_block<const F: bool, const R: usize>(
-    act: Activation,
-    i: usize,
-    k: usize,
-    n: usize,
-    n_pad: usize,
-    a: &[f32],
-    wt: &[f32],
-    bias_pad: &[f32],
-    out: &mut [f32],
-    z: &mut [f32],
-) {
-    let full = n_pad / NR * NR;
-    dense_block::<F, R, NR>(act, 0..full, i, k, n, n_pad, a, wt, bias_pad, out, z);
-    if full < n_pad {
-        dense_block::<F, R, HALF>(act, full..n_pad, i, k, n, n_pad, a, wt, bias_pad, out, z);
+    tail_rows!(32, 48, 64, 80, 96, 112, 128);
+    while i < m {
+        dense_block::<F, 1, NR>(act, i, k, n, n_pad, a, wt, bias_pad, out, z);
+        i += 1;
     }
 }
 
