@@ -552,26 +552,14 @@ fn dense_forward_impl<const F: bool, const W: bool>(
         dense_block::<F, MR, NR>(act, i, k, n, n_pad, a, wt, bias_pad, out, z);
         i += MR;
     }
-    // The last rows one at a time, each over its whole padded row when that fits in 8 registers:
-    // a 1 × NR block is one chain of dependent FMAs, several times slower per row (with 50 rows
-    // per thread, 2 such rows cost 14 % of a 6 → 100 → 100 → 3 rollout).
-    macro_rules! tail_rows {
-        ($($c:literal),*) => {
-            match n_pad {
-                $($c if W || $c <= 4 * NR => {
-                    while i < m {
-                        dense_block::<F, 1, $c>(act, i, k, n, n_pad, a, wt, bias_pad, out, z);
-                        i += 1;
-                    }
-                })*
-                _ => {}
-            }
-        };
-    }
-    tail_rows!(32, 48, 64, 80, 96, 112, 128);
-    while i < m {
-        dense_block::<F, 1, NR>(act, i, k, n, n_pad, a, wt, bias_pad, out, z);
-        i += 1;
+    // The last rows (fewer than MR) in one block: in a block of R rows each column vector is a
+    // chain of R dependent FMAs, so rows one at a time would each take as long as a whole block.
+    // (Whole padded rows in registers instead spill in the activation: 20× slower per row.)
+    match m - i {
+        0 => {}
+        1 => dense_block::<F, 1, NR>(act, i, k, n, n_pad, a, wt, bias_pad, out, z),
+        2 => dense_block::<F, 2, NR>(act, i, k, n, n_pad, a, wt, bias_pad, out, z),
+        _ => dense_block::<F, 3, NR>(act, i, k, n, n_pad, a, wt, bias_pad, out, z),
     }
 }
 
