@@ -208,9 +208,7 @@ pub fn run(args: CollectArgs) -> anyhow::Result<()> {
                 e
             })?
         }
-        Scenario::Car(s) if args.race.is_some() => {
-            race_episodes(&args, s, count, threads, &tick)?
-        }
+        Scenario::Car(s) if args.race.is_some() => race_episodes(&args, s, count, threads, &tick)?,
         Scenario::Car(s) => {
             let explorer: CarExplorer = load_explorer(args.explore.as_deref())?;
             explorer

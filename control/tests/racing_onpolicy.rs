@@ -39,8 +39,11 @@ fn an_on_policy_episode_records_poses_odometry_and_commands_at_their_rates() {
         .collect();
     assert!(cmds.iter().all(|(t, _)| t % 50_000_000 == 0));
     let lim = &scenario.car;
-    assert!(cmds.iter().all(|(_, u)| u.steering.abs() <= lim.steering_max
-        && (lim.throttle_min..=lim.throttle_max).contains(&u.throttle)));
+    assert!(
+        cmds.iter()
+            .all(|(_, u)| u.steering.abs() <= lim.steering_max
+                && (lim.throttle_min..=lim.throttle_max).contains(&u.throttle))
+    );
     // the racer races: the car is at speed on the track after 2 s
     let last = e
         .samples

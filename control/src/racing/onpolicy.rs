@@ -13,10 +13,10 @@ use dynlab_learn::dynamics::data::SavGol;
 use dynlab_sim::episode::{Episode, EpisodeEnd, Record, Sample};
 use dynlab_sim::{CarInput, CarScenario, CarState, CarWorld, SimRng, Track, derive_seed};
 
+use super::RacingError;
 use super::estimate::CarStateEstimator;
 use super::plant::CarDynamics;
 use super::race::{Racer, RacerSettings};
-use super::RacingError;
 
 /// Seed streams of an on-policy episode (distinct from the simulator's exploration streams).
 const STREAM_START: u64 = 0x52_41_43_45_01;
