@@ -115,7 +115,7 @@ pub enum RaceModelArg {
     /// The simulator's bicycle model with the scenario's car parameters and exact Jacobians
     /// (fast; no friction ellipse, no hidden effects).
     Physics,
-    /// The simulator itself, with finite-difference Jacobians (exact, ≈ 5× slower).
+    /// The simulator itself, with finite-difference Jacobians (exact, ≈ 4–5× slower).
     Simulator,
 }
 
@@ -173,6 +173,9 @@ pub fn run(args: CollectArgs) -> anyhow::Result<()> {
         let summary = replay(&args, &scenario, actions, world, options)?;
         print_summary(&summary, None, started);
         return Ok(());
+    }
+    if args.race.is_some() && args.world != WorldArg::Car {
+        bail!("--race drives the car racer: use `dynlab collect car --race FILE`");
     }
     let count = args.episodes.unwrap_or(0);
     if count == 0 {
@@ -250,7 +253,20 @@ fn race_episodes(
     tick: &(dyn Fn(u64) + Sync),
 ) -> anyhow::Result<Vec<Episode>> {
     use dynlab_control::racing::{CarDynamics, OnPolicySettings, SimCar, racing_episode};
-    let mut settings: OnPolicySettings = load_explorer(args.race.as_deref())?;
+    let mut settings: OnPolicySettings = match args.race.as_deref() {
+        None => OnPolicySettings::default(),
+        Some(path) => {
+            let text = std::fs::read_to_string(path)
+                .with_context(|| format!("cannot read --race file {}", path.display()))?;
+            toml::from_str(&text).map_err(|e| {
+                anyhow::anyhow!(
+                    "--race file {}: {} (every key is optional; see OnPolicySettings and, under [racer], RacerSettings)",
+                    path.display(),
+                    e.to_string().trim()
+                )
+            })?
+        }
+    };
     settings.racer.limits.steering_max = scenario.car.steering_max;
     settings.racer.limits.throttle_min = scenario.car.throttle_min;
     settings.racer.limits.throttle_max = scenario.car.throttle_max;
@@ -559,6 +575,20 @@ mod tests {
         ])
         .unwrap_err();
         assert!(format!("{err:#}").contains("track"), "{err:#}");
+        std::fs::write(&race, "speed_rang = [1.8, 2.2]\n").unwrap();
+        let err = collect(&[
+            "car",
+            "--scenario",
+            scenario,
+            "--race",
+            race.to_str().unwrap(),
+            "--episodes",
+            "1",
+            "--out",
+            tmp.path().join("bag3").to_str().unwrap(),
+        ])
+        .unwrap_err();
+        assert!(format!("{err:#}").contains("speed_rang"), "{err:#}");
     }
 
     #[test]
