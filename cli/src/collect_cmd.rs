@@ -95,10 +95,28 @@ pub struct CollectArgs {
     /// Chunk compression.
     #[arg(long, value_enum, default_value_t = CompressionArg::Zstd)]
     compression: CompressionArg,
+    /// Car: drive the racer on the scenario's track instead of exploring (on-policy racing
+    /// data): TOML with the fields of `dynlab_control::racing::OnPolicySettings` (every key
+    /// optional, e.g. `speed_range = [1.5, 2.5]`, `steering_noise = 0.05`, `[racer]`).
+    #[arg(long, value_name = "FILE", conflicts_with_all = ["explore", "actions"])]
+    race: Option<PathBuf>,
+    /// With --race: the racer's model.
+    #[arg(long, value_enum, default_value_t = RaceModelArg::Physics, requires = "race")]
+    race_model: RaceModelArg,
     /// Time between episodes on the bag's time line (s). The offline tools split trajectories
     /// at gaps over 5 pose intervals: with one pose per push (`pose_rate = 0.5`) use ≥ 20.
     #[arg(long, value_name = "SECONDS", default_value_t = 1.0)]
     episode_gap: f64,
+}
+
+/// The model inside the on-policy racer.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum RaceModelArg {
+    /// The simulator's bicycle model with the scenario's car parameters and exact Jacobians
+    /// (fast; no friction ellipse, no hidden effects).
+    Physics,
+    /// The simulator itself, with finite-difference Jacobians (exact, ≈ 4–5× slower).
+    Simulator,
 }
 
 enum Scenario {
@@ -156,6 +174,9 @@ pub fn run(args: CollectArgs) -> anyhow::Result<()> {
         print_summary(&summary, None, started);
         return Ok(());
     }
+    if args.race.is_some() && args.world != WorldArg::Car {
+        bail!("--race drives the car racer: use `dynlab collect car --race FILE`");
+    }
     let count = args.episodes.unwrap_or(0);
     if count == 0 {
         bail!("--episodes must be at least 1");
@@ -190,6 +211,7 @@ pub fn run(args: CollectArgs) -> anyhow::Result<()> {
                 e
             })?
         }
+        Scenario::Car(s) if args.race.is_some() => race_episodes(&args, s, count, threads, &tick)?,
         Scenario::Car(s) => {
             let explorer: CarExplorer = load_explorer(args.explore.as_deref())?;
             explorer
@@ -220,6 +242,68 @@ pub fn run(args: CollectArgs) -> anyhow::Result<()> {
     let summary = write_bag(&args.out, world, args.clock, options, &samples)?;
     print_summary(&summary, Some((count, left_table)), started);
     Ok(())
+}
+
+/// On-policy racing episodes (`--race`): the racer on the scenario's track.
+fn race_episodes(
+    args: &CollectArgs,
+    scenario: &CarScenario,
+    count: u64,
+    threads: usize,
+    tick: &(dyn Fn(u64) + Sync),
+) -> anyhow::Result<Vec<Episode>> {
+    use dynlab_control::racing::{CarDynamics, OnPolicySettings, SimCar, racing_episode};
+    let mut settings: OnPolicySettings = match args.race.as_deref() {
+        None => OnPolicySettings::default(),
+        Some(path) => {
+            let text = std::fs::read_to_string(path)
+                .with_context(|| format!("cannot read --race file {}", path.display()))?;
+            toml::from_str(&text).map_err(|e| {
+                anyhow::anyhow!(
+                    "--race file {}: {} (every key is optional; see OnPolicySettings and, under [racer], RacerSettings)",
+                    path.display(),
+                    e.to_string().trim()
+                )
+            })?
+        }
+    };
+    settings.racer.limits.steering_max = scenario.car.steering_max;
+    settings.racer.limits.throttle_min = scenario.car.throttle_min;
+    settings.racer.limits.throttle_max = scenario.car.throttle_max;
+    settings
+        .validate()
+        .context("bad --race settings (the key is named above)")?;
+    let track = scenario.track_data.clone().context(
+        "--race needs a scenario with a track (e.g. launch_scripts/scenarios/car_track.toml)",
+    )?;
+    let dt = 0.01;
+    let physics;
+    let sim;
+    let model: &dyn CarDynamics = match args.race_model {
+        RaceModelArg::Physics => {
+            physics = dynlab_control::racing::true_car_model(&scenario.car, dt)?;
+            &physics
+        }
+        RaceModelArg::Simulator => {
+            sim = SimCar::new(scenario, dt)?;
+            &sim
+        }
+    };
+    Ok(dynlab_sim::episode::generate(
+        count,
+        args.seed,
+        threads,
+        |i, seed| {
+            let e = racing_episode(model, scenario, &track, &settings, seed, i).map_err(|e| {
+                dynlab_sim::SimError::Input {
+                    what: "racing episode",
+                    message: e.to_string(),
+                }
+            });
+            tick(i);
+            e
+        },
+    )?)
 }
 
 fn write_bag(
@@ -427,6 +511,84 @@ mod tests {
                 "{world}: the seed had no effect"
             );
         }
+    }
+
+    #[test]
+    fn on_policy_racing_bags_load_for_training_with_the_car_topics_and_rates() {
+        let tmp = tempfile::tempdir().unwrap();
+        let race = tmp.path().join("race.toml");
+        std::fs::write(&race, "duration = 1.0\nspeed_range = [1.8, 2.2]\n").unwrap();
+        let out = tmp.path().join("bag");
+        let scenario = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../launch_scripts/scenarios/car_track.toml"
+        );
+        collect(&[
+            "car",
+            "--scenario",
+            scenario,
+            "--race",
+            race.to_str().unwrap(),
+            "--episodes",
+            "2",
+            "--seed",
+            "3",
+            "--out",
+            out.to_str().unwrap(),
+        ])
+        .unwrap();
+        let bag = dynlab_bag::Bag::open(&out).unwrap();
+        let cmds = bag
+            .read::<dynlab_msgs::ackermann_msgs::AckermannDriveStamped>("/car/cmd")
+            .unwrap();
+        let poses = bag
+            .read::<dynlab_msgs::geometry_msgs::PoseStamped>("/car/pose")
+            .unwrap();
+        // two 1 s episodes: 101 poses (100 Hz) and 20 commands (20 Hz) each
+        assert_eq!((poses.len(), cmds.len()), (202, 40));
+        let data = dynlab_learn::dataset::load_bags(
+            &[out],
+            None,
+            &dynlab_learn::dataset::Topics::default(),
+            &dynlab_learn::dynamics::data::SavGol::default(),
+        )
+        .unwrap();
+        assert_eq!(data.world, dynlab_learn::World::Car);
+        assert_eq!(data.trajectories.len(), 2, "the episode gap splits them");
+        assert!((data.pose_dt_s - 0.01).abs() < 1e-9, "{}", data.pose_dt_s);
+        // the racer drives: the data is at speed, not a standing car
+        let vmax = data
+            .trajectories
+            .iter()
+            .flat_map(|t| t.s.chunks(t.dim_s).map(|s| s[3]))
+            .fold(0.0f64, f64::max);
+        assert!(vmax > 0.8, "top speed in the data {vmax} m/s");
+        // --race needs a track
+        let err = collect(&[
+            "car",
+            "--race",
+            race.to_str().unwrap(),
+            "--episodes",
+            "1",
+            "--out",
+            tmp.path().join("bag2").to_str().unwrap(),
+        ])
+        .unwrap_err();
+        assert!(format!("{err:#}").contains("track"), "{err:#}");
+        std::fs::write(&race, "speed_rang = [1.8, 2.2]\n").unwrap();
+        let err = collect(&[
+            "car",
+            "--scenario",
+            scenario,
+            "--race",
+            race.to_str().unwrap(),
+            "--episodes",
+            "1",
+            "--out",
+            tmp.path().join("bag3").to_str().unwrap(),
+        ])
+        .unwrap_err();
+        assert!(format!("{err:#}").contains("speed_rang"), "{err:#}");
     }
 
     #[test]

@@ -170,6 +170,7 @@ fn racing_gradient_with_progress_and_excursion_matches_finite_differences() {
                 track: &track,
                 progress_weight: 10.0,
                 margin: 0.03,
+                margin_growth: 0.004,
                 excursion_weight: 100.0,
                 reference_weight: 1.0,
                 reference_step: 0.1,
@@ -259,6 +260,7 @@ fn infeasible_track_qp_is_reported_as_a_status() {
                 track: &track,
                 progress_weight: 1.0,
                 margin: 0.0,
+                margin_growth: 0.0,
                 excursion_weight: 100.0,
                 reference_weight: 1.0,
                 reference_step: 0.1,
@@ -569,4 +571,71 @@ fn bad_racer_settings_are_refused_with_the_setting_named() {
         assert!(err.contains(name), "{name}: {err}");
     }
     assert!(Racer::new(&model, &track, RacerSettings::default()).is_ok());
+}
+
+/// The margin grows along the horizon: the excursion cost starts `k · margin_growth` further
+/// in at step k, and a racer with a growing margin plans its far steps further from the
+/// borders than with the constant margin.
+#[test]
+fn a_growing_margin_keeps_the_far_plan_further_from_the_borders() {
+    let model = physics_car();
+    let track = Track::oval(1.0, 0.5, 0.2, 120).unwrap();
+    let terms = TrackTerms {
+        track: &track,
+        progress_weight: 0.0,
+        margin: 0.03,
+        margin_growth: 0.002,
+        excursion_weight: 1000.0,
+        reference_weight: 1.0,
+        reference_step: 0.1,
+        reference_progress: &[],
+        slip_weight: 0.0,
+    };
+    assert!((terms.margin_at(0) - 0.03).abs() < 1e-15);
+    assert!((terms.margin_at(20) - 0.07).abs() < 1e-12);
+    // the far end of the plan, entering the first bend at speed, from the start of the oval
+    let far_border = |growth: f64| {
+        let mut racer = Racer::new(
+            &model,
+            &track,
+            RacerSettings {
+                margin_growth: growth,
+                ..RacerSettings::default()
+            },
+        )
+        .unwrap();
+        let plant = Plant::new(&model, 5).unwrap();
+        let p = track.start_pose();
+        let mut s = [p.x, p.y, p.theta, 0.0, 0.0, 0.0];
+        let mut worst = f64::INFINITY;
+        for _ in 0..30 {
+            let step = racer.step(s).unwrap();
+            for x in &step.predicted[15..] {
+                let l = track.locate([x[0], x[1]]);
+                worst = worst.min(l.half_width - l.lateral.abs());
+            }
+            s = plant.rollout(&s, &[step.input]).unwrap()[1];
+        }
+        worst
+    };
+    let (flat, grown) = (far_border(0.0), far_border(0.06));
+    // 0.06 m/s: steps 15–20 (0.75–1 s ahead) keep 0.075–0.09 m
+    assert!(
+        grown > flat + 0.01,
+        "far plan border distance {grown} vs {flat}"
+    );
+    eprintln!("far plan border distance {grown} vs {flat}");
+    assert!(
+        Racer::new(
+            &model,
+            &track,
+            RacerSettings {
+                margin_growth: -0.1,
+                ..RacerSettings::default()
+            }
+        )
+        .unwrap_err()
+        .to_string()
+        .contains("margin_growth")
+    );
 }

@@ -88,6 +88,11 @@ pub struct TrackTerms<'t> {
     /// Distance kept from the borders \[m\] (constraint and excursion cost use
     /// `half_width − margin`).
     pub margin: f64,
+    /// Growth of the margin per control step along the horizon \[m\]: step k keeps
+    /// `margin + k · margin_growth` from the borders (see [`TrackTerms::margin_at`]; 0:
+    /// constant). A model's prediction error grows with the horizon; a plan that keeps room
+    /// in proportion to it stays feasible when the car does not follow the plan exactly.
+    pub margin_growth: f64,
     /// Weight of `max(0, |lateral| − (half_width − margin))²` at every step (the paper's
     /// excursion cost; the SQP also imposes the borders as hard constraints).
     pub excursion_weight: f64,
@@ -104,6 +109,14 @@ pub struct TrackTerms<'t> {
     /// the plan in the tyres' linear range, away from slides and spins (which a learned model
     /// predicts worst and a receding horizon cannot recover from).
     pub slip_weight: f64,
+}
+
+impl TrackTerms<'_> {
+    /// Distance kept from the borders at control step `k` of the horizon \[m\]:
+    /// `margin + k · margin_growth`.
+    pub fn margin_at(&self, k: usize) -> f64 {
+        self.margin + k as f64 * self.margin_growth
+    }
 }
 
 /// The total cost `ℓ(x(u), u)`.
@@ -213,7 +226,7 @@ impl<'t> Objective<'t> {
                 st.grad[4] += 2.0 * c * x[4];
                 st.hess[4 * 6 + 4] += 2.0 * c;
             }
-            let w = l.half_width - tt.margin;
+            let w = l.half_width - tt.margin_at(k);
             let e = l.lateral.abs() - w;
             if e > 0.0 {
                 let sg = l.lateral.signum();

@@ -72,6 +72,11 @@ pub struct RacerSettings {
     pub slip_weight: f64,
     /// Distance kept from the borders \[m\]. Default 0.03 (about half the car's width).
     pub margin: f64,
+    /// Growth of the margin with the time ahead in the plan \[m/s\]: the plan's state `t`
+    /// seconds ahead keeps `margin + margin_growth · t` from the borders (the model's position
+    /// error grows with the prediction horizon; near steps, which the next cycles re-plan
+    /// from measured states, keep the plain margin). Default 0 (constant margin).
+    pub margin_growth: f64,
     /// Excursion cost weight. Default 1000.
     pub excursion_weight: f64,
     /// Input limits.
@@ -110,6 +115,7 @@ impl Default for RacerSettings {
             reference_from_speed: false,
             slip_weight: 0.0,
             margin: 0.03,
+            margin_growth: 0.0,
             excursion_weight: 1000.0,
             limits: InputLimits::default(),
             reg: Regulariser {
@@ -183,6 +189,13 @@ impl<'a> Racer<'a> {
                 "margin",
                 settings.margin,
                 "margin must be ≥ 0 and progress_weight finite",
+            ));
+        }
+        if !(settings.margin_growth >= 0.0 && settings.margin_growth.is_finite()) {
+            return Err(RacingError::setting(
+                "margin_growth",
+                settings.margin_growth,
+                "a growth of the margin in m per second of horizon, finite and ≥ 0 (0: constant)",
             ));
         }
         if !(settings.slip_weight >= 0.0 && settings.slip_weight.is_finite()) {
@@ -276,6 +289,7 @@ impl<'a> Racer<'a> {
                     track: self.track,
                     progress_weight: st.progress_weight,
                     margin: st.margin,
+                    margin_growth: st.margin_growth * self.plant.dt(),
                     excursion_weight: st.excursion_weight,
                     reference_weight: st.reference_weight,
                     reference_step: st.reference_speed * self.plant.dt(),

@@ -150,7 +150,7 @@ fn solve_qp(
             let row: Vec<f64> = (0..m)
                 .map(|c| l.normal[0] * g[c] + l.normal[1] * g[m + c])
                 .collect();
-            let w = l.half_width - tt.margin;
+            let w = l.half_width - tt.margin_at(k);
             borders.push((row, w - l.lateral, w + l.lateral));
         }
     }
