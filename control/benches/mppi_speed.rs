@@ -62,7 +62,7 @@ fn time_step(model: &Model, k: usize, t: usize, threads: usize, obstacle: bool) 
     for _ in 0..3 {
         m.step(model, s).expect("step");
     }
-    let reps = if k * t >= 10_000 { 15 } else { 200 };
+    let reps = if k * t >= 10_000 { 41 } else { 401 };
     let mut times: Vec<f64> = (0..reps)
         .map(|_| {
             let t0 = Instant::now();
@@ -95,7 +95,7 @@ fn median_ms(reps: usize, mut f: impl FnMut()) -> f64 {
 /// average and the shift) is the difference.
 fn phases(model: &Model, k: usize, t: usize, threads: usize) -> [f64; 3] {
     let scene = PushScenario::obstacle();
-    let reps = if k * t >= 10_000 { 15 } else { 200 };
+    let reps = if k * t >= 10_000 { 41 } else { 401 };
     let mut rng = SimRng::new(1);
     let actions: Vec<f32> = (0..k * t * 3)
         .map(|_| (0.3 * rng.normal()).clamp(-1.0, 1.0) as f32)
