@@ -3,7 +3,7 @@
 use std::collections::VecDeque;
 
 use dynlab_learn::dynamics::data::{SavGol, savgol};
-use dynlab_sim::wrap_angle;
+use dynlab_sim::{CarState, wrap_angle};
 
 use super::plant::State;
 
@@ -69,6 +69,27 @@ impl CarStateEstimator {
             -s * xd[i] + c * yd[i],
             psid[i],
         ])
+    }
+}
+
+impl CarStateEstimator {
+    /// The state a racer sees in a simulated run at time `t`: the estimate from the measured
+    /// `pose` (`estimate`) or the simulator's true state; while the estimator has fewer than a
+    /// window of poses, the car is still at its known standing `start`.
+    pub(crate) fn observe(
+        &mut self,
+        estimate: bool,
+        t: f64,
+        pose: [f64; 3],
+        truth: &CarState,
+        start: &CarState,
+    ) -> State {
+        let measured = if estimate {
+            self.push(t, pose)
+        } else {
+            Some([truth.x, truth.y, truth.psi, truth.vx, truth.vy, truth.omega])
+        };
+        measured.unwrap_or([start.x, start.y, start.psi, 0.0, 0.0, 0.0])
     }
 }
 

@@ -129,14 +129,9 @@ pub fn run_laps(
     while rep.lap_times.len() < settings.laps && world.time() < settings.max_time {
         let truth = world.state();
         let pose = world.measure(&mut rng);
-        let measured = if settings.estimate {
-            est.push(world.time(), [pose.x, pose.y, pose.theta])
-        } else {
-            Some([truth.x, truth.y, truth.psi, truth.vx, truth.vy, truth.omega])
-        };
+        let pose = [pose.x, pose.y, pose.theta];
+        let s = est.observe(settings.estimate, world.time(), pose, &truth, &start);
         if step.is_multiple_of(hold) {
-            // before the estimator has a full window the car is still at its (known) start
-            let s = measured.unwrap_or([start.x, start.y, start.psi, 0.0, 0.0, 0.0]);
             let t0 = clock();
             let r = racer.step(s)?;
             rep.solve_times.push(clock() - t0);

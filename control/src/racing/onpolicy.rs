@@ -145,16 +145,17 @@ pub fn racing_episode(
             t_ns,
             record: Record::CarOdom(truth),
         });
-        let measured = if settings.estimate {
-            est.push(world.time(), [pose.x, pose.y, pose.theta])
-        } else {
-            Some([truth.x, truth.y, truth.psi, truth.vx, truth.vy, truth.omega])
-        };
+        let s = est.observe(
+            settings.estimate,
+            world.time(),
+            [pose.x, pose.y, pose.theta],
+            &truth,
+            &start,
+        );
         if i == ticks {
             break;
         }
         if (i as usize).is_multiple_of(hold) {
-            let s = measured.unwrap_or([start.x, start.y, start.psi, 0.0, 0.0, 0.0]);
             let r = racer.step(s)?;
             let u = limits.clamp([
                 r.input[0] + settings.steering_noise * noise_rng.normal(),

@@ -191,19 +191,21 @@ impl<'a> Racer<'a> {
                 "margin must be ≥ 0 and progress_weight finite",
             ));
         }
-        if !(settings.margin_growth >= 0.0 && settings.margin_growth.is_finite()) {
-            return Err(RacingError::setting(
+        for (key, value, fix) in [
+            (
                 "margin_growth",
                 settings.margin_growth,
                 "a growth of the margin in m per second of horizon, finite and ≥ 0 (0: constant)",
-            ));
-        }
-        if !(settings.slip_weight >= 0.0 && settings.slip_weight.is_finite()) {
-            return Err(RacingError::setting(
+            ),
+            (
                 "slip_weight",
                 settings.slip_weight,
                 "a weight on v_y² must be finite and ≥ 0 (0: off)",
-            ));
+            ),
+        ] {
+            if !(value >= 0.0 && value.is_finite()) {
+                return Err(RacingError::setting(key, value, fix));
+            }
         }
         if !(0.0..=1.0).contains(&settings.recovery_fraction) {
             return Err(RacingError::setting(
