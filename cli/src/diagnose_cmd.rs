@@ -34,6 +34,16 @@ pub struct DiagnoseArgs {
     /// Smallest held-out error reduction that counts (fraction).
     #[arg(long, default_value_t = 0.05)]
     min_reduction: f64,
+    /// Hold the model's nominal parameters instead of refitting the identifiable ones (tires,
+    /// drivetrain; pushing `c`, `κ`) with every candidate.
+    #[arg(long)]
+    no_refit: bool,
+    /// Refit these nominal parameters (comma-separated; default the model's identifiable ones).
+    #[arg(long, value_delimiter = ',')]
+    refit: Option<Vec<String>>,
+    /// Forward selection adds at most this many effects.
+    #[arg(long, default_value_t = 3)]
+    max_effects: usize,
     /// Pose topic (default from the model's world).
     #[arg(long)]
     pose_topic: Option<String>,
@@ -80,6 +90,9 @@ pub fn run(args: DiagnoseArgs) -> anyhow::Result<()> {
         seed: args.seed,
         effects,
         min_reduction: args.min_reduction,
+        refit_nominal: args.no_refit.then_some(false),
+        max_effects: args.max_effects,
+        refit_params: args.refit.clone(),
         ..DiagnoseConfig::default()
     };
     let d = diagnose(&model, &data, &cfg)?;
