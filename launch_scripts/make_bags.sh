@@ -24,6 +24,8 @@ bags=(
   "car_nominal         car   car_nominal.toml           3  201"
   "car_aero_drag       car   car_aero_drag.toml         3  202"
   "car_steering_offset car   car_steering_offset.toml   3  203"
+  "car_drag_steering   car   car_drag_steering.toml     3  204"
+  "car_steering_gain   car   car_steering_gain.toml     3  205"
 )
 for line in "${bags[@]}"; do
   read -r name world scenario episodes seed <<<"$line"

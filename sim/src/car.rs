@@ -142,6 +142,42 @@ impl CarParams {
     pub fn wheelbase(&self) -> f64 {
         self.lf + self.lr
     }
+
+    /// These parameters with every physical constant of the model scaled by its own factor
+    /// drawn uniformly from `[1 − fraction, 1 + fraction]` (seeded: the same seed gives the same
+    /// car): a car whose true parameters differ from the datasheet, for tests of
+    /// identification and diagnosis.
+    ///
+    /// Scaled, in this order: `mass`, `inertia_z`, `lf`, `lr`, `front.{b, c, d}`,
+    /// `rear.{b, c, d}`, `cm1`, `cm2`, `cr0`, `cr2`. Kept: the command limits (`steering_max`,
+    /// `throttle_min`, `throttle_max`: known from the command interface), `friction_ellipse`
+    /// and the numerical settings (`slip_speed_floor`, `rolling_speed_eps`, `substep`).
+    ///
+    /// Errors: `fraction` outside `[0, 1)` (a factor must stay positive).
+    pub fn perturbed(&self, seed: u64, fraction: f64) -> Result<CarParams, SimError> {
+        crate::rng::check_fraction("CarParams::perturbed fraction", fraction)?;
+        let mut p = self.clone();
+        let mut f = crate::rng::Perturb::new(seed, fraction);
+        for v in [
+            &mut p.mass,
+            &mut p.inertia_z,
+            &mut p.lf,
+            &mut p.lr,
+            &mut p.front.b,
+            &mut p.front.c,
+            &mut p.front.d,
+            &mut p.rear.b,
+            &mut p.rear.c,
+            &mut p.rear.d,
+            &mut p.cm1,
+            &mut p.cm2,
+            &mut p.cr0,
+            &mut p.cr2,
+        ] {
+            f.scale(v);
+        }
+        Ok(p)
+    }
 }
 
 /// Where the car may drive: a rectangular floor, optionally with a race track on it.
@@ -265,6 +301,84 @@ impl Default for GripPatch {
     }
 }
 
+/// Hidden effect: the steering gain falls with speed. The front wheels turn to
+///
+/// ```text
+/// δ_wheel = δ_servo / (1 + (vx / v0)²)   (+ steering_offset, if on)
+/// ```
+///
+/// where `δ_servo` is the clamped command (or the servo angle under `steering_rate_limit`) and
+/// `vx` the body-frame longitudinal speed \[m/s\]. At `vx = v0` the wheels turn half as far as
+/// commanded. Why: the tires' self-aligning moment grows with the lateral force, and so with
+/// speed at a given steering angle; a compliant steering linkage or a weak servo gives way to
+/// it (RC transmitters' "speed-sensitive steering" has the same shape). A model that takes
+/// `δ_wheel = δ` sees too little yaw at speed: a `δ·vx²`-like term in the residual. The
+/// form is smooth, even in `vx`, never reverses the steering and tends to 0 only as vx → ∞.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SteeringGainSpeed {
+    /// Switch. Default true.
+    pub enabled: bool,
+    /// Speed at which the gain is 1/2, v0 \[m/s\] (> 0). Default 2.5 (the explorer's top
+    /// speed): gain 0.76 at the explorer's 1.4 m/s cruise, 0.5 at 2.5 m/s.
+    pub v0: f64,
+}
+
+impl Default for SteeringGainSpeed {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            v0: 2.5,
+        }
+    }
+}
+
+impl SteeringGainSpeed {
+    /// The factor `1 / (1 + (vx / v0)²)` on the steering angle at longitudinal speed `vx`.
+    pub fn gain(&self, vx: f64) -> f64 {
+        let r = vx / self.v0;
+        1.0 / (1.0 + r * r)
+    }
+}
+
+/// Hidden effect: a steering servo with a slew-rate limit and an optional first-order lag.
+///
+/// The servo angle `δ_s` is simulator state (reset to 0, wheels straight, by
+/// [`CarWorld::reset`]). Every RK4 substep of length `h` it moves towards the clamped command
+/// `δ_cmd`:
+///
+/// ```text
+/// Δ = (δ_cmd − δ_s)(1 − e^(−h/τ))     (τ > 0: exact first-order lag over the substep)
+/// Δ = δ_cmd − δ_s                      (τ = 0: no lag)
+/// δ_s ← δ_s + clamp(Δ, −r h, r h)      so |δ̇_s| ≤ r always
+/// ```
+///
+/// and is held over the substep. Why: a hobby servo slews at a bounded rate (≈ 5–10 rad/s
+/// unloaded, slower under tire load) and lags its command; a model that takes `δ = δ_cmd`
+/// sees the yaw response late after every steering step (a lagged-input term in the residual).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SteeringRateLimit {
+    /// Switch. Default true.
+    pub enabled: bool,
+    /// Largest steering rate r \[rad/s\] (> 0). Default 3 (a full 0.35 → −0.35 rad swing takes
+    /// 0.23 s).
+    pub rate: f64,
+    /// Time constant τ of the servo's first-order lag \[s\] (≥ 0; 0 = rate limit only).
+    /// Default 0.
+    pub tau: f64,
+}
+
+impl Default for SteeringRateLimit {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            rate: 3.0,
+            tau: 0.0,
+        }
+    }
+}
+
 /// The hidden effects of the car world; each is off unless its table is present.
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -277,6 +391,10 @@ pub struct CarEffects {
     pub steering_offset: Option<SteeringOffset>,
     /// Low-grip region.
     pub grip_patch: Option<GripPatch>,
+    /// Steering gain falling with speed (not in the diagnosis library).
+    pub steering_gain_speed: Option<SteeringGainSpeed>,
+    /// Rate-limited, lagging steering servo (not in the diagnosis library).
+    pub steering_rate_limit: Option<SteeringRateLimit>,
 }
 
 fn on<T>(e: &Option<T>, enabled: impl Fn(&T) -> bool) -> Option<&T> {
@@ -298,6 +416,12 @@ impl CarEffects {
         }
         if on(&self.grip_patch, |e| e.enabled).is_some() {
             v.push("grip_patch");
+        }
+        if on(&self.steering_gain_speed, |e| e.enabled).is_some() {
+            v.push("steering_gain_speed");
+        }
+        if on(&self.steering_rate_limit, |e| e.enabled).is_some() {
+            v.push("steering_rate_limit");
         }
         v
     }
@@ -388,6 +512,18 @@ impl CarScenario {
         toml::to_string(self).unwrap_or_default()
     }
 
+    /// This scenario with the car's physical constants perturbed by
+    /// [`CarParams::perturbed`]`(seed, fraction)`; everything else (effects, arena, noise)
+    /// unchanged.
+    pub fn perturbed(&self, seed: u64, fraction: f64) -> Result<Self, SimError> {
+        let s = Self {
+            car: self.car.perturbed(seed, fraction)?,
+            ..self.clone()
+        };
+        s.validate()?;
+        Ok(s)
+    }
+
     /// The start state (at rest).
     pub fn start_state(&self) -> CarState {
         CarState {
@@ -464,6 +600,13 @@ impl CarScenario {
             crate::geometry::non_negative("effects.grip_patch.scale", g.scale)?;
             g.region.validate("effects.grip_patch.region")?;
         }
+        if let Some(g) = &e.steering_gain_speed {
+            positive("effects.steering_gain_speed.v0", g.v0)?;
+        }
+        if let Some(r) = &e.steering_rate_limit {
+            positive("effects.steering_rate_limit.rate", r.rate)?;
+            crate::geometry::non_negative("effects.steering_rate_limit.tau", r.tau)?;
+        }
         self.noise.validate("noise")
     }
 }
@@ -536,6 +679,9 @@ type Xs = [f64; 7];
 pub struct CarWorld {
     scenario: CarScenario,
     x: Xs,
+    /// Steering servo angle δ_s \[rad\]: the rate-limited command under
+    /// `steering_rate_limit`, else the last clamped command.
+    servo: f64,
     time: f64,
 }
 
@@ -546,6 +692,7 @@ impl CarWorld {
         let mut w = Self {
             scenario: scenario.clone(),
             x: [0.0; 7],
+            servo: 0.0,
             time: 0.0,
         };
         w.reset(scenario.start_state())?;
@@ -557,7 +704,8 @@ impl CarWorld {
         &self.scenario
     }
 
-    /// Puts the car in `state` (the motor lag, if any, starts at zero throttle).
+    /// Puts the car in `state` (the motor lag, if any, starts at zero throttle; the steering
+    /// servo at 0, wheels straight).
     pub fn reset(&mut self, state: CarState) -> Result<(), SimError> {
         if !state.is_finite() {
             return Err(SimError::Input {
@@ -574,6 +722,7 @@ impl CarWorld {
             state.omega,
             0.0,
         ];
+        self.servo = 0.0;
         Ok(())
     }
 
@@ -592,6 +741,32 @@ impl CarWorld {
     /// Simulated time since construction \[s\].
     pub fn time(&self) -> f64 {
         self.time
+    }
+
+    /// The steering servo angle \[rad\]: under `steering_rate_limit` the rate-limited
+    /// (and lagged) servo state, otherwise the last clamped steering command (0 after a reset).
+    pub fn servo_angle(&self) -> f64 {
+        self.servo
+    }
+
+    /// The front wheel angle δ the tires see now \[rad\]: the servo angle times the
+    /// `steering_gain_speed` factor at the current `vx`, plus the `steering_offset`.
+    pub fn wheel_angle(&self) -> f64 {
+        self.wheel_angle_at(self.servo, self.x[3])
+    }
+
+    /// δ_wheel from the servo angle and the longitudinal speed (the effects' order: gain, then
+    /// offset).
+    fn wheel_angle_at(&self, servo: f64, vx: f64) -> f64 {
+        let e = &self.scenario.effects;
+        let mut delta = servo;
+        if let Some(g) = on(&e.steering_gain_speed, |g| g.enabled) {
+            delta *= g.gain(vx);
+        }
+        if let Some(s) = on(&e.steering_offset, |s| s.enabled) {
+            delta += s.offset;
+        }
+        delta
     }
 
     /// A noisy pose measurement (the scenario's `noise`).
@@ -628,10 +803,32 @@ impl CarWorld {
         let n = (dt / self.scenario.car.substep - 1e-9).ceil().max(1.0) as usize;
         let h = dt / n as f64;
         for _ in 0..n {
-            self.substep(u, h);
+            self.servo_substep(u.steering, h);
+            let held = CarInput {
+                steering: self.servo,
+                throttle: u.throttle,
+            };
+            self.substep(held, h);
         }
         self.time += dt;
         Ok(self.state())
+    }
+
+    /// Moves the servo angle towards the clamped command over one substep (see
+    /// [`SteeringRateLimit`]); without the effect the servo follows the command at once.
+    fn servo_substep(&mut self, target: f64, h: f64) {
+        match on(&self.scenario.effects.steering_rate_limit, |r| r.enabled) {
+            None => self.servo = target,
+            Some(r) => {
+                let want = if r.tau > 0.0 {
+                    (target - self.servo) * -(-h / r.tau).exp_m1()
+                } else {
+                    target - self.servo
+                };
+                let max = r.rate * h;
+                self.servo += want.clamp(-max, max);
+            }
+        }
     }
 
     fn substep(&mut self, u: CarInput, h: f64) {
@@ -667,10 +864,8 @@ impl CarWorld {
         let c = &self.scenario.car;
         let e = &self.scenario.effects;
         let (psi, vx, vy, w) = (x[2], x[3], x[4], x[5]);
-        let delta = match on(&e.steering_offset, |s| s.enabled) {
-            Some(s) => u.steering + s.offset,
-            None => u.steering,
-        };
+        // `u.steering` is the servo angle; gain and offset act on it at this stage's speed.
+        let delta = self.wheel_angle_at(u.steering, vx);
         let (throttle, d_dot) = match on(&e.motor_lag, |m| m.enabled) {
             Some(m) => (x[6], (u.throttle - x[6]) / m.tau),
             None => (u.throttle, 0.0),

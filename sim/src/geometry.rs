@@ -71,22 +71,34 @@ pub enum RegionShape {
     Rect,
     /// A disc: `centre`, `radius`.
     Disc,
+    /// An unbounded straight strip (a stripe across the whole floor): the points within
+    /// `width / 2` of the line through `centre` running along `angle`, i.e.
+    /// `|n · (p − centre)| ≤ width / 2` with the normal `n = (−sin angle, cos angle)`.
+    Band,
+    /// A ring: `inner_radius ≤ |p − centre| ≤ radius`.
+    Annulus,
 }
 
-/// A region of the table or floor (a rectangle or a disc), used by patch effects.
+/// A region of the table or floor (a rectangle, a disc, a band or an annulus), used by patch
+/// effects. Each shape reads only its own keys; the others keep their defaults and are ignored.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct Region {
-    /// `"rect"` (default) or `"disc"`.
+    /// `"rect"` (default), `"disc"`, `"band"` or `"annulus"`.
     pub shape: RegionShape,
-    /// Centre \[m\].
+    /// Centre \[m\] (band: a point on its centre line).
     pub centre: [f64; 2],
     /// Rectangle side lengths \[m\] (rect only). Default 0.2 × 0.2 m.
     pub size: [f64; 2],
-    /// Rectangle rotation \[rad\] (rect only). Default 0.
+    /// Rectangle rotation, or the direction the band runs along \[rad\] (rect and band).
+    /// Default 0.
     pub angle: f64,
-    /// Disc radius \[m\] (disc only). Default 0.1 m.
+    /// Disc radius, or the annulus's outer radius \[m\] (disc and annulus). Default 0.1 m.
     pub radius: f64,
+    /// Full width of a band \[m\] (band only). Default 0.2 m.
+    pub width: f64,
+    /// Inner radius of an annulus \[m\], `< radius` (annulus only). Default 0.05 m.
+    pub inner_radius: f64,
 }
 
 impl Default for Region {
@@ -97,6 +109,8 @@ impl Default for Region {
             size: [0.2, 0.2],
             angle: 0.0,
             radius: 0.1,
+            width: 0.2,
+            inner_radius: 0.05,
         }
     }
 }
@@ -113,6 +127,14 @@ impl Region {
                 let ly = -s * d[0] + c * d[1];
                 lx.abs() <= 0.5 * self.size[0] && ly.abs() <= 0.5 * self.size[1]
             }
+            RegionShape::Band => {
+                let (s, c) = self.angle.sin_cos();
+                (-s * d[0] + c * d[1]).abs() <= 0.5 * self.width
+            }
+            RegionShape::Annulus => {
+                let r2 = d[0] * d[0] + d[1] * d[1];
+                r2 <= self.radius * self.radius && r2 >= self.inner_radius * self.inner_radius
+            }
         }
     }
 
@@ -126,6 +148,20 @@ impl Region {
                 positive(&format!("{key}.size[1]"), self.size[1])?;
             }
             RegionShape::Disc => positive(&format!("{key}.radius"), self.radius)?,
+            RegionShape::Band => positive(&format!("{key}.width"), self.width)?,
+            RegionShape::Annulus => {
+                positive(&format!("{key}.radius"), self.radius)?;
+                non_negative(&format!("{key}.inner_radius"), self.inner_radius)?;
+                if self.inner_radius >= self.radius {
+                    return Err(SimError::invalid(
+                        format!("{key}.inner_radius"),
+                        format!(
+                            "must be < {key}.radius ({}), got {}",
+                            self.radius, self.inner_radius
+                        ),
+                    ));
+                }
+            }
         }
         Ok(())
     }

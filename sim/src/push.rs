@@ -13,7 +13,9 @@
 //! is clamped the point slides and the force is `−μᵢ Nᵢ vᵢ/|vᵢ|`. This is Coulomb friction with
 //! exact sticking: a block at rest under a tilt below the friction angle does not creep, a block
 //! whose pusher stops stops, and a block pushed off-centre turns about the point its support
-//! distribution dictates. The forces and the torque about the centre of mass go to rapier as
+//! distribution dictates. On an anisotropic table (`anisotropic_friction`) the cone is an
+//! ellipse and a sliding point takes the force of maximum dissipation on it
+//! ([`AnisotropicFriction`]). The forces and the torque about the centre of mass go to rapier as
 //! user forces; rapier solves the block–pusher and block–obstacle contacts.
 //!
 //! The pusher is a kinematic disc. An action `[p, φ, ℓ]` (Tu & Lin's convention, from their
@@ -335,6 +337,51 @@ impl Default for PusherFriction {
     }
 }
 
+/// Hidden effect: anisotropic block–table friction (a brushed or grooved table surface).
+///
+/// The table has a grain direction `e₁ = (cos angle, sin angle)` and the cross direction
+/// `e₂ = (−sin angle, cos angle)`. At a support point with coefficient μ (the table's
+/// `table_friction`, or the patch's `mu` on a `friction_patch`: the grain runs under the whole
+/// table) and load N the friction coefficients are `μ₁ = μ` along the grain and
+/// `μ₂ = ratio · μ` across it. The set of friction forces the point can carry is the ellipse
+///
+/// ```text
+/// (F·e₁ / (μ₁ N))² + (F·e₂ / (μ₂ N))² ≤ 1
+/// ```
+///
+/// (an elliptic limit surface; Goyal, Ruina & Papadopoulos 1991). A sticking point takes the
+/// force that stops it if that force is inside the ellipse (exact sticking, as for isotropic
+/// friction). A sliding point with velocity `v = v₁ e₁ + v₂ e₂` takes the force of maximum
+/// dissipation on the ellipse,
+///
+/// ```text
+/// F = −N (μ₁² v₁ e₁ + μ₂² v₂ e₂) / √(μ₁² v₁² + μ₂² v₂²)
+/// ```
+///
+/// which is `−μ₁ N` along the grain for sliding along it, `−μ₂ N` across, and for sliding at
+/// an angle is not anti-parallel to the velocity: a block pushed obliquely to the grain veers
+/// towards the grain. `ratio = 1` is isotropic Coulomb friction (the same forces up to rounding).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct AnisotropicFriction {
+    /// Switch. Default true.
+    pub enabled: bool,
+    /// `μ₂ / μ₁`, friction across the grain over friction along it (> 0, ≤ 100). Default 2.
+    pub ratio: f64,
+    /// Grain direction in the table frame \[rad\]. Default 0 (along +x: μ_y = 2 μ_x).
+    pub angle: f64,
+}
+
+impl Default for AnisotropicFriction {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            ratio: 2.0,
+            angle: 0.0,
+        }
+    }
+}
+
 /// The hidden effects of the pushing world; each is off unless its table is present.
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -347,6 +394,9 @@ pub struct PushEffects {
     pub friction_patch: Option<FrictionPatch>,
     /// Pusher–block friction.
     pub pusher_friction: Option<PusherFriction>,
+    /// Friction that differs along and across a grain of the table (not in the diagnosis
+    /// library).
+    pub anisotropic_friction: Option<AnisotropicFriction>,
 }
 
 impl PushEffects {
@@ -364,6 +414,9 @@ impl PushEffects {
         }
         if on(&self.pusher_friction, |e| e.enabled).is_some() {
             v.push("pusher_friction");
+        }
+        if on(&self.anisotropic_friction, |e| e.enabled).is_some() {
+            v.push("anisotropic_friction");
         }
         v
     }
@@ -556,7 +609,50 @@ impl PushScenario {
         if let Some(f) = &e.pusher_friction {
             non_negative("effects.pusher_friction.mu", f.mu)?;
         }
+        if let Some(a) = &e.anisotropic_friction {
+            if !(a.ratio.is_finite() && a.ratio > 0.0 && a.ratio <= 100.0) {
+                return Err(SimError::invalid(
+                    "effects.anisotropic_friction.ratio",
+                    format!(
+                        "must be within (0, 100] (μ across the grain over μ along it; 1 is isotropic), got {}",
+                        a.ratio
+                    ),
+                ));
+            }
+            finite("effects.anisotropic_friction.angle", a.angle)?;
+        }
         self.noise.validate("noise")
+    }
+
+    /// This scenario with the physical constants of block, table and pusher each scaled by a
+    /// factor drawn uniformly from `[1 − fraction, 1 + fraction]` (seeded: the same seed gives
+    /// the same world): a block whose true friction and geometry differ from the nominal ones,
+    /// for tests of identification and diagnosis.
+    ///
+    /// Scaled, in this order: `block.size[0]`, `block.size[1]`, `block.mass`,
+    /// `block.table_friction`, `block.obstacle_friction`, `pusher.radius`. Kept: the pusher's
+    /// motion (speed, acceleration, gaps, `push_scale`: the commanded, known part), the support
+    /// layout, the integration settings, the poses, obstacles, effects and noise.
+    ///
+    /// Errors: `fraction` outside `[0, 1)`; the perturbed scenario failing
+    /// [`PushScenario::validate`] (e.g. a `com_offset` outside the shrunken block).
+    pub fn perturbed(&self, seed: u64, fraction: f64) -> Result<Self, SimError> {
+        crate::rng::check_fraction("PushScenario::perturbed fraction", fraction)?;
+        let mut s = self.clone();
+        let mut f = crate::rng::Perturb::new(seed, fraction);
+        let [a, b] = &mut s.block.size;
+        for v in [
+            a,
+            b,
+            &mut s.block.mass,
+            &mut s.block.table_friction,
+            &mut s.block.obstacle_friction,
+            &mut s.pusher.radius,
+        ] {
+            f.scale(v);
+        }
+        s.validate()?;
+        Ok(s)
     }
 
     /// Duration of the pusher motion for `action` (approach plus push) \[s\].
@@ -1044,6 +1140,11 @@ impl PushWorld {
         let m = self.scenario.block.mass;
         let mu_table = self.scenario.block.table_friction;
         let patch = on(&self.scenario.effects.friction_patch, |e| e.enabled);
+        // Grain frame of an anisotropic table: (μ₂/μ₁, cos, sin).
+        let grain = on(&self.scenario.effects.anisotropic_friction, |e| e.enabled).map(|a| {
+            let (s, c) = a.angle.sin_cos();
+            (a.ratio, c, s)
+        });
         let ext = self.tilt_force;
         let body = &self.world.bodies[self.block];
         let t = body.translation();
@@ -1073,7 +1174,9 @@ impl PushWorld {
                 need[1] -= f[1] * sp.mass / m;
             }
             let need_norm = need[0].hypot(need[1]);
-            let fi = if need_norm <= limit {
+            let fi = if let Some((ratio, c, s)) = grain {
+                elliptic_friction(need, vi, [limit, ratio * limit], c, s)
+            } else if need_norm <= limit {
                 need
             } else {
                 let speed = vi[0].hypot(vi[1]);
@@ -1097,6 +1200,33 @@ impl PushWorld {
         body.add_force(Vector::new(force[0] as f32, force[1] as f32), false);
         body.add_torque(torque as f32, false);
     }
+}
+
+/// Friction force at one support point on an anisotropic table (see
+/// [`AnisotropicFriction`]): `need` is the force that would stop the point within the step,
+/// `v` its velocity, `limit = [μ₁ N, μ₂ N]` the ellipse's half axes along the grain
+/// `(c, s)` and across it. All vectors in the world frame.
+fn elliptic_friction(need: [f64; 2], v: [f64; 2], limit: [f64; 2], c: f64, s: f64) -> [f64; 2] {
+    let [l1, l2] = limit;
+    if l1 <= 0.0 || l2 <= 0.0 {
+        return [0.0, 0.0];
+    }
+    let to_grain = |p: [f64; 2]| [c * p[0] + s * p[1], -s * p[0] + c * p[1]];
+    let n = to_grain(need);
+    let e = (n[0] / l1).powi(2) + (n[1] / l2).powi(2);
+    let f = if e <= 1.0 {
+        n
+    } else {
+        let vg = to_grain(v);
+        let q = (l1 * vg[0]).hypot(l2 * vg[1]);
+        if v[0].hypot(v[1]) > 1e-9 && q > 0.0 {
+            [-l1 * l1 * vg[0] / q, -l2 * l2 * vg[1] / q]
+        } else {
+            let k = e.sqrt();
+            [n[0] / k, n[1] / k]
+        }
+    };
+    [c * f[0] - s * f[1], s * f[0] + c * f[1]]
 }
 
 /// The point at arc length `s` along a polyline of three points.

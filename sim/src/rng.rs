@@ -99,4 +99,38 @@ pub(crate) mod stream {
     pub const EPISODE: u64 = 1;
     pub const EXPLORE: u64 = 2;
     pub const NOISE: u64 = 3;
+    pub const PERTURB: u64 = 4;
+}
+
+/// Checks a perturbation fraction (`[0, 1)`) for the `perturbed` helpers.
+pub(crate) fn check_fraction(what: &'static str, fraction: f64) -> Result<(), crate::SimError> {
+    if fraction.is_finite() && (0.0..1.0).contains(&fraction) {
+        Ok(())
+    } else {
+        Err(crate::SimError::Input {
+            what,
+            message: format!("must be within [0, 1) (e.g. 0.1 for ±10 %), got {fraction}"),
+        })
+    }
+}
+
+/// Seeded factors uniform in `[1 − fraction, 1 + fraction]`, one per call, for the
+/// `perturbed` helpers.
+pub(crate) struct Perturb {
+    rng: SimRng,
+    fraction: f64,
+}
+
+impl Perturb {
+    pub(crate) fn new(seed: u64, fraction: f64) -> Self {
+        Self {
+            rng: SimRng::new(derive_seed(seed, stream::PERTURB, 0)),
+            fraction,
+        }
+    }
+
+    /// `v` times the next factor.
+    pub(crate) fn scale(&mut self, v: &mut f64) {
+        *v *= 1.0 + self.fraction * (2.0 * self.rng.uniform() - 1.0);
+    }
 }
