@@ -101,10 +101,12 @@ impl PusherLogic {
             return None;
         }
         let event = self.watch.on_pose(received, stamp);
-        if let Some(PoseEvent::Resumed {
-            restarted: true, ..
-        }
-        | PoseEvent::Restarted { .. }) = event
+        if let Some(
+            PoseEvent::Resumed {
+                restarted: true, ..
+            }
+            | PoseEvent::Restarted { .. },
+        ) = event
         {
             self.pushed_from = None;
         }

@@ -93,7 +93,8 @@ impl PoseWatch {
                 restarted: back,
             })
         } else if back {
-            self.stamp.map(|from| PoseEvent::Restarted { from, to: stamp })
+            self.stamp
+                .map(|from| PoseEvent::Restarted { from, to: stamp })
         } else {
             None
         };
@@ -142,7 +143,11 @@ mod tests {
     #[test]
     fn goes_stale_once_and_resumes_once() {
         let mut w = PoseWatch::new(0.2).unwrap();
-        assert_eq!(w.check(100.0), None, "nothing is stale before the first pose");
+        assert_eq!(
+            w.check(100.0),
+            None,
+            "nothing is stale before the first pose"
+        );
         assert!(!w.stale_at(100.0));
         for k in 0..10 {
             let t = 1.0 + 0.01 * k as f64;

@@ -60,7 +60,10 @@ fn after_a_gap_the_estimate_restarts_without_a_velocity_spike() {
         worst
     };
     // (measured: 0.26 m/s at the first fresh pose, for a car standing still)
-    assert!(worst > 0.2, "the spliced window should misread the gap; |vx| ≤ {worst}");
+    assert!(
+        worst > 0.2,
+        "the spliced window should misread the gap; |vx| ≤ {worst}"
+    );
     // restarted: no estimate until a full window of fresh poses, then the true speed
     clock.restart();
     assert!(clock.estimate().is_none());
@@ -71,7 +74,10 @@ fn after_a_gap_the_estimate_restarts_without_a_velocity_spike() {
     }
     let (stamp, s) = clock.estimate().unwrap();
     assert!((stamp - 1.43).abs() < 1e-9);
-    assert!(s[3].abs() < 1e-6 && s[4].abs() < 1e-6 && s[5].abs() < 1e-6, "{s:?}");
+    assert!(
+        s[3].abs() < 1e-6 && s[4].abs() < 1e-6 && s[5].abs() < 1e-6,
+        "{s:?}"
+    );
     assert!((s[0] - 1.78).abs() < 1e-6, "{s:?}");
     // and the racer plans at once from the fresh estimate (the solve schedule was reset too)
     let planned = clock.plan(stamp).unwrap().expect("a plan from fresh poses");
@@ -146,7 +152,10 @@ fn the_hold_is_zero_throttle_with_the_last_steering_said_once_and_repeated_each_
         }
     );
     assert_eq!(h.on_pose(2.01, 0.02), None, "said once");
-    assert!(h.holding(), "still holding until a fresh solve is published");
+    assert!(
+        h.holding(),
+        "still holding until a fresh solve is published"
+    );
     assert_eq!(h.due(2.01), Some([0.25, 0.0]));
     h.published([0.1, 0.7]);
     assert!(!h.holding());

@@ -168,7 +168,11 @@ fn main() -> anyhow::Result<()> {
                 Some(PoseEvent::Resumed { gap, restarted }) => {
                     tracing::info!(
                         "block pose back after {gap:.2} s{}: pushing again (MPPI warm start reset)",
-                        if restarted { " with its clock restarted" } else { "" }
+                        if restarted {
+                            " with its clock restarted"
+                        } else {
+                            ""
+                        }
                     );
                     mppi.reset();
                 }
@@ -182,7 +186,9 @@ fn main() -> anyhow::Result<()> {
             }
         }
         if let Some(PoseEvent::Stale { silent }) = logic.check(now) {
-            tracing::warn!("no block pose for {silent:.2} s: holding off (no push) until it returns");
+            tracing::warn!(
+                "no block pose for {silent:.2} s: holding off (no push) until it returns"
+            );
         }
         let d = logic.decide(now);
         match d {

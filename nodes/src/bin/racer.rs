@@ -130,7 +130,11 @@ fn main() -> anyhow::Result<()> {
                 tracing::info!(
                     "poses back after {gap:.2} s{}: state estimate restarted, racing again after a \
                      full window of fresh poses",
-                    if restarted { " with their clock restarted" } else { "" }
+                    if restarted {
+                        " with their clock restarted"
+                    } else {
+                        ""
+                    }
                 );
                 rc.restart();
                 pending.clear();
