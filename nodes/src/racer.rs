@@ -203,13 +203,21 @@ pub enum HoldEvent {
         /// Time since the newest pose arrived \[s, steady clock\].
         silent: f64,
     },
-    /// Poses arrive again (or their clock restarted): log once, [`RaceClock::restart`]; the hold
-    /// goes on until the first command solved from fresh poses is published.
+    /// Poses arrive again: log once, [`RaceClock::restart`]; the hold goes on until the first
+    /// command solved from fresh poses is published.
     Resumed {
-        /// Time without poses \[s, steady clock\] (0 for a clock restart without a gap).
+        /// Time without poses \[s, steady clock\].
         gap: f64,
-        /// The pose stamps went back (a restarted simulator, a looped bag).
+        /// The pose stamps went back (a restarted simulator).
         restarted: bool,
+    },
+    /// Without a gap, the pose stamps went back (a looped bag): log once, [`RaceClock::restart`]
+    /// (the old window and schedule belong to another clock).
+    Restarted {
+        /// The newest stamp before \[s\].
+        from: f64,
+        /// The new, earlier stamp \[s\].
+        to: f64,
     },
 }
 
@@ -243,10 +251,7 @@ impl StaleHold {
         use crate::stale::PoseEvent;
         match self.watch.on_pose(now, stamp)? {
             PoseEvent::Resumed { gap, restarted } => Some(HoldEvent::Resumed { gap, restarted }),
-            PoseEvent::Restarted { .. } => Some(HoldEvent::Resumed {
-                gap: 0.0,
-                restarted: true,
-            }),
+            PoseEvent::Restarted { from, to } => Some(HoldEvent::Restarted { from, to }),
             PoseEvent::Stale { silent } => Some(HoldEvent::Stale { silent }),
         }
     }

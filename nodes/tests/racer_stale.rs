@@ -163,10 +163,14 @@ fn the_hold_is_zero_throttle_with_the_last_steering_said_once_and_repeated_each_
     // a looped bag: stamps back without a gap
     assert_eq!(
         h.on_pose(2.02, 0.0),
-        Some(HoldEvent::Resumed {
-            gap: 0.0,
-            restarted: true
+        Some(HoldEvent::Restarted {
+            from: 0.02,
+            to: 0.0
         })
+    );
+    assert!(
+        !h.holding(),
+        "a clock restart without a gap is no reason to hold"
     );
     assert!(StaleHold::new(0.0, 0.05).is_err());
 }

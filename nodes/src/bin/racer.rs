@@ -124,10 +124,9 @@ fn main() -> anyhow::Result<()> {
         waits.wait(POLL)?;
         while let Some(msg) = poses.take()? {
             let t = f64::from(msg.header.stamp.sec) + 1e-9 * f64::from(msg.header.stamp.nanosec);
-            if let Some(HoldEvent::Resumed { gap, restarted }) =
-                hold.on_pose(steady0.elapsed().as_secs_f64(), t)
-            {
-                tracing::info!(
+            let event = hold.on_pose(steady0.elapsed().as_secs_f64(), t);
+            match event {
+                Some(HoldEvent::Resumed { gap, restarted }) => tracing::info!(
                     "poses back after {gap:.2} s{}: state estimate restarted, racing again after a \
                      full window of fresh poses",
                     if restarted {
@@ -135,7 +134,14 @@ fn main() -> anyhow::Result<()> {
                     } else {
                         ""
                     }
-                );
+                ),
+                Some(HoldEvent::Restarted { from, to }) => tracing::info!(
+                    "pose stamps went back from {from:.3} s to {to:.3} s: state estimate \
+                     restarted on the new clock"
+                ),
+                _ => {}
+            }
+            if event.is_some() {
                 rc.restart();
                 pending.clear();
                 last_stamp = None;
