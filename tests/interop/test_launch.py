@@ -30,7 +30,6 @@ import re
 import shlex
 import signal
 import subprocess
-import tempfile
 import time
 import xml.etree.ElementTree as ET
 
@@ -257,21 +256,32 @@ def test_each_node_starts_as_launch_ros_would_start_it_and_knows_its_parameters(
             needs_required = any(launch.uses_required(p.get("value")) for p in el.findall("param")) \
                 or launch.uses_required(el.get("args", ""))
             # both branches of an if/unless pair are started: each is checked
-            procs.append((el, needs_required, subprocess.Popen(
-                launch_ros_command(exe, el, launch, pf), env=env, cwd=tmp_path,
-                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)))
-        time.sleep(3.0)
+            log = tmp_path / f"node_{i}.log"
+            with open(log, "w") as f:
+                proc = subprocess.Popen(launch_ros_command(exe, el, launch, pf), env=env, cwd=tmp_path,
+                                        stdout=subprocess.DEVNULL, stderr=f, text=True)
+            procs.append((el, needs_required, proc, log))
+        # until each node has failed or logged its first line of its own (after the parameter
+        # check: the unknown-parameter warnings come first)
+        deadline = time.monotonic() + 30
+        def settled(el, proc, log):
+            text = re.sub(r"\x1b\[[0-9;]*m", "", log.read_text())  # colours off
+            return proc.poll() is not None or re.search(rf" {el.get('exec')}: ", text)
+        while time.monotonic() < deadline and not all(settled(e, p, lg) for e, _, p, lg in procs):
+            time.sleep(0.1)
+        for el, _, proc, log in procs:
+            assert settled(el, proc, log), f"{path.name}: {el.get('exec')} logged nothing in 30 s:\n{log.read_text()}"
     finally:
         results = []
-        for el, needs_required, proc in procs:
+        for el, needs_required, proc, log in procs:
             if proc.poll() is None:
                 proc.send_signal(signal.SIGINT)
             try:
-                _, err = proc.communicate(timeout=20)
+                proc.wait(timeout=20)
             except subprocess.TimeoutExpired:
                 proc.kill()
-                _, err = proc.communicate()
-            results.append((el, needs_required, proc.returncode, err))
+                proc.wait()
+            results.append((el, needs_required, proc.returncode, log.read_text()))
     for el, needs_required, rc, err in results:
         who = f"{path.name}: {el.get('exec')} ({el.get('name')})"
         assert "unknown parameter" not in err, f"{who}:\n{err[-2000:]}"
