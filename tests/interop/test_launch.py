@@ -18,7 +18,9 @@ behaviour, not from ROS code (none is installed):
   package.xml}, PREFIX/share/ament_index/resource_index/packages/dynlab, and with PREFIX/setup.sh
   sourced the ament index lookup that `ros2 launch` and `ros2 run` use finds the package, its
   launch files, the files they name and the executables;
-- package.xml is format 3, names `dynlab`, and agrees with the workspace's version and license.
+- package.xml is format 3, names `dynlab`, and agrees with the workspace's version and license;
+- racer.launch.xml as a whole (sim_node, racer, recorder from the prefix, a model fitted here):
+  a Cyclone DDS peer sees the racer accelerate and rosbags reads the recorded bag.
 
 Not checked (needs ROS): `ros2 launch` itself, `colcon build` of CMakeLists.txt.
 """
@@ -233,6 +235,54 @@ def launch_ros_command(exe: pathlib.Path, el, launch: Launch, params_file: pathl
     return cmd
 
 
+def start_launch(launch: Launch, prefix: pathlib.Path, tmp_path: pathlib.Path, domain: int) -> list:
+    """Starts every node of `launch` from the installed `prefix` as launch_ros would (both
+    branches of an if/unless pair: each is checked); returns (element, whether it got a required
+    argument, process, log file) for each."""
+    share = prefix / "share" / "dynlab"
+    procs = []
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain))
+    for i, (el, _) in enumerate(launch.nodes()):
+        exe = prefix / "lib" / "dynlab" / el.get("exec")
+        assert exe.is_file(), f"{exe} not installed"
+        params = {p.get("name"): yaml_scalar(launch.sub(p.get("value"))) for p in el.findall("param")}
+        for name, v in params.items():
+            if isinstance(v, str) and str(share) in v:
+                assert pathlib.Path(v).exists(), f"{launch.path.name}: {name} = {v} not installed"
+        pf = tmp_path / f"launch_params_{i}"
+        pf.write_text("/**:\n  ros__parameters:\n" +
+                      "".join(f"    {k}: {yaml_value(v)}\n" for k, v in params.items()))
+        needs_required = any(launch.uses_required(p.get("value")) for p in el.findall("param")) \
+            or launch.uses_required(el.get("args", ""))
+        log = tmp_path / f"node_{i}.log"
+        with open(log, "w") as f:
+            proc = subprocess.Popen(launch_ros_command(exe, el, launch, pf), env=env, cwd=tmp_path,
+                                    stdout=subprocess.DEVNULL, stderr=f, text=True)
+        procs.append((el, needs_required, proc, log))
+    return procs
+
+
+def stop_launch(procs, first: str | None = None) -> list:
+    """SIGINT to every node (`first` before the others) and their (element, needs_required, exit
+    code, log text)."""
+    order = sorted(procs, key=lambda p: p[0].get("exec") != first)
+    results = []
+    for el, needs_required, proc, log in order:
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGINT)
+        try:
+            proc.wait(timeout=20)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+        results.append((el, needs_required, proc.returncode, log.read_text()))
+    return results
+
+
+def plain(text: str) -> str:
+    return re.sub(r"\x1b\[[0-9;]*m", "", text)  # colours off
+
+
 @pytest.mark.parametrize("path", LAUNCH_FILES, ids=lambda p: p.name)
 def test_each_node_starts_as_launch_ros_would_start_it_and_knows_its_parameters(path, prefix, tmp_path):
     share = prefix / "share" / "dynlab"
@@ -241,47 +291,20 @@ def test_each_node_starts_as_launch_ros_would_start_it_and_knows_its_parameters(
                         else tmp_path / "bag")}
     launch = Launch(path, share, given)
     procs = []
-    env = dict(os.environ, ROS_DOMAIN_ID=str(DOMAIN))
     try:
-        for i, (el, _) in enumerate(launch.nodes()):
-            exe = prefix / "lib" / "dynlab" / el.get("exec")
-            assert exe.is_file(), f"{exe} not installed"
-            params = {p.get("name"): yaml_scalar(launch.sub(p.get("value"))) for p in el.findall("param")}
-            for name, v in params.items():
-                if isinstance(v, str) and str(share) in v:
-                    assert pathlib.Path(v).exists(), f"{path.name}: {name} = {v} not installed"
-            pf = tmp_path / f"launch_params_{i}"
-            pf.write_text("/**:\n  ros__parameters:\n" +
-                          "".join(f"    {k}: {yaml_value(v)}\n" for k, v in params.items()))
-            needs_required = any(launch.uses_required(p.get("value")) for p in el.findall("param")) \
-                or launch.uses_required(el.get("args", ""))
-            # both branches of an if/unless pair are started: each is checked
-            log = tmp_path / f"node_{i}.log"
-            with open(log, "w") as f:
-                proc = subprocess.Popen(launch_ros_command(exe, el, launch, pf), env=env, cwd=tmp_path,
-                                        stdout=subprocess.DEVNULL, stderr=f, text=True)
-            procs.append((el, needs_required, proc, log))
+        procs = start_launch(launch, prefix, tmp_path, DOMAIN)
         # until each node has failed or logged its first line of its own (after the parameter
         # check: the unknown-parameter warnings come first)
         deadline = time.monotonic() + 30
+
         def settled(el, proc, log):
-            text = re.sub(r"\x1b\[[0-9;]*m", "", log.read_text())  # colours off
-            return proc.poll() is not None or re.search(rf" {el.get('exec')}: ", text)
+            return proc.poll() is not None or re.search(rf" {el.get('exec')}: ", plain(log.read_text()))
         while time.monotonic() < deadline and not all(settled(e, p, lg) for e, _, p, lg in procs):
             time.sleep(0.1)
         for el, _, proc, log in procs:
             assert settled(el, proc, log), f"{path.name}: {el.get('exec')} logged nothing in 30 s:\n{log.read_text()}"
     finally:
-        results = []
-        for el, needs_required, proc, log in procs:
-            if proc.poll() is None:
-                proc.send_signal(signal.SIGINT)
-            try:
-                proc.wait(timeout=20)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
-            results.append((el, needs_required, proc.returncode, log.read_text()))
+        results = stop_launch(procs)
     for el, needs_required, rc, err in results:
         who = f"{path.name}: {el.get('exec')} ({el.get('name')})"
         assert "unknown parameter" not in err, f"{who}:\n{err[-2000:]}"
@@ -290,3 +313,52 @@ def test_each_node_starts_as_launch_ros_would_start_it_and_knows_its_parameters(
         else:
             # the placeholder of a required argument is what it may fail on, nothing else
             assert rc == 0 or "/nonexistent/required_" in err, f"{who} exited {rc}:\n{err[-2000:]}"
+
+
+def test_racer_launch_races_the_simulated_car_and_records_the_run(prefix, tmp_path):
+    """racer.launch.xml as a whole, from the installed prefix: a Cyclone DDS peer sees the racer
+    accelerate, and rosbags reads the recorder's bag."""
+    from cyclonedds.core import Policy, Qos
+    from cyclonedds.util import duration
+    from peers.ros_types import AckermannDriveStamped, Peer, wait_matched
+    from rosbags.rosbag2 import Reader
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+    from conftest import run
+
+    model = tmp_path / "model"
+    run("dynlab", "train", "--bag", REPO / "bags" / "car_nominal", "--kind", "physics",
+        "--steps", 1, "--physics-windows", 300, "--out", model, "--quiet", timeout=180)
+    bag = tmp_path / "race_bag"
+    launch = Launch(LAUNCH_DIR / "racer.launch.xml", prefix / "share" / "dynlab",
+                    {"model": str(model), "bag": str(bag), "sim_rate": "0.2"})
+    peer = Peer(DOMAIN + 1)
+    cmds = peer.reader("/car/cmd", AckermannDriveStamped,
+                       Qos(Policy.Reliability.Reliable(duration(seconds=1)), Policy.History.KeepLast(1000)))
+    procs = []
+    got = []
+    try:
+        procs = start_launch(launch, prefix, tmp_path, DOMAIN + 1)
+        assert wait_matched(cmds, timeout=30), "racer did not publish /car/cmd"
+        deadline = time.monotonic() + 20
+        while time.monotonic() < deadline and sum(c.drive.acceleration > 0 for c in got) < 20:
+            got += [c for c in cmds.take(N=1000) if type(c).__name__ != "InvalidSample"]
+            time.sleep(0.05)
+            assert all(p.poll() is None for _, _, p, _ in procs), "a node exited"
+    finally:
+        results = stop_launch(procs, first="recorder")
+    logs = "\n".join(f"{el.get('exec')}: {err[-1500:]}" for el, _, _, err in results)
+    assert sum(c.drive.acceleration > 0 for c in got) >= 20, logs
+    for el, _, rc, err in results:
+        assert rc == 0, f"{el.get('exec')} exited {rc}\n{err[-2000:]}"
+    store = get_typestore(Stores.ROS2_JAZZY)
+    counts, throttles = {}, []
+    with Reader(bag) as reader:
+        for conn in reader.connections:
+            if conn.msgtype not in store.types:
+                store.register(get_types_from_msg(conn.msgdef.data, conn.msgtype))
+        for conn, _, raw in reader.messages():
+            counts[conn.topic] = counts.get(conn.topic, 0) + 1
+            if conn.topic == "/car/cmd":
+                throttles.append(store.deserialize_cdr(raw, conn.msgtype).drive.acceleration)
+    assert {"/car/pose", "/car/cmd", "/car/odom", "/clock"} <= set(counts), counts
+    assert sum(t > 0 for t in throttles) >= 20, throttles
