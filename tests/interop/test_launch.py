@@ -9,8 +9,8 @@ behaviour, not from ROS code (none is installed):
   substitutions `$(var …)` and `$(find-pkg-share dynlab)`);
 - every `exec` is a binary of the workspace (nodes/src/bin/<exec>.rs) and is installed;
 - every `<param>` is a parameter its node reads: its name is in the node's source and the node,
-  started the way launch_ros starts it (`<exec> [args] --ros-args -r __node:=<name>
-  --params-file <file with /**: ros__parameters:> -r from:=to`, values typed as YAML), prints no
+  started the way launch_ros (Jazzy) starts it (`<exec> [args] --ros-args -r __node:=<name>
+  --params-file <file with /**: ros__parameters:> -r <name>:from:=to`, values typed as YAML), prints no
   "unknown parameter" warning and does not fail on a value (nodes without a required argument
   run until stopped);
 - every remap's target is a topic of the topic contract (the table in README.md);
@@ -231,7 +231,8 @@ def launch_ros_command(exe: pathlib.Path, el, launch: Launch, params_file: pathl
     if el.findall("param"):
         cmd += ["--params-file", str(params_file)]
     for r in el.findall("remap"):
-        cmd += ["-r", f"{launch.sub(r.get('from'))}:={launch.sub(r.get('to'))}"]
+        # launch_ros writes node-specific rules, prefixed with the node's name
+        cmd += ["-r", f"{el.get('name')}:{launch.sub(r.get('from'))}:={launch.sub(r.get('to'))}"]
     return cmd
 
 
