@@ -30,6 +30,7 @@ import os
 import pathlib
 import re
 import shlex
+import shutil
 import signal
 import subprocess
 import time
@@ -174,7 +175,8 @@ def prefix(tmp_path_factory):
     proc = subprocess.run(["bash", str(REPO / "launch_scripts" / "install_ros.sh"), str(prefix), "--no-build"],
                           capture_output=True, text=True, env=env, timeout=60)
     assert proc.returncode == 0, proc.stderr
-    return prefix
+    yield prefix
+    shutil.rmtree(prefix, ignore_errors=True)  # ≈ 0.7 GB of binaries with debug info
 
 
 def ament_lookup(prefix: pathlib.Path, package: str) -> pathlib.Path | None:
