@@ -9,6 +9,7 @@
 //! | [`play`] | `player` | bag → topics with original timing, `--rate`, `--loop`, `/clock` |
 //! | [`mppi_pusher`] | `mppi_pusher` | when to push, hold off (stale pose) or stop (goal reached) |
 //! | [`racer`] | `racer` | state estimate, known command delay (state predicted over it), when each command is due |
+//! | [`stale`] | `racer`, `mppi_pusher` | when poses stop (steady clock), return, or restart their clock: each change reported once |
 //! | [`start`] | all parameter-only nodes | command line, logging, shutdown flag, unknown-parameter warnings |
 //! | [`probe`] | `dds_probe` | publish / receive `PoseStamped` and measure latency (benchmarks) |
 #![warn(missing_docs)]
@@ -18,6 +19,7 @@ pub mod play;
 pub mod probe;
 pub mod racer;
 pub mod record;
+pub mod stale;
 pub mod start;
 
 pub use start::{StartError, Started, start_node};

@@ -3,13 +3,20 @@
 //! testable and deterministic.
 //!
 //! - No goal yet, or no pose yet: hold.
-//! - Pose stale (received longer than `stale_timeout` ago): hold, no action.
+//! - Pose stale (received longer than `stale_timeout` ago on the node's steady clock, see
+//!   [`crate::stale`]): hold, no action. [`PusherLogic::check`] and [`PusherLogic::on_pose`]
+//!   report going stale and coming back once each, for the node to log and to reset its MPPI
+//!   warm start.
+//! - Pose stamps going back (a restarted simulator, a looped bag): the push in flight is
+//!   forgotten, so the wait below does not compare stamps of two different clocks.
 //! - Pose within `goal_tolerance` (xy) and `angle_tolerance` of the goal: at goal, no action.
 //! - A push was sent: wait until a pose stamped at least `push_wait` after the pose the push
 //!   started from arrives (the simulator or robot has finished and settled the push).
 //! - Otherwise: push (the caller runs MPPI on the latest pose).
 
 use dynlab_control::mppi::goal_error;
+
+use crate::stale::{PoseEvent, PoseWatch, StaleError};
 
 /// Settings of the decision logic.
 #[derive(Debug, Clone, PartialEq)]
@@ -18,7 +25,7 @@ pub struct PusherSettings {
     pub goal_tolerance: f64,
     /// ... and the heading error below this \[rad\].
     pub angle_tolerance: f64,
-    /// Hold off when the last pose was received longer ago than this \[s\].
+    /// Hold off when the last pose was received longer ago than this \[s, steady clock\].
     pub stale_timeout: f64,
     /// After a push, wait for a pose stamped this long after the push's start pose \[s\].
     pub push_wait: f64,
@@ -55,21 +62,24 @@ pub enum Decision {
 pub struct PusherLogic {
     settings: PusherSettings,
     goal: Option<[f64; 3]>,
-    /// Latest pose, its stamp \[s\] and its receipt time \[s\].
-    pose: Option<([f64; 3], f64, f64)>,
+    /// Latest pose and its stamp \[s\].
+    pose: Option<([f64; 3], f64)>,
+    /// When the poses arrived.
+    watch: PoseWatch,
     /// Stamp of the pose the last push started from.
     pushed_from: Option<f64>,
 }
 
 impl PusherLogic {
-    /// New logic with `settings`.
-    pub fn new(settings: PusherSettings) -> Self {
-        Self {
+    /// New logic with `settings`; an error names a bad `stale_timeout`.
+    pub fn new(settings: PusherSettings) -> Result<Self, StaleError> {
+        Ok(Self {
+            watch: PoseWatch::new(settings.stale_timeout)?,
             settings,
             goal: None,
             pose: None,
             pushed_from: None,
-        }
+        })
     }
 
     /// A new goal.
@@ -82,20 +92,40 @@ impl PusherLogic {
         self.goal
     }
 
-    /// A pose measurement, stamped `stamp` \[s\], received at `received` \[s\]. Non-finite poses
-    /// are ignored.
-    pub fn on_pose(&mut self, pose: [f64; 3], stamp: f64, received: f64) {
-        if pose.iter().all(|v| v.is_finite()) {
-            self.pose = Some((pose, stamp, received));
+    /// A pose measurement, stamped `stamp` \[s\], received at `received` \[s, steady clock\].
+    /// Non-finite poses are ignored (they are not fresh either). Returns the stream's change,
+    /// once: [`PoseEvent::Resumed`] after a stale spell, [`PoseEvent::Restarted`] when the
+    /// stamps went back without one.
+    pub fn on_pose(&mut self, pose: [f64; 3], stamp: f64, received: f64) -> Option<PoseEvent> {
+        if !pose.iter().all(|v| v.is_finite()) {
+            return None;
         }
+        let event = self.watch.on_pose(received, stamp);
+        if let Some(
+            PoseEvent::Resumed {
+                restarted: true, ..
+            }
+            | PoseEvent::Restarted { .. },
+        ) = event
+        {
+            self.pushed_from = None;
+        }
+        self.pose = Some((pose, stamp));
+        event
     }
 
-    /// Decides at time `now` \[s\] (the clock of the receipt times).
+    /// Checks the pose stream at `now` \[s, steady clock\]: [`PoseEvent::Stale`] once when the
+    /// newest pose arrived longer than `stale_timeout` ago.
+    pub fn check(&mut self, now: f64) -> Option<PoseEvent> {
+        self.watch.check(now)
+    }
+
+    /// Decides at time `now` \[s\] (the steady clock of the receipt times).
     pub fn decide(&self, now: f64) -> Decision {
-        let (Some(goal), Some((pose, stamp, received))) = (self.goal, self.pose) else {
+        let (Some(goal), Some((pose, stamp))) = (self.goal, self.pose) else {
             return Decision::Idle;
         };
-        if now - received > self.settings.stale_timeout {
+        if self.watch.stale_at(now) {
             return Decision::Stale;
         }
         if let Some(from) = self.pushed_from
@@ -129,7 +159,7 @@ mod tests {
 
     #[test]
     fn pushes_waits_for_the_push_and_stops_at_the_goal() {
-        let mut l = PusherLogic::new(PusherSettings::default());
+        let mut l = PusherLogic::new(PusherSettings::default()).unwrap();
         assert_eq!(l.decide(0.0), Decision::Idle);
         l.on_pose([0.4, 0.0, 0.0], 0.0, 0.0);
         assert_eq!(l.decide(0.0), Decision::Idle, "no goal yet");
@@ -153,7 +183,8 @@ mod tests {
         let mut l = PusherLogic::new(PusherSettings {
             stale_timeout: 0.5,
             ..PusherSettings::default()
-        });
+        })
+        .unwrap();
         l.on_goal([0.8, 0.0, 0.0]);
         l.on_pose([0.4, 0.0, 0.0], 10.0, 10.0);
         assert!(matches!(l.decide(10.4), Decision::Push(_)));
@@ -165,8 +196,55 @@ mod tests {
     }
 
     #[test]
+    fn says_stale_once_and_resumes_after_a_simulator_restart() {
+        // regression: after `sim_node` was restarted its stamps began again at 0, and the
+        // pusher waited for a pose stamped `push_wait` after the last push of the old run
+        let mut l = PusherLogic::new(PusherSettings {
+            stale_timeout: 0.5,
+            ..PusherSettings::default()
+        })
+        .unwrap();
+        l.on_goal([0.8, 0.0, 0.0]);
+        assert_eq!(l.on_pose([0.4, 0.0, 0.0], 40.0, 10.0), None);
+        assert!(matches!(l.decide(10.0), Decision::Push(_)));
+        l.pushed();
+        assert_eq!(l.check(10.4), None);
+        assert!(matches!(l.check(10.6), Some(PoseEvent::Stale { .. })));
+        assert_eq!(l.check(11.0), None, "stale is said once");
+        assert_eq!(l.decide(11.0), Decision::Stale);
+        // the simulator comes back with its clock from 0 and the block at its start
+        let e = l.on_pose([0.4, 0.0, 0.0], 0.01, 14.0);
+        assert_eq!(
+            e,
+            Some(PoseEvent::Resumed {
+                gap: 4.0,
+                restarted: true
+            })
+        );
+        assert!(
+            matches!(l.decide(14.0), Decision::Push(_)),
+            "the push of the old run is not waited for: {:?}",
+            l.decide(14.0)
+        );
+        // the same clock after a dropout: the push in flight is still waited for
+        l.pushed();
+        assert!(matches!(l.check(15.0), Some(PoseEvent::Stale { .. })));
+        let e = l.on_pose([0.42, 0.0, 0.0], 1.0, 16.0);
+        assert!(matches!(
+            e,
+            Some(PoseEvent::Resumed {
+                restarted: false,
+                ..
+            })
+        ));
+        assert_eq!(l.decide(16.0), Decision::Waiting);
+        l.on_pose([0.45, 0.0, 0.0], 1.9, 16.1);
+        assert!(matches!(l.decide(16.1), Decision::Push(_)));
+    }
+
+    #[test]
     fn the_goal_check_wraps_the_angle() {
-        let mut l = PusherLogic::new(PusherSettings::default());
+        let mut l = PusherLogic::new(PusherSettings::default()).unwrap();
         l.on_goal([0.8, 0.0, std::f64::consts::PI - 0.02]);
         l.on_pose([0.8, 0.0, -std::f64::consts::PI + 0.02], 0.0, 0.0);
         assert_eq!(l.decide(0.0), Decision::AtGoal);

@@ -98,6 +98,19 @@ impl<'a> RaceClock<'a> {
         self.latest
     }
 
+    /// Starts over after the poses stopped or their clock restarted ([`crate::stale`]): forgets
+    /// the state estimate and its pose window (a Savitzky–Golay fit across a gap would read the
+    /// gap as motion, and poses stamped before the old window would be dropped), the commands
+    /// sent, the solve schedule and the optimiser's warm start. The next estimate comes after a
+    /// full window of fresh poses (15 at the default fit: 0.15 s at 100 Hz).
+    pub fn restart(&mut self) {
+        self.est.reset();
+        self.latest = None;
+        self.sent.clear();
+        self.next_solve = None;
+        self.racer.reset();
+    }
+
     /// The input acting at time `t` by the commands sent so far (zero before the first: the
     /// simulator holds the zero command until one arrives).
     fn input_at(&self, t: f64) -> Input {
@@ -165,6 +178,120 @@ impl<'a> RaceClock<'a> {
             self.overruns += 1;
         }
         due
+    }
+}
+
+/// The command the racer holds while its poses are stale: zero throttle, steering as last
+/// commanded (centred before any command).
+///
+/// Why not centred: the car is still moving when the poses stop (a motion-capture dropout, a
+/// restarted simulator whose car is coasting) and the last steering angle is the one that
+/// keeps it on the arc the optimiser planned through the current curve; snapping the wheels
+/// straight at speed is a steering step the racer never planned, which turns a coasting car in a
+/// bend towards the outer border. With zero throttle the car slows on drag and rolling
+/// resistance along that arc. (`sim_node` itself gives the zero command, steering centred, after
+/// its own `cmd_timeout` without commands: a stopped racer is covered there.)
+pub fn held_input(last: Option<Input>) -> Input {
+    [last.map_or(0.0, |u| u[0]), 0.0]
+}
+
+/// What [`StaleHold`] tells the node to do about the pose stream.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum HoldEvent {
+    /// The poses went stale: log once, forget the plan ([`RaceClock::restart`]), hold.
+    Stale {
+        /// Time since the newest pose arrived \[s, steady clock\].
+        silent: f64,
+    },
+    /// Poses arrive again: log once, [`RaceClock::restart`]; the hold goes on until the first
+    /// command solved from fresh poses is published.
+    Resumed {
+        /// Time without poses \[s, steady clock\].
+        gap: f64,
+        /// The pose stamps went back (a restarted simulator).
+        restarted: bool,
+    },
+    /// Without a gap, the pose stamps went back (a looped bag): log once, [`RaceClock::restart`]
+    /// (the old window and schedule belong to another clock).
+    Restarted {
+        /// The newest stamp before \[s\].
+        from: f64,
+        /// The new, earlier stamp \[s\].
+        to: f64,
+    },
+}
+
+/// The racer's hold on stale poses, on the node's steady clock (see [`crate::stale`] for why not
+/// ROS time): a [`PoseWatch`](crate::stale::PoseWatch) plus the held command, repeated every
+/// control period while holding so that a robot (or `sim_node`) with a command timeout of its
+/// own keeps a defined command.
+#[derive(Debug, Clone)]
+pub struct StaleHold {
+    watch: crate::stale::PoseWatch,
+    period: f64,
+    holding: bool,
+    next_hold: f64,
+    last: Option<Input>,
+}
+
+impl StaleHold {
+    /// Holds after `timeout` \[s\] without a pose, repeating the held command every `period` \[s\].
+    pub fn new(timeout: f64, period: f64) -> Result<Self, crate::stale::StaleError> {
+        Ok(Self {
+            watch: crate::stale::PoseWatch::new(timeout)?,
+            period,
+            holding: false,
+            next_hold: f64::NEG_INFINITY,
+            last: None,
+        })
+    }
+
+    /// A pose stamped `stamp` \[s\] arrived at `now` \[s, steady clock\].
+    pub fn on_pose(&mut self, now: f64, stamp: f64) -> Option<HoldEvent> {
+        use crate::stale::PoseEvent;
+        match self.watch.on_pose(now, stamp)? {
+            PoseEvent::Resumed { gap, restarted } => Some(HoldEvent::Resumed { gap, restarted }),
+            PoseEvent::Restarted { from, to } => Some(HoldEvent::Restarted { from, to }),
+            PoseEvent::Stale { silent } => Some(HoldEvent::Stale { silent }),
+        }
+    }
+
+    /// Checks for stale poses at `now` \[s, steady clock\]; reports the change once.
+    pub fn check(&mut self, now: f64) -> Option<HoldEvent> {
+        match self.watch.check(now)? {
+            crate::stale::PoseEvent::Stale { silent } => {
+                self.holding = true;
+                self.next_hold = now;
+                Some(HoldEvent::Stale { silent })
+            }
+            _ => None,
+        }
+    }
+
+    /// Whether the racer holds (poses stale, or fresh again but no command solved from them
+    /// yet): solved commands are not to be published from stale data.
+    pub fn holding(&self) -> bool {
+        self.holding
+    }
+
+    /// The held command when one is due at `now` \[s, steady clock\] (at once on holding, then
+    /// every period).
+    pub fn due(&mut self, now: f64) -> Option<Input> {
+        if !self.holding || now < self.next_hold {
+            return None;
+        }
+        self.next_hold = (self.next_hold + self.period).max(now);
+        let u = held_input(self.last);
+        self.last = Some(u);
+        Some(u)
+    }
+
+    /// A command solved from fresh poses was published: the hold (if any) ends.
+    pub fn published(&mut self, u: Input) {
+        self.last = Some(u);
+        if !self.watch.is_stale() {
+            self.holding = false;
+        }
     }
 }
 

@@ -14,7 +14,7 @@
 //! | `samples`, `horizon`, `lambda`, `seed`, `threads` | `MppiConfig` defaults | K, T, λ, noise seed, rollout threads |
 //! | `goal_tolerance` | 0.02 | goal reached within this xy distance (m) ... |
 //! | `angle_tolerance` | 0.1 | ... and this heading error (rad) |
-//! | `stale_timeout` | 1.0 | no action while the last pose is older than this (s, wall time) |
+//! | `stale_timeout` | 1.0 | no action while the last pose arrived longer ago than this (s, the node's steady clock, also with `use_sim_time`); one WARN on going stale, one INFO when poses return |
 //! | `push_wait` | 1.8 | after a push, wait for a pose stamped this much later (s, pose time) |
 //! | `obstacle` | none | `"cx,cy,sx,sy[,angle]"`: an obstacle box (m, rad) to avoid, e.g. Tu & Lin's `"0.6,0.2,0.1,0.5"` |
 //! | `block_size` | `"0.1,0.1"` | block side lengths (m) for the collision test |
@@ -28,6 +28,7 @@ use dynlab_control::mppi::{Mppi, MppiConfig, PushTask, Rect};
 use dynlab_learn::{World, load_model};
 use dynlab_msgs::geometry_msgs::PoseStamped;
 use dynlab_nodes::mppi_pusher::{Decision, PusherLogic, PusherSettings};
+use dynlab_nodes::stale::PoseEvent;
 use dynlab_nodes::{Started, start_node};
 use dynlab_ros::{WaitSet, qos};
 use dynlab_sim::PushAction;
@@ -139,7 +140,7 @@ fn main() -> anyhow::Result<()> {
         mppi.config().lambda
     );
     let wall0 = Instant::now();
-    let mut logic = PusherLogic::new(settings);
+    let mut logic = PusherLogic::new(settings)?;
     if !goal0.is_empty() {
         let g = floats("goal", &goal0, &[3])?;
         logic.on_goal([g[0], g[1], g[2]]);
@@ -163,7 +164,31 @@ fn main() -> anyhow::Result<()> {
         }
         if let Some(msg) = poses.take_latest()? {
             let (pose, stamp) = planar(&msg);
-            logic.on_pose(pose, stamp, now);
+            match logic.on_pose(pose, stamp, now) {
+                Some(PoseEvent::Resumed { gap, restarted }) => {
+                    tracing::info!(
+                        "block pose back after {gap:.2} s{}: pushing again (MPPI warm start reset)",
+                        if restarted {
+                            " with its clock restarted"
+                        } else {
+                            ""
+                        }
+                    );
+                    mppi.reset();
+                }
+                Some(PoseEvent::Restarted { from, to }) => {
+                    tracing::info!(
+                        "block pose stamps went back from {from:.3} s to {to:.3} s: a new run (MPPI warm start reset)"
+                    );
+                    mppi.reset();
+                }
+                _ => {}
+            }
+        }
+        if let Some(PoseEvent::Stale { silent }) = logic.check(now) {
+            tracing::warn!(
+                "no block pose for {silent:.2} s: holding off (no push) until it returns"
+            );
         }
         let d = logic.decide(now);
         match d {
@@ -187,9 +212,6 @@ fn main() -> anyhow::Result<()> {
             }
             Decision::AtGoal if last != Decision::AtGoal => {
                 tracing::info!("goal reached after {pushes} pushes");
-            }
-            Decision::Stale if last != Decision::Stale => {
-                tracing::warn!("block pose stale: holding off");
             }
             _ => {}
         }

@@ -15,7 +15,16 @@
 //! steps, enough for a solve at a fifth of real time: the command computed from the pose stamped `t` is published when the clock reaches
 //! `t + delay`, and the optimiser starts from the state predicted at that time under the
 //! commands already sent; 0 publishes at once and assumes no delay; see
-//! `dynlab_nodes::racer`), `use_sim_time` (follow `/clock`; recommended with `sim_node`).
+//! `dynlab_nodes::racer`), `use_sim_time` (follow `/clock`; recommended with `sim_node`),
+//! `stale_timeout` (s, default 0.2: twenty pose periods at 100 Hz).
+//!
+//! Stale poses: when no pose has arrived for `stale_timeout` seconds of the node's own steady
+//! clock (not ROS time: with `use_sim_time` a stopped simulator stops `/clock` too), the racer
+//! logs one WARN, forgets its plan and publishes zero throttle with the last steering angle
+//! every control period (`dynlab_nodes::racer::held_input` says why not centred). When poses
+//! arrive again it logs one INFO, restarts its state estimate from fresh poses only (no
+//! velocity from across the gap; a restarted simulator's stamps from 0 are taken as a new
+//! clock) and its warm start, and races again with the first command solved from them.
 
 use std::collections::VecDeque;
 use std::time::{Duration, Instant};
@@ -23,7 +32,7 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, bail};
 use dynlab_control::racing::{Optimizer, Racer, RacerSettings};
 use dynlab_msgs::geometry_msgs::PoseStamped;
-use dynlab_nodes::racer::{Planned, RaceClock};
+use dynlab_nodes::racer::{HoldEvent, Planned, RaceClock, StaleHold};
 use dynlab_nodes::{Started, start_node};
 use dynlab_ros::WaitSet;
 use dynlab_ros::qos::{self, History, QosProfile};
@@ -42,6 +51,7 @@ fn main() -> anyhow::Result<()> {
         "hold",
         "delay",
         "use_sim_time",
+        "stale_timeout",
     ];
     let Started { mut node, shutdown } = start_node("racer", &known)?;
     let p = node.params();
@@ -55,6 +65,7 @@ fn main() -> anyhow::Result<()> {
     let horizon: i64 = p.get_or("horizon", 20)?;
     let hold: i64 = p.get_or("hold", 5)?;
     let delay: f64 = p.get_or("delay", 0.03)?;
+    let stale_timeout: f64 = p.get_or("stale_timeout", 0.2)?;
     let (model, _) = dynlab_learn::load_model(std::path::Path::new(&model_dir), None, None)
         .with_context(|| format!("parameter model: {model_dir}"))?;
     let track =
@@ -79,6 +90,8 @@ fn main() -> anyhow::Result<()> {
         );
     }
     let mut rc = RaceClock::new(racer, &model, delay_steps as usize)?;
+    let mut hold = StaleHold::new(stale_timeout, rc.period())?;
+    let steady0 = Instant::now();
     tracing::info!(
         "racing {} ({:.2} m) with {} ({:?}, n = {}, {:.0} Hz, command delay {:.0} ms)",
         track_path,
@@ -111,6 +124,28 @@ fn main() -> anyhow::Result<()> {
         waits.wait(POLL)?;
         while let Some(msg) = poses.take()? {
             let t = f64::from(msg.header.stamp.sec) + 1e-9 * f64::from(msg.header.stamp.nanosec);
+            let event = hold.on_pose(steady0.elapsed().as_secs_f64(), t);
+            match event {
+                Some(HoldEvent::Resumed { gap, restarted }) => tracing::info!(
+                    "poses back after {gap:.2} s{}: state estimate restarted, racing again after a \
+                     full window of fresh poses",
+                    if restarted {
+                        " with their clock restarted"
+                    } else {
+                        ""
+                    }
+                ),
+                Some(HoldEvent::Restarted { from, to }) => tracing::info!(
+                    "pose stamps went back from {from:.3} s to {to:.3} s: state estimate \
+                     restarted on the new clock"
+                ),
+                _ => {}
+            }
+            if event.is_some() {
+                rc.restart();
+                pending.clear();
+                last_stamp = None;
+            }
             let (x, y, psi) = msg.pose.planar_xy_yaw();
             if let Some(l) = last_stamp
                 && t > l + 1.5 * tick
@@ -122,6 +157,19 @@ fn main() -> anyhow::Result<()> {
         }
         let now = clock.now_ns()?;
         let now_s = now as f64 * 1e-9;
+        let steady = steady0.elapsed().as_secs_f64();
+        if let Some(HoldEvent::Stale { silent }) = hold.check(steady) {
+            tracing::warn!(
+                "no pose for {silent:.2} s (stale_timeout {stale_timeout} s): holding zero \
+                 throttle with the last steering angle until poses return"
+            );
+            rc.restart();
+            pending.clear();
+            last_stamp = None;
+        }
+        if let Some(u) = hold.due(steady) {
+            publisher.publish(m::car_cmd_msg(now.max(0) as u64, CarInput::new(u[0], u[1])))?;
+        }
         while let Some((p, checked)) = pending.front_mut() {
             let first = !*checked;
             *checked = true;
@@ -132,6 +180,7 @@ fn main() -> anyhow::Result<()> {
             let u = p.step.input;
             let u = limits.clamp([u[0] * (1.0 - 1e-6), u[1] * (1.0 - 1e-6)]);
             publisher.publish(m::car_cmd_msg(now.max(0) as u64, CarInput::new(u[0], u[1])))?;
+            hold.published(u);
             pending.pop_front();
         }
         // schedule solves on pose stamps (the clock only releases commands): each solve starts
