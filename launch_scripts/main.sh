@@ -1,13 +1,17 @@
 #!/usr/bin/env bash
 # The main job on the bundled bags (bags/): the whole loop of finding the missing physics, for
-# each bag with a hidden effect, in a few minutes on 2 cores:
+# each bag with hidden effects, in a few minutes on 2 cores:
 #   1. baseline: the physics model fitted on the nominal bag (k = 20 open-loop steps);
-#   2. its error on held-out data with the hidden effect, and where it fails (`dynlab compare`);
-#   3. diagnosis (`dynlab diagnose`) on the bag with the hidden effect: which effect of the
-#      library explains the residual, with fitted parameters ± std and a significance test;
-#   4. add the verdict (`dynlab train --effects <verdict>`) and refit on that bag;
-#   5. the error after, on the same held-out data (`dynlab compare --baseline`: side by side);
-#      a before/after table and the report paths.
+#   2. its error on held-out data with the hidden effects, and where it fails (`dynlab compare`);
+#   3. diagnosis (`dynlab diagnose`) on the bag: forward selection over the effect library (every
+#      significant effect, one step at a time, with fitted parameters ± std), then, where the
+#      residual keeps structure, a search over physics-informed terms beyond the library that
+#      writes a custom effect file;
+#   4. add what was found (`dynlab train --effects a,b [--effects-file F]`) and refit on that bag;
+#   5. the error after, on the same held-out data (`dynlab compare --baseline`: before and after
+#      on the same axes); a before/after table and the report paths.
+# Car bags: car_drag_steering (drag and a steering offset, both in the library) and
+# car_steering_gain (the steering gain falls with speed: not in the library).
 # Usage: launch_scripts/main.sh [OUT_DIR]   (default out/main; rewritten on each run)
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -19,10 +23,11 @@ rm -rf "$out"
 mkdir -p "$out/test" "$out/models" "$out/eval" "$out/diagnosis" "$out/compare"
 
 step() { printf '\n== %s\n' "$*"; }
-verdict_of() { python3 -c 'import json,sys; v=json.load(open(sys.argv[1]))["verdict"]; print(v or "")' "$1"; }
+effects_of() { python3 -c 'import json,sys; print(",".join(json.load(open(sys.argv[1])).get("effects") or []))' "$1"; }
+custom_name_of() { python3 -c 'import sys,tomllib; print(tomllib.load(open(sys.argv[1],"rb")).get("name","custom"))' "$1"; }
 
 step "Held-out test data (same scenarios, other seeds)"
-for name in car_nominal car_aero_drag car_steering_offset; do
+for name in car_drag_steering car_steering_gain; do
   "$dynlab" collect car --scenario "$scen/$name.toml" --episodes 1 --seed 9002 --out "$out/test/$name" \
     | tail -n 1
 done
@@ -31,35 +36,42 @@ step "Baseline: the physics model fitted on the nominal bag"
 "$dynlab" train --bag bags/car_nominal --kind physics --steps 20 --physics-windows 400 \
   --out "$out/models/car_physics" | tail -n 1
 
-for effect_bag in car_aero_drag car_steering_offset; do
+# car_drag_steering: two library effects at once (drag and a steering offset);
+# car_steering_gain: an effect outside the library (the steering gain falls with speed)
+for effect_bag in car_drag_steering car_steering_gain; do
   step "$effect_bag: baseline error on held-out data"
   "$dynlab" eval-model --model "$out/models/car_physics" --bag "$out/test/$effect_bag" --steps 50 --json \
     > "$out/eval/before@$effect_bag.json"
 
   step "$effect_bag: where the baseline fails (compare)"
   "$dynlab" compare --steps 50 --model "$out/models/car_physics" --bag "$out/test/$effect_bag" \
-    --out "$out/compare/baseline@$effect_bag"
+    --out "$out/compare/baseline@$effect_bag" | head -n 12
 
-  step "$effect_bag: diagnosis"
-  "$dynlab" diagnose --model "$out/models/car_physics" --bag "bags/$effect_bag" \
-    --out "$out/diagnosis/$effect_bag"
-  verdict="$(verdict_of "$out/diagnosis/$effect_bag/diagnosis.json")"
-  if [[ -z "$verdict" ]]; then
-    echo "no effect found for $effect_bag; nothing to add"
+  step "$effect_bag: diagnosis (forward selection over the library, then terms beyond it)"
+  diag="$out/diagnosis/$effect_bag"
+  "$dynlab" diagnose --model "$out/models/car_physics" --bag "bags/$effect_bag" --out "$diag"
+  effects="$(effects_of "$diag/diagnosis.json")"
+  add=()
+  [[ -n "$effects" ]] && add+=(--effects "$effects")
+  [[ -f "$diag/custom_effect.toml" ]] && add+=(--effects-file "$diag/custom_effect.toml")
+  if [[ ${#add[@]} -eq 0 ]]; then
+    echo "nothing found for $effect_bag; nothing to add"
     cp "$out/eval/before@$effect_bag.json" "$out/eval/after@$effect_bag.json"
     continue
   fi
+  label="${effects:-}"
+  [[ -f "$diag/custom_effect.toml" ]] && label="${label:+$label+}custom:$(custom_name_of "$diag/custom_effect.toml")"
 
-  step "$effect_bag: add $verdict and refit"
+  step "$effect_bag: add $label and refit"
   "$dynlab" train --bag "bags/$effect_bag" --kind physics --steps 20 --physics-windows 400 \
-    --effects "$verdict" --out "$out/models/car_physics+$verdict" | grep -E "\($verdict|physics model, best"
-  "$dynlab" eval-model --model "$out/models/car_physics+$verdict" --bag "$out/test/$effect_bag" --steps 50 \
+    "${add[@]}" --out "$out/models/car_physics+$effect_bag" | tail -n 1
+  "$dynlab" eval-model --model "$out/models/car_physics+$effect_bag" --bag "$out/test/$effect_bag" --steps 50 \
     --json > "$out/eval/after@$effect_bag.json"
-  echo "$verdict" > "$out/eval/verdict@$effect_bag.txt"
+  echo "$label" > "$out/eval/verdict@$effect_bag.txt"
 
-  step "$effect_bag: where the error fell (compare, side by side with the baseline)"
-  "$dynlab" compare --steps 50 --model "$out/models/car_physics+$verdict" --baseline "$out/models/car_physics" \
-    --bag "$out/test/$effect_bag" --out "$out/compare/$effect_bag"
+  step "$effect_bag: where the error fell (compare, before and after on the same axes)"
+  "$dynlab" compare --steps 50 --model "$out/models/car_physics+$effect_bag" --baseline "$out/models/car_physics" \
+    --bag "$out/test/$effect_bag" --out "$out/compare/$effect_bag" | head -n 12
 done
 
 # Pushing: the same loop on the bundled pushing bag with a hidden centre-of-mass offset (one
@@ -77,7 +89,7 @@ step "$effect_bag: baseline error on held-out data"
   > "$out/eval/before@$effect_bag.json"
 step "$effect_bag: diagnosis"
 "$dynlab" diagnose --model "$out/models/push_physics" --bag "bags/$effect_bag" --out "$out/diagnosis/$effect_bag"
-verdict="$(verdict_of "$out/diagnosis/$effect_bag/diagnosis.json")"
+verdict="$(effects_of "$out/diagnosis/$effect_bag/diagnosis.json")"
 if [[ -z "$verdict" ]]; then
   echo "no effect found for $effect_bag; nothing to add"
   cp "$out/eval/before@$effect_bag.json" "$out/eval/after@$effect_bag.json"
@@ -93,11 +105,11 @@ else
     --bag "$out/test/$effect_bag" --out "$out/compare/$effect_bag"
 fi
 
-step "Before / after: held-out error of the physics model (car: 50 steps, pushing: 3 pushes; test data with the hidden effect)"
+step "Before / after: held-out error of the physics model (car: 50 steps, pushing: 3 pushes; held-out test data with the hidden effects)"
 python3 - "$out/eval" <<'PY'
 import json, pathlib, sys
 d = pathlib.Path(sys.argv[1])
-print(f"{'data':<22} {'effect added':<16} {'loss before':>12} {'loss after':>12} {'change':>8} {'TVE before':>11} {'TVE after':>10}")
+print(f"{'data':<22} {'effects added':<40} {'loss before':>12} {'loss after':>12} {'change':>8} {'TVE before':>11} {'TVE after':>10}")
 for before in sorted(d.glob("before@*.json")):
     name = before.stem.split("@")[1]
     b = json.loads(before.read_text())
@@ -107,6 +119,6 @@ for before in sorted(d.glob("before@*.json")):
     tb = (b.get("tve") or {}).get("tve", float("nan"))
     ta = (a.get("tve") or {}).get("tve", float("nan"))
     f = lambda x: f"{x:.3f}" if x == x else "—"
-    print(f"{name:<22} {v:<16} {b['loss']:>12.4e} {a['loss']:>12.4e} {100*(a['loss']/b['loss']-1):>7.0f}% {f(tb):>11} {f(ta):>10}")
+    print(f"{name:<22} {v:<40} {b['loss']:>12.4e} {a['loss']:>12.4e} {100*(a['loss']/b['loss']-1):>7.0f}% {f(tb):>11} {f(ta):>10}")
 PY
 printf '\nReports: %s/compare/*/index.html (where it fails, before/after), %s/diagnosis/*/diagnosis.html\nModels and errors: %s\n' "$out" "$out" "$out"

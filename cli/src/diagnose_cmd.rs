@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 
 use anyhow::Context;
-use clap::Args;
+use clap::{Args, Parser};
 use dynlab_diagnose::diagnosis::{DiagnoseConfig, diagnose, diagnosis_page};
 use dynlab_learn::dynamics::data::SavGol;
 use dynlab_learn::dynamics::physics::PhysicsModel;
@@ -34,16 +34,21 @@ pub struct DiagnoseArgs {
     /// Smallest held-out error reduction that counts (fraction).
     #[arg(long, default_value_t = 0.05)]
     min_reduction: f64,
-    /// Hold the model's nominal parameters instead of refitting the identifiable ones (tires,
-    /// drivetrain; pushing `c`, `κ`) with every candidate.
+    /// Hold the model's nominal parameters (pushing physics models otherwise refit `c`, `κ`
+    /// with every candidate).
     #[arg(long)]
     no_refit: bool,
-    /// Refit these nominal parameters (comma-separated; default the model's identifiable ones).
+    /// Refit these nominal parameters with every candidate (comma-separated; the car's grip and
+    /// drivetrain: `Df,Dr,Cm1,Cm2,Cr0`).
     #[arg(long, value_delimiter = ',')]
     refit: Option<Vec<String>>,
     /// Forward selection adds at most this many effects.
     #[arg(long, default_value_t = 3)]
     max_effects: usize,
+    /// Also train the model with the selected effects on the same bags
+    /// (`dynlab train --kind physics --effects …`), written to `<out>/model`.
+    #[arg(long)]
+    apply: bool,
     /// Pose topic (default from the model's world).
     #[arg(long)]
     pose_topic: Option<String>,
@@ -90,7 +95,13 @@ pub fn run(args: DiagnoseArgs) -> anyhow::Result<()> {
         seed: args.seed,
         effects,
         min_reduction: args.min_reduction,
-        refit_nominal: args.no_refit.then_some(false),
+        refit_nominal: if args.no_refit {
+            Some(false)
+        } else if args.refit.is_some() {
+            Some(true)
+        } else {
+            None
+        },
         max_effects: args.max_effects,
         refit_params: args.refit.clone(),
         ..DiagnoseConfig::default()
@@ -106,5 +117,53 @@ pub fn run(args: DiagnoseArgs) -> anyhow::Result<()> {
     std::fs::write(&html, diagnosis_page(&d))
         .with_context(|| format!("writing {}", html.display()))?;
     println!("report: {} and {}", json.display(), html.display());
-    Ok(())
+    if d.effects.is_empty() {
+        return Ok(());
+    }
+    let kind = if model.kind().name() == "hybrid" {
+        "hybrid"
+    } else {
+        "physics"
+    };
+    let mut train: Vec<String> = vec!["train".into()];
+    for b in &args.bags {
+        train.extend(["--bag".into(), b.display().to_string()]);
+    }
+    train.extend([
+        "--kind".into(),
+        kind.into(),
+        "--effects".into(),
+        d.effects.join(","),
+    ]);
+    for (flag, v) in [
+        ("--pose-topic", &args.pose_topic),
+        ("--cmd-topic", &args.cmd_topic),
+    ] {
+        if let Some(v) = v {
+            train.extend([flag.into(), v.clone()]);
+        }
+    }
+    train.extend(["--out".into(), args.out.join("model").display().to_string()]);
+    let shown = train.join(" ");
+    if !args.apply {
+        println!("add them: dynlab {shown}   (or rerun with --apply)");
+        return Ok(());
+    }
+    println!("applying: dynlab {shown}");
+    let parsed = ApplyTrain::try_parse_from(std::iter::once("dynlab".to_string()).chain(train))
+        .context("building the train command for --apply")?;
+    let ApplyCommand::Train(t) = parsed.command;
+    crate::train_cmd::run(t)
+}
+
+/// The `dynlab train` command line that `--apply` runs.
+#[derive(Debug, clap::Parser)]
+struct ApplyTrain {
+    #[command(subcommand)]
+    command: ApplyCommand,
+}
+
+#[derive(Debug, clap::Subcommand)]
+enum ApplyCommand {
+    Train(crate::train_cmd::TrainArgs),
 }

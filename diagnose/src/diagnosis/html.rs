@@ -2,7 +2,7 @@
 
 use std::fmt::Write as _;
 
-use super::{Diagnosis, g4};
+use super::{Candidate, Diagnosis, g4};
 
 fn esc(s: &str) -> String {
     s.replace('&', "&amp;")
@@ -59,43 +59,58 @@ pub fn diagnosis_html(d: &Diagnosis) -> String {
             p.join(", ")
         );
     }
-    let _ = writeln!(
-        o,
-        "<table style=\"border-collapse:collapse\"><tr><th align=left>effect</th><th align=left>held-out error removed</th><th>bootstrap lower bound</th><th>significant</th><th align=left>fitted parameters (± std)</th></tr>"
-    );
-    for c in &d.candidates {
-        let w = (c.error_reduction * 200.0).round();
-        let params: Vec<String> = c
-            .params
-            .iter()
-            .map(|(k, v)| {
-                let sd = c.param_std.get(k).copied().unwrap_or(0.0);
-                let unit = c.param_units.get(k).cloned().unwrap_or_default();
-                if sd > 0.0 {
-                    format!("{k} = {} ± {} {}", g4(*v), g4(sd), esc(&unit))
-                } else {
-                    format!("{k} = {} {}", g4(*v), esc(&unit))
-                }
-            })
-            .collect();
-        let bold = if d.verdict.as_deref() == Some(c.effect.as_str()) {
-            "font-weight:bold;"
-        } else {
-            ""
-        };
+    for step in &d.selection {
         let _ = writeln!(
             o,
-            "<tr style=\"{bold}border-top:1px solid #ddd\"><td title=\"{}\">{}</td><td><span style=\"display:inline-block;height:0.8em;width:{w}px;background:{}\"></span> {:.1} %</td><td align=right>{:.1} %</td><td align=center>{}</td><td>{}</td></tr>",
-            esc(&c.description),
-            esc(&c.effect),
-            if c.significant { "#1a7f37" } else { "#aaa" },
-            100.0 * c.error_reduction,
-            100.0 * c.ci_lower.max(-9.99),
-            if c.significant { "yes" } else { "no" },
-            params.join(", ")
+            "<h3>Step {}: candidates against the model{}</h3><p>Held-out error before this step {}.</p>",
+            step.step,
+            if step.given.is_empty() {
+                String::new()
+            } else {
+                format!(" + {}", esc(&step.given.join(" + ")))
+            },
+            g4(step.error_before)
         );
+        o.push_str(&candidate_table(&step.candidates, step.added.as_deref()));
+        let _ = match &step.added {
+            Some(e) => writeln!(
+                o,
+                "<p>→ <b>{}</b> added: held-out error {} → {} ({:+.0} %).</p>",
+                esc(e),
+                g4(step.error_before),
+                g4(step.error_after),
+                100.0 * (step.error_after / step.error_before.max(1e-300) - 1.0)
+            ),
+            None => writeln!(
+                o,
+                "<p>→ no candidate is significant: the selection stops.</p>"
+            ),
+        };
     }
-    let _ = writeln!(o, "</table>");
+    if let Some(j) = &d.joint {
+        let _ = writeln!(
+            o,
+            "<h3>The selected effects refitted together</h3><p><b>{}</b>: held-out error {} → {}, {:.1} % removed (bootstrap lower bound {:.1} %). Add them with <code>dynlab train --kind physics --effects {}</code>.</p><table style=\"border-collapse:collapse\"><tr><th align=left>parameter</th><th align=right>value</th><th align=right>± std</th><th align=left>unit</th></tr>",
+            esc(&j.effects.join(" + ")),
+            g4(j.error_before),
+            g4(j.error_after),
+            100.0 * j.error_reduction,
+            100.0 * j.ci_lower.max(-9.99),
+            esc(&j.effects.join(","))
+        );
+        for (name, v) in &j.params {
+            let sd = j.param_std.get(name).copied().unwrap_or(0.0);
+            let _ = writeln!(
+                o,
+                "<tr><td>{}</td><td align=right>{}</td><td align=right>{}</td><td>{}</td></tr>",
+                esc(name),
+                g4(*v),
+                if sd > 0.0 { g4(sd) } else { "–".into() },
+                esc(j.param_units.get(name).map_or("", |u| u.as_str()))
+            );
+        }
+        let _ = writeln!(o, "</table>");
+    }
     if !d.correlations.is_empty() {
         let _ = writeln!(
             o,
@@ -113,6 +128,56 @@ pub fn diagnosis_html(d: &Diagnosis) -> String {
         let _ = writeln!(o, "</table>");
     }
     let _ = writeln!(o, "</section>");
+    o
+}
+
+/// One step's candidates as a table with a bar per error reduction (`added` in bold).
+fn candidate_table(cands: &[Candidate], added: Option<&str>) -> String {
+    let mut o = String::new();
+    let _ = writeln!(
+        o,
+        "<table style=\"border-collapse:collapse\"><tr><th align=left>effect</th><th align=left>held-out error removed</th><th>bootstrap lower bound</th><th>significant</th><th align=left>fitted parameters (± std)</th></tr>"
+    );
+    for c in cands {
+        let w = (c.error_reduction * 200.0).round();
+        let params: Vec<String> = c
+            .params
+            .iter()
+            .map(|(k, v)| {
+                let sd = c.param_std.get(k).copied().unwrap_or(0.0);
+                let unit = c.param_units.get(k).cloned().unwrap_or_default();
+                if sd > 0.0 {
+                    format!("{k} = {} ± {} {}", g4(*v), g4(sd), esc(&unit))
+                } else {
+                    format!("{k} = {} {}", g4(*v), esc(&unit))
+                }
+            })
+            .collect();
+        let bold = if added == Some(c.effect.as_str()) {
+            "font-weight:bold;"
+        } else {
+            ""
+        };
+        let _ = writeln!(
+            o,
+            "<tr style=\"{bold}border-top:1px solid #ddd\"><td title=\"{}\">{}</td><td><span style=\"display:inline-block;height:0.8em;width:{w}px;background:{}\"></span> {:.1} %</td><td align=right>{:.1} %</td><td align=center>{}</td><td>{}</td></tr>",
+            esc(&c.description),
+            esc(&c.effect),
+            if c.significant { "#1a7f37" } else { "#aaa" },
+            100.0 * c.error_reduction,
+            100.0 * c.ci_lower.max(-9.99),
+            if c.significant { "yes" } else { "no" },
+            params.join(", ")
+        );
+        if let Some(n) = &c.note {
+            let _ = writeln!(
+                o,
+                "<tr><td></td><td colspan=4 style=\"color:#9a6700\">not counted: {}</td></tr>",
+                esc(n)
+            );
+        }
+    }
+    let _ = writeln!(o, "</table>");
     o
 }
 
