@@ -45,9 +45,12 @@ pub mod args;
 pub mod clock;
 pub mod names;
 pub mod node;
+pub mod param_services;
+pub mod param_store;
 pub mod params;
 pub mod qos;
 pub mod raw;
+pub mod rosout;
 pub mod shutdown;
 
 pub use args::{ArgsError, LogLevel, NodeArgs, ParamArg, Remap};
@@ -56,6 +59,7 @@ pub use node::{
     DiscoveredPublication, Node, NodeError, Publisher, RawPublisher, RawSubscription, Received,
     Subscription, WaitSet, domain_id_from_env, parse_domain_id,
 };
+pub use param_store::{ParamChange, ParamDescriptor, ParamRange, ParamStore};
 pub use params::{FromParam, ParamError, ParamSource, ParamValue, Parameters};
 pub use qos::{QosPreset, QosProfile};
 pub use raw::SerializedMessage;
@@ -63,14 +67,19 @@ pub use shutdown::{Shutdown, ShutdownError};
 
 /// Sets up logging to stderr: `RUST_LOG` if set, else the `--log-level` threshold (default
 /// `info`). RustDDS and ros2-client are held to warnings unless `RUST_LOG` says otherwise, since
-/// their info messages describe every discovery step. Safe to call more than once.
+/// their info messages describe every discovery step. The same lines at info level and above
+/// also go to `/rosout` once the process's [`Node`] exists (see [`rosout`]). Safe to call more
+/// than once.
 pub fn init_logging(level: Option<LogLevel>) {
     use tracing_subscriber::EnvFilter;
     let level = level.unwrap_or(LogLevel::Info).directive();
     let filter = EnvFilter::try_from_default_env()
         .unwrap_or_else(|_| EnvFilter::new(format!("{level},rustdds=warn,ros2_client=warn")));
-    let _ = tracing_subscriber::fmt()
-        .with_env_filter(filter)
-        .with_writer(std::io::stderr)
+    use tracing_subscriber::layer::SubscriberExt;
+    use tracing_subscriber::util::SubscriberInitExt;
+    let _ = tracing_subscriber::registry()
+        .with(filter)
+        .with(tracing_subscriber::fmt::layer().with_writer(std::io::stderr))
+        .with(rosout::RosoutLayer)
         .try_init();
 }

@@ -1,0 +1,366 @@
+"""Our nodes as ROS 2 citizens, checked by an independent peer (Eclipse Cyclone DDS, Python):
+
+- the parameter services (`rcl_interfaces/srv/*` on `rq/<node>/<service>Request` and
+  `rr/<node>/<service>Reply`) list, get, describe and set parameters, refuse bad sets with a
+  reason, and accepted sets appear on `/parameter_events` and reach the node loop;
+- `ros_discovery_info` (`rmw_dds_common/msg/ParticipantEntitiesInfo`) names the node and the
+  GIDs of its readers and writers, as DDS discovery (DCPSPublication/DCPSSubscription) sees them;
+- `/rosout` (`rcl_interfaces/msg/Log`) carries the node's log lines under its name;
+- SIGINT stops a node without an ERROR line on stderr.
+
+The peer speaks the service protocol as a plain DDS client: it writes a request and takes the
+reply (one request at a time, so no correlation is needed). The message classes are written here
+from the rcl_interfaces and rmw_dds_common definitions of ROS 2 Jazzy.
+"""
+
+import re
+import signal
+import time
+from dataclasses import dataclass, field
+
+import cyclonedds.idl.annotations as annotate
+import pytest
+from cyclonedds.builtin import BuiltinDataReader, BuiltinTopicDcpsPublication, BuiltinTopicDcpsSubscription
+from cyclonedds.core import Policy, Qos
+from cyclonedds.idl import IdlStruct
+from cyclonedds.idl.types import array, float64, int64, sequence, uint8, uint32, uint64
+from cyclonedds.pub import DataWriter
+from cyclonedds.sub import DataReader
+from cyclonedds.topic import Topic
+from cyclonedds.util import duration
+
+from conftest import run, start, stop
+from peers.ros_types import Time, wait_matched
+
+# --- rcl_interfaces ---------------------------------------------------------------------------
+
+
+@dataclass
+@annotate.final
+class ParameterValue(IdlStruct, typename="rcl_interfaces::msg::dds_::ParameterValue_"):
+    type: uint8 = 0
+    bool_value: bool = False
+    integer_value: int64 = 0
+    double_value: float64 = 0.0
+    string_value: str = ""
+    byte_array_value: sequence[uint8] = field(default_factory=list)
+    bool_array_value: sequence[bool] = field(default_factory=list)
+    integer_array_value: sequence[int64] = field(default_factory=list)
+    double_array_value: sequence[float64] = field(default_factory=list)
+    string_array_value: sequence[str] = field(default_factory=list)
+
+
+NOT_SET, BOOL, INTEGER, DOUBLE, STRING = 0, 1, 2, 3, 4
+
+
+@dataclass
+@annotate.final
+class Parameter(IdlStruct, typename="rcl_interfaces::msg::dds_::Parameter_"):
+    name: str = ""
+    value: ParameterValue = field(default_factory=ParameterValue)
+
+
+@dataclass
+@annotate.final
+class SetParametersResult(IdlStruct, typename="rcl_interfaces::msg::dds_::SetParametersResult_"):
+    successful: bool = False
+    reason: str = ""
+
+
+@dataclass
+@annotate.final
+class FloatingPointRange(IdlStruct, typename="rcl_interfaces::msg::dds_::FloatingPointRange_"):
+    from_value: float64 = 0.0
+    to_value: float64 = 0.0
+    step: float64 = 0.0
+
+
+@dataclass
+@annotate.final
+class IntegerRange(IdlStruct, typename="rcl_interfaces::msg::dds_::IntegerRange_"):
+    from_value: int64 = 0
+    to_value: int64 = 0
+    step: uint64 = 0
+
+
+@dataclass
+@annotate.final
+class ParameterDescriptor(IdlStruct, typename="rcl_interfaces::msg::dds_::ParameterDescriptor_"):
+    name: str = ""
+    type: uint8 = 0
+    description: str = ""
+    additional_constraints: str = ""
+    read_only: bool = False
+    dynamic_typing: bool = False
+    floating_point_range: sequence[FloatingPointRange, 1] = field(default_factory=list)
+    integer_range: sequence[IntegerRange, 1] = field(default_factory=list)
+
+
+@dataclass
+@annotate.final
+class ParameterEvent(IdlStruct, typename="rcl_interfaces::msg::dds_::ParameterEvent_"):
+    stamp: Time = field(default_factory=Time)
+    node: str = ""
+    new_parameters: sequence[Parameter] = field(default_factory=list)
+    changed_parameters: sequence[Parameter] = field(default_factory=list)
+    deleted_parameters: sequence[Parameter] = field(default_factory=list)
+
+
+@dataclass
+@annotate.final
+class Log(IdlStruct, typename="rcl_interfaces::msg::dds_::Log_"):
+    stamp: Time = field(default_factory=Time)
+    level: uint8 = 0
+    name: str = ""
+    msg: str = ""
+    file: str = ""
+    function: str = ""
+    line: uint32 = 0
+
+
+@dataclass
+@annotate.final
+class ListParametersResult(IdlStruct, typename="rcl_interfaces::msg::dds_::ListParametersResult_"):
+    names: sequence[str] = field(default_factory=list)
+    prefixes: sequence[str] = field(default_factory=list)
+
+
+@dataclass
+@annotate.final
+class ListParametersRequest(IdlStruct, typename="rcl_interfaces::srv::dds_::ListParameters_Request_"):
+    prefixes: sequence[str] = field(default_factory=list)
+    depth: uint64 = 0
+
+
+@dataclass
+@annotate.final
+class ListParametersResponse(IdlStruct, typename="rcl_interfaces::srv::dds_::ListParameters_Response_"):
+    result: ListParametersResult = field(default_factory=ListParametersResult)
+
+
+@dataclass
+@annotate.final
+class GetParametersRequest(IdlStruct, typename="rcl_interfaces::srv::dds_::GetParameters_Request_"):
+    names: sequence[str] = field(default_factory=list)
+
+
+@dataclass
+@annotate.final
+class GetParametersResponse(IdlStruct, typename="rcl_interfaces::srv::dds_::GetParameters_Response_"):
+    values: sequence[ParameterValue] = field(default_factory=list)
+
+
+@dataclass
+@annotate.final
+class GetParameterTypesRequest(IdlStruct, typename="rcl_interfaces::srv::dds_::GetParameterTypes_Request_"):
+    names: sequence[str] = field(default_factory=list)
+
+
+@dataclass
+@annotate.final
+class GetParameterTypesResponse(IdlStruct, typename="rcl_interfaces::srv::dds_::GetParameterTypes_Response_"):
+    types: sequence[uint8] = field(default_factory=list)
+
+
+@dataclass
+@annotate.final
+class SetParametersRequest(IdlStruct, typename="rcl_interfaces::srv::dds_::SetParameters_Request_"):
+    parameters: sequence[Parameter] = field(default_factory=list)
+
+
+@dataclass
+@annotate.final
+class SetParametersResponse(IdlStruct, typename="rcl_interfaces::srv::dds_::SetParameters_Response_"):
+    results: sequence[SetParametersResult] = field(default_factory=list)
+
+
+@dataclass
+@annotate.final
+class SetParametersAtomicallyRequest(IdlStruct,
+                                     typename="rcl_interfaces::srv::dds_::SetParametersAtomically_Request_"):
+    parameters: sequence[Parameter] = field(default_factory=list)
+
+
+@dataclass
+@annotate.final
+class SetParametersAtomicallyResponse(IdlStruct,
+                                      typename="rcl_interfaces::srv::dds_::SetParametersAtomically_Response_"):
+    result: SetParametersResult = field(default_factory=SetParametersResult)
+
+
+@dataclass
+@annotate.final
+class DescribeParametersRequest(IdlStruct, typename="rcl_interfaces::srv::dds_::DescribeParameters_Request_"):
+    names: sequence[str] = field(default_factory=list)
+
+
+@dataclass
+@annotate.final
+class DescribeParametersResponse(IdlStruct, typename="rcl_interfaces::srv::dds_::DescribeParameters_Response_"):
+    descriptors: sequence[ParameterDescriptor] = field(default_factory=list)
+
+
+# --- rmw_dds_common ---------------------------------------------------------------------------
+
+
+@dataclass
+@annotate.final
+class Gid(IdlStruct, typename="rmw_dds_common::msg::dds_::Gid_"):
+    data: array[uint8, 16] = field(default_factory=lambda: [0] * 16)
+
+
+@dataclass
+@annotate.final
+class NodeEntitiesInfo(IdlStruct, typename="rmw_dds_common::msg::dds_::NodeEntitiesInfo_"):
+    node_namespace: str = ""
+    node_name: str = ""
+    reader_gid_seq: sequence[Gid] = field(default_factory=list)
+    writer_gid_seq: sequence[Gid] = field(default_factory=list)
+
+
+@dataclass
+@annotate.final
+class ParticipantEntitiesInfo(IdlStruct, typename="rmw_dds_common::msg::dds_::ParticipantEntitiesInfo_"):
+    gid: Gid = field(default_factory=Gid)
+    node_entities_info_seq: sequence[NodeEntitiesInfo] = field(default_factory=list)
+
+
+# --- the peer ---------------------------------------------------------------------------------
+
+# rmw_qos_profile_services_default; rmw_qos_profile_parameter_events; rcl's /rosout and
+# ros_discovery_info profiles.
+SERVICES = Qos(Policy.Reliability.Reliable(duration(seconds=1)), Policy.History.KeepLast(10),
+               Policy.Durability.Volatile)
+EVENTS = Qos(Policy.Reliability.Reliable(duration(seconds=1)), Policy.History.KeepLast(1000),
+             Policy.Durability.Volatile)
+LATCHED = Qos(Policy.Reliability.Reliable(duration(seconds=1)), Policy.History.KeepLast(1000),
+              Policy.Durability.TransientLocal)
+DISCOVERY = Qos(Policy.Reliability.Reliable(duration(seconds=1)), Policy.History.KeepLast(1),
+                Policy.Durability.TransientLocal)
+
+
+class ParamClient:
+    """Calls a node's parameter services the way a ROS 2 client does, over plain DDS."""
+
+    SERVICES = {
+        "list_parameters": (ListParametersRequest, ListParametersResponse, "ListParameters"),
+        "get_parameters": (GetParametersRequest, GetParametersResponse, "GetParameters"),
+        "get_parameter_types": (GetParameterTypesRequest, GetParameterTypesResponse, "GetParameterTypes"),
+        "set_parameters": (SetParametersRequest, SetParametersResponse, "SetParameters"),
+        "set_parameters_atomically": (SetParametersAtomicallyRequest, SetParametersAtomicallyResponse,
+                                      "SetParametersAtomically"),
+        "describe_parameters": (DescribeParametersRequest, DescribeParametersResponse, "DescribeParameters"),
+    }
+
+    def __init__(self, dp, node: str):
+        self.ends = {}
+        for service, (req, resp, _) in self.SERVICES.items():
+            w = DataWriter(dp, Topic(dp, f"rq{node}/{service}Request", req), qos=SERVICES)
+            r = DataReader(dp, Topic(dp, f"rr{node}/{service}Reply", resp), qos=SERVICES)
+            self.ends[service] = (w, r)
+
+    def wait_ready(self, timeout=30.0):
+        for service, (w, r) in self.ends.items():
+            assert wait_matched(w, timeout), f"no server for {service}"
+            assert wait_matched(r, timeout), f"no replies from {service}"
+
+    def call(self, service: str, request, timeout=10.0):
+        w, r = self.ends[service]
+        r.take(N=100)  # nothing stale
+        w.write(request)
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            got = [s for s in r.take(N=10) if type(s).__name__ != "InvalidSample"]
+            if got:
+                assert len(got) == 1, got
+                return got[0]
+            time.sleep(0.005)
+        pytest.fail(f"no reply from {service} within {timeout} s")
+
+
+def double(v: float) -> ParameterValue:
+    return ParameterValue(type=DOUBLE, double_value=v)
+
+
+def integer(v: int) -> ParameterValue:
+    return ParameterValue(type=INTEGER, integer_value=v)
+
+
+def string(v: str) -> ParameterValue:
+    return ParameterValue(type=STRING, string_value=v)
+
+
+def take_all(reader, timeout: float, until=lambda got: False) -> list:
+    got = []
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        got.extend(s for s in reader.take(N=100) if type(s).__name__ != "InvalidSample")
+        if until(got):
+            break
+        time.sleep(0.01)
+    return got
+
+
+def guid_bytes(key) -> bytes:
+    """The 16 GUID bytes of a DCPS builtin-topic key."""
+    return bytes(key.bytes) if hasattr(key, "bytes") else bytes(key)
+
+
+@pytest.fixture(scope="module")
+def pusher_model(tmp_path_factory):
+    """A pushing model (the nominal physics fitted on a short simulated bag)."""
+    d = tmp_path_factory.mktemp("model")
+    explore = d / "explore.toml"
+    explore.write_text("pose_rate = 0.5\n")
+    run("dynlab", "collect", "push", "--explore", explore, "--episodes", 8, "--seed", 3,
+        "--episode-gap", 10, "--out", d / "bag", timeout=120)
+    run("dynlab", "train", "--bag", d / "bag", "--kind", "physics", "--steps", 1, "--out", d / "model",
+        "--quiet", timeout=120)
+    return d / "model"
+
+
+def test_sim_node_discovery_info_lists_its_topics_and_rosout_carries_its_log(tmp_path):
+    domain = 61
+    from cyclonedds.domain import DomainParticipant
+    dp = DomainParticipant(domain)
+    disc = DataReader(dp, Topic(dp, "ros_discovery_info", ParticipantEntitiesInfo), qos=DISCOVERY)
+    rosout = DataReader(dp, Topic(dp, "rt/rosout", Log), qos=LATCHED)
+    pubs = BuiltinDataReader(dp, BuiltinTopicDcpsPublication)
+    subs = BuiltinDataReader(dp, BuiltinTopicDcpsSubscription)
+    sim = start("sim_node", "--ros-args", "-r", "__node:=sim_citizen", "-p", "rate:=5.0", domain=domain)
+    try:
+        infos = take_all(disc, 20, until=lambda got: any(
+            n.node_name == "sim_citizen" and len(n.writer_gid_seq) >= 3
+            for s in got for n in s.node_entities_info_seq))
+        nodes = [(s, n) for s in infos for n in s.node_entities_info_seq if n.node_name == "sim_citizen"]
+        assert nodes, f"sim_citizen not in ros_discovery_info: {infos}"
+        part, node = nodes[-1]
+        assert node.node_namespace == "/"
+        writers = {bytes(g.data) for g in node.writer_gid_seq}
+        readers = {bytes(g.data) for g in node.reader_gid_seq}
+        # every writer and reader GID of the node is a DDS endpoint of its participant
+        prefix = bytes(part.gid.data)[:12]
+        assert all(g[:12] == prefix for g in writers | readers)
+        time.sleep(1.0)
+        topics_w = {guid_bytes(p.key): p.topic_name for p in pubs.take(N=1000)
+                    if type(p).__name__ != "InvalidSample"}
+        topics_r = {guid_bytes(p.key): p.topic_name for p in subs.take(N=1000)
+                    if type(p).__name__ != "InvalidSample"}
+        node_w = {topics_w.get(g) for g in writers}
+        node_r = {topics_r.get(g) for g in readers}
+        for t in ["rt/push/block_pose", "rt/clock", "rt/rosout", "rt/parameter_events",
+                  "rr/sim_citizen/set_parametersReply"]:
+            assert t in node_w, f"{t} not among the node's writers: {sorted(map(str, node_w))}"
+        for t in ["rt/push/action", "rq/sim_citizen/set_parametersRequest",
+                  "rq/sim_citizen/list_parametersRequest"]:
+            assert t in node_r, f"{t} not among the node's readers: {sorted(map(str, node_r))}"
+
+        # a log line from the node itself, as the node logs it to stderr: its start line
+        logs = take_all(rosout, 10, until=lambda got: any(l.name == "sim_citizen" for l in got))
+        mine = [l for l in logs if l.name == "sim_citizen"]
+        assert mine, f"no /rosout line from sim_citizen: {logs}"
+        assert any("push world" in l.msg and l.level == 20 for l in mine), [l.msg for l in mine]
+        assert all(l.level in (20, 30, 40) and l.stamp.sec > 1_600_000_000 for l in mine)
+    finally:
+        err = stop(sim, signal.SIGINT)
+    assert not re.search(r"\bERROR\b", err), err
