@@ -59,7 +59,7 @@ pub use node::{
     DiscoveredPublication, Node, NodeError, Publisher, RawPublisher, RawSubscription, Received,
     Subscription, WaitSet, domain_id_from_env, parse_domain_id,
 };
-pub use param_store::{ParamChange, ParamDescriptor, ParamRange, ParamStore};
+pub use param_store::{ParamChange, ParamCheck, ParamDescriptor, ParamRange, ParamStore};
 pub use params::{FromParam, ParamError, ParamSource, ParamValue, Parameters};
 pub use qos::{QosPreset, QosProfile};
 pub use raw::SerializedMessage;

@@ -21,7 +21,7 @@ use crate::args::{NodeArgs, Remap};
 use crate::clock::Clock;
 use crate::names::{self, NameError};
 use crate::param_services::ParamServices;
-use crate::param_store::{ParamChange, ParamDescriptor, ParamStore};
+use crate::param_store::{ParamChange, ParamCheck, ParamDescriptor, ParamStore};
 use crate::params::{ParamError, ParamValue, Parameters};
 use crate::raw::{PUBLISHED_REPRESENTATION, RawAdapter, SerializedMessage};
 use crate::rosout::RosoutRegistration;
@@ -272,6 +272,20 @@ impl Node {
                 what: format!("parameter `{name}` of {}", self.fully_qualified_name()),
                 reason,
             })
+    }
+
+    /// Like [`Node::declare_parameter`], with the node's own check of new values (run after
+    /// the type and range checks; its `Err` is the reason a set is refused with).
+    pub fn declare_parameter_checked(
+        &self,
+        name: &str,
+        value: ParamValue,
+        descriptor: ParamDescriptor,
+        check: ParamCheck,
+    ) -> Result<(), NodeError> {
+        self.declare_parameter(name, value, descriptor)?;
+        self.lock_store().set_check(name, check);
+        Ok(())
     }
 
     /// The current value of a declared parameter (as the parameter services report it).

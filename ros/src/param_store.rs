@@ -148,16 +148,30 @@ pub struct ParamChange {
     pub value: ParamValue,
 }
 
+/// "a double", "an integer".
+fn article(type_name: &str) -> String {
+    if type_name.starts_with(['a', 'e', 'i', 'o', 'u']) {
+        format!("an {type_name}")
+    } else {
+        format!("a {type_name}")
+    }
+}
+
 /// The reason a set is refused for a read-only parameter.
 pub fn read_only_reason(name: &str) -> String {
     format!("read-only: restart the node with -p {name}:=value to change `{name}`")
 }
+
+/// A node's own check of a new value (beyond type and range), e.g. the format of a string;
+/// `Err` carries the reason the set is refused with.
+pub type ParamCheck = fn(&ParamValue) -> Result<(), String>;
 
 /// The declared parameters of one node.
 #[derive(Debug, Clone, Default)]
 pub struct ParamStore {
     node: String,
     params: BTreeMap<String, Declared>,
+    checks: BTreeMap<String, ParamCheck>,
 }
 
 impl ParamStore {
@@ -166,6 +180,7 @@ impl ParamStore {
         Self {
             node: node_fqn.to_owned(),
             params: BTreeMap::new(),
+            checks: BTreeMap::new(),
         }
     }
 
@@ -213,6 +228,11 @@ impl ParamStore {
         Ok(())
     }
 
+    /// Adds the node's own check for sets of `name` (run after the type and range checks).
+    pub fn set_check(&mut self, name: &str, check: ParamCheck) {
+        self.checks.insert(name.to_owned(), check);
+    }
+
     /// Declares a read-only parameter unless one of that name exists (the node's value as read
     /// at start).
     pub fn declare_if_absent(&mut self, name: &str, value: ParamValue, description: &str) {
@@ -255,14 +275,17 @@ impl ParamStore {
         };
         if std::mem::discriminant(&value) != std::mem::discriminant(&d.value) {
             return Err(format!(
-                "wrong type: `{name}` is a {}, got a {} ({value}); set e.g. {name} {}",
-                d.value.type_name(),
-                value.type_name(),
+                "wrong type: `{name}` is {}, got {} ({value}); set e.g. {name} {}",
+                article(d.value.type_name()),
+                article(value.type_name()),
                 d.value
             ));
         }
         if let Some(range) = &d.descriptor.range {
             range.check(&value).map_err(|r| format!("`{name}`: {r}"))?;
+        }
+        if let Some(check) = self.checks.get(name) {
+            check(&value).map_err(|r| format!("`{name}`: {r}"))?;
         }
         Ok(value)
     }
@@ -434,7 +457,7 @@ mod tests {
             (
                 "horizon",
                 ParamValue::Double(2.0),
-                "is a integer, got a double",
+                "is an integer, got a double",
             ),
             (
                 "horizon",
@@ -488,6 +511,23 @@ mod tests {
             .unwrap();
         assert_eq!(ok.len(), 2);
         assert_eq!(s.get("horizon").unwrap().value, ParamValue::Integer(12));
+    }
+
+    #[test]
+    fn a_node_check_refuses_with_its_reason() {
+        let mut s = store();
+        s.set_check("goal", |v| match v {
+            ParamValue::String(t) if t.split(',').count() == 3 => Ok(()),
+            _ => Err("give \"x,y,θ\"".to_owned()),
+        });
+        let r = s.set_each(&[("goal".into(), ParamValue::String("1,2".into()))]);
+        assert_eq!(r[0].clone().unwrap_err(), "`goal`: give \"x,y,θ\"");
+        assert_eq!(
+            s.get("goal").unwrap().value,
+            ParamValue::String(String::new())
+        );
+        let r = s.set_each(&[("goal".into(), ParamValue::String("1,2,0".into()))]);
+        assert!(r[0].is_ok());
     }
 
     #[test]

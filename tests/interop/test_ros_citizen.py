@@ -312,8 +312,8 @@ def pusher_model(tmp_path_factory):
     d = tmp_path_factory.mktemp("model")
     explore = d / "explore.toml"
     explore.write_text("pose_rate = 0.5\n")
-    run("dynlab", "collect", "push", "--explore", explore, "--episodes", 8, "--seed", 3,
-        "--episode-gap", 10, "--out", d / "bag", timeout=120)
+    run("dynlab", "collect", "push", "--explore", explore, "--episodes", 20, "--seed", 3,
+        "--episode-gap", 30, "--out", d / "bag", timeout=120)
     run("dynlab", "train", "--bag", d / "bag", "--kind", "physics", "--steps", 1, "--out", d / "model",
         "--quiet", timeout=120)
     return d / "model"
@@ -363,4 +363,97 @@ def test_sim_node_discovery_info_lists_its_topics_and_rosout_carries_its_log(tmp
         assert all(l.level in (20, 30, 40) and l.stamp.sec > 1_600_000_000 for l in mine)
     finally:
         err = stop(sim, signal.SIGINT)
+    assert not re.search(r"\bERROR\b", err), err
+
+
+def values_of(resp) -> list:
+    out = []
+    for v in resp.values:
+        out.append({NOT_SET: None, INTEGER: v.integer_value, DOUBLE: v.double_value,
+                    STRING: v.string_value, BOOL: v.bool_value}.get(v.type, ("type", v.type)))
+    return out
+
+
+def test_mppi_pusher_parameters_list_get_describe_set_and_events(pusher_model):
+    from cyclonedds.domain import DomainParticipant
+    domain = 62
+    dp = DomainParticipant(domain)
+    events = DataReader(dp, Topic(dp, "rt/parameter_events", ParameterEvent), qos=EVENTS)
+    rosout = DataReader(dp, Topic(dp, "rt/rosout", Log), qos=LATCHED)
+    client = ParamClient(dp, "/mppi_pusher")
+    pusher = start("mppi_pusher", "--ros-args", "-p", f"model:={pusher_model}", "-p", "samples:=64",
+                   "-p", "horizon:=4", domain=domain)
+    try:
+        client.wait_ready()
+        assert wait_matched(events), "no /parameter_events publisher"
+
+        # list: the run-time parameters, what the node read at start (given or default), use_sim_time
+        names = client.call("list_parameters", ListParametersRequest()).result.names
+        for n in ["goal", "goal_tolerance", "angle_tolerance", "lambda", "model", "samples", "horizon",
+                  "stale_timeout", "push_wait", "use_sim_time"]:
+            assert n in names, f"{n} not listed: {names}"
+        assert list(names) == sorted(names)
+
+        got = client.call("get_parameters", GetParametersRequest(
+            names=["goal_tolerance", "samples", "model", "push_wait", "not_a_parameter"]))
+        assert values_of(got) == [0.02, 64, str(pusher_model), 1.8, None]
+        types = client.call("get_parameter_types", GetParameterTypesRequest(
+            names=["goal_tolerance", "samples", "goal", "not_a_parameter"])).types
+        assert list(types) == [DOUBLE, INTEGER, STRING, NOT_SET]
+
+        desc = client.call("describe_parameters", DescribeParametersRequest(
+            names=["goal_tolerance", "samples"])).descriptors
+        assert desc[0].name == "goal_tolerance" and desc[0].type == DOUBLE and not desc[0].read_only
+        assert [(r.from_value, r.to_value) for r in desc[0].floating_point_range] == [(0.0, 10.0)]
+        assert "xy distance" in desc[0].description
+        assert desc[1].read_only and desc[1].type == INTEGER
+        assert "-p samples:=value" in desc[1].description
+
+        # set: each entry on its own, refusals with their reason
+        res = client.call("set_parameters", SetParametersRequest(parameters=[
+            Parameter("goal_tolerance", double(0.05)),
+            Parameter("samples", integer(128)),
+            Parameter("angle_tolerance", double(5.0)),
+            Parameter("goal", string("0.6,0.05")),
+            Parameter("lambda", string("hot")),
+            Parameter("not_a_parameter", double(1.0)),
+        ])).results
+        assert [r.successful for r in res] == [True, False, False, False, False, False], res
+        assert res[1].reason.startswith("read-only: restart the node with -p samples:=value")
+        assert "outside the range [0, 3.14159" in res[2].reason
+        assert "x,y,θ" in res[3].reason
+        assert "wrong type" in res[4].reason and "double" in res[4].reason
+        assert "not declared by /mppi_pusher" in res[5].reason
+        assert values_of(client.call("get_parameters", GetParametersRequest(
+            names=["goal_tolerance", "samples", "angle_tolerance"]))) == [0.05, 64, 0.1]
+
+        ev = take_all(events, 10, until=lambda got: len(got) >= 1)
+        assert len(ev) == 1, ev
+        assert ev[0].node == "/mppi_pusher" and not ev[0].new_parameters and not ev[0].deleted_parameters
+        assert [(p.name, p.value.type, p.value.double_value) for p in ev[0].changed_parameters] == [
+            ("goal_tolerance", DOUBLE, 0.05)]
+
+        # atomically: all or nothing
+        r = client.call("set_parameters_atomically", SetParametersAtomicallyRequest(parameters=[
+            Parameter("goal_tolerance", double(0.03)), Parameter("horizon", integer(9))])).result
+        assert not r.successful and "read-only" in r.reason and "horizon" in r.reason
+        r = client.call("set_parameters_atomically", SetParametersAtomicallyRequest(parameters=[
+            Parameter("goal_tolerance", double(0.03)), Parameter("lambda", integer(2))])).result
+        assert r.successful, r.reason
+        assert values_of(client.call("get_parameters", GetParametersRequest(
+            names=["goal_tolerance", "lambda"]))) == [0.03, 2.0]  # the integer stored as a double
+
+        # a new goal reaches the node loop, which logs it (stderr and /rosout)
+        r = client.call("set_parameters", SetParametersRequest(parameters=[
+            Parameter("goal", string("0.6,0.05,0"))])).results
+        assert r[0].successful, r[0].reason
+        line = "goal (0.600, 0.050, 0.000) from the goal parameter"
+        logs = take_all(rosout, 10, until=lambda got: any(line in l.msg for l in got))
+        assert any(line in l.msg and l.name == "mppi_pusher" and l.level == 20 for l in logs), \
+            [l.msg for l in logs]
+        assert pusher.poll() is None, "mppi_pusher exited"
+    finally:
+        err = stop(pusher, signal.SIGINT)
+    assert line in err, err
+    assert "parameter goal_tolerance set to 0.05" in err, err
     assert not re.search(r"\bERROR\b", err), err
