@@ -65,6 +65,11 @@ pub use qos::{QosPreset, QosProfile};
 pub use raw::SerializedMessage;
 pub use shutdown::{Shutdown, ShutdownError};
 
+/// Log filter directives after the level: RustDDS and ros2-client at warnings; ros2-client's
+/// service request decoding at errors, because it warns on every request of a client that sends
+/// no related-sample-identity (a plain DDS client) and then answers it correctly anyway.
+const QUIET: &str = "rustdds=warn,ros2_client=warn,ros2_client::service::wrappers=error";
+
 /// Sets up logging to stderr: `RUST_LOG` if set, else the `--log-level` threshold (default
 /// `info`). RustDDS and ros2-client are held to warnings unless `RUST_LOG` says otherwise, since
 /// their info messages describe every discovery step. The same lines at info level and above
@@ -74,7 +79,7 @@ pub fn init_logging(level: Option<LogLevel>) {
     use tracing_subscriber::EnvFilter;
     let level = level.unwrap_or(LogLevel::Info).directive();
     let filter = EnvFilter::try_from_default_env()
-        .unwrap_or_else(|_| EnvFilter::new(format!("{level},rustdds=warn,ros2_client=warn")));
+        .unwrap_or_else(|_| EnvFilter::new(format!("{level},{QUIET}")));
     use tracing_subscriber::layer::SubscriberExt;
     use tracing_subscriber::util::SubscriberInitExt;
     let _ = tracing_subscriber::registry()

@@ -337,10 +337,12 @@ impl ParamServices {
         let stop = Arc::new(AtomicBool::new(false));
         let worker = Worker {
             servers,
-            events,
-            store,
-            changes,
-            fqn: fqn.to_owned(),
+            ctx: Ctx {
+                events,
+                store,
+                changes,
+                fqn: fqn.to_owned(),
+            },
         };
         let stop_t = Arc::clone(&stop);
         let thread = std::thread::Builder::new()
@@ -370,10 +372,39 @@ impl Drop for ParamServices {
 
 struct Worker {
     servers: Servers,
+    ctx: Ctx,
+}
+
+/// What the answers need besides the servers.
+struct Ctx {
     events: ros2_client::Publisher<raw::ParameterEvent>,
     store: Arc<Mutex<ParamStore>>,
     changes: Sender<ParamChange>,
     fqn: String,
+}
+
+/// Answers every request waiting on `server` with `answer`. A request that cannot be decoded
+/// (e.g. from a client with another service mapping) is consumed and logged; the rest wait for
+/// the next round.
+fn drain<Q, R>(server: &Server<Q, R>, fqn: &str, service: &str, mut answer: impl FnMut(Q) -> R)
+where
+    Q: Message + 'static,
+    R: Message + 'static,
+{
+    loop {
+        match server.receive_request() {
+            Ok(Some((id, req))) => {
+                if let Err(e) = server.send_response(id, answer(req)) {
+                    tracing::warn!("{fqn}/{service}: the reply could not be sent: {e}");
+                }
+            }
+            Ok(None) => return,
+            Err(e) => {
+                tracing::warn!("{fqn}/{service}: a request could not be read: {e}");
+                return;
+            }
+        }
+    }
 }
 
 impl Worker {
@@ -381,7 +412,7 @@ impl Worker {
         let mut events = mio1::Events::with_capacity(16);
         while !stop.load(Ordering::SeqCst) {
             // Edge-triggered: serve everything waiting, then sleep until the next request. The
-            // timeout only bounds a missed wake-up.
+            // timeout bounds how long a request left after a read error waits.
             self.serve();
             match poll.poll(&mut events, Some(Duration::from_millis(500))) {
                 Ok(()) => {}
@@ -394,105 +425,81 @@ impl Worker {
         }
     }
 
-    fn store(&self) -> std::sync::MutexGuard<'_, ParamStore> {
-        // A panic while holding the lock cannot leave the store half-changed (every change is
-        // one insert), so a poisoned lock is still usable.
-        self.store.lock().unwrap_or_else(|p| p.into_inner())
-    }
-
     fn serve(&mut self) {
-        while let Ok(Some((id, req))) = self.servers.list.receive_request() {
-            let (names, prefixes) = self.store().list(&req.prefixes, req.depth);
-            let resp = rcl::ListParametersResponse {
+        let (sv, ctx) = (&self.servers, &self.ctx);
+        let fqn = ctx.fqn.as_str();
+        drain(&sv.list, fqn, "list_parameters", |req| {
+            let (names, prefixes) = ctx.store().list(&req.prefixes, req.depth);
+            rcl::ListParametersResponse {
                 result: rcl::ListParametersResult { names, prefixes },
-            };
-            self.reply_err(
-                self.servers.list.send_response(id, resp).err(),
-                "list_parameters",
-            );
-        }
-        while let Ok(Some((id, req))) = self.servers.get.receive_request() {
-            let values = {
-                let s = self.store();
-                req.names
+            }
+        });
+        drain(&sv.get, fqn, "get_parameters", |req| {
+            let s = ctx.store();
+            rcl::GetParametersResponse {
+                values: req
+                    .names
                     .iter()
                     .map(|n| s.get(n).map(|d| to_wire(&d.value)).unwrap_or_else(not_set))
-                    .collect()
-            };
-            let resp = rcl::GetParametersResponse { values };
-            self.reply_err(
-                self.servers.get.send_response(id, resp).err(),
-                "get_parameters",
-            );
-        }
-        while let Ok(Some((id, req))) = self.servers.types.receive_request() {
-            let values = {
-                let s = self.store();
-                req.names
+                    .collect(),
+            }
+        });
+        drain(&sv.types, fqn, "get_parameter_types", |req| {
+            let s = ctx.store();
+            rcl::GetParameterTypesResponse {
+                values: req
+                    .names
                     .iter()
                     .map(|n| {
                         s.get(n)
                             .map(|d| type_code(&d.value))
                             .unwrap_or(ptype::NOT_SET)
                     })
-                    .collect()
-            };
-            let resp = rcl::GetParameterTypesResponse { values };
-            self.reply_err(
-                self.servers.types.send_response(id, resp).err(),
-                "get_parameter_types",
-            );
-        }
-        while let Ok(Some((id, req))) = self.servers.describe.receive_request() {
-            let values = {
-                let s = self.store();
-                req.names.iter().map(|n| describe(n, s.get(n))).collect()
-            };
-            let resp = rcl::DescribeParametersResponse { values };
-            self.reply_err(
-                self.servers.describe.send_response(id, resp).err(),
-                "describe_parameters",
-            );
-        }
-        while let Ok(Some((id, req))) = self.servers.set.receive_request() {
-            let (results, changes) = answer_set(&mut self.store(), &req);
-            self.log_set(&req, &results);
-            self.announce(changes);
-            let resp = rcl::SetParametersResponse { results };
-            self.reply_err(
-                self.servers.set.send_response(id, resp).err(),
-                "set_parameters",
-            );
-        }
-        while let Ok(Some((id, req))) = self.servers.set_atomically.receive_request() {
-            let (result, changes) = answer_set_atomically(&mut self.store(), &req);
-            self.log_set(&req, std::slice::from_ref(&result));
-            self.announce(changes);
-            let resp = rcl::SetParametersAtomicallyResponse { result };
-            self.reply_err(
-                self.servers.set_atomically.send_response(id, resp).err(),
-                "set_parameters_atomically",
-            );
-        }
+                    .collect(),
+            }
+        });
+        drain(&sv.describe, fqn, "describe_parameters", |req| {
+            let s = ctx.store();
+            rcl::DescribeParametersResponse {
+                values: req.names.iter().map(|n| describe(n, s.get(n))).collect(),
+            }
+        });
+        drain(&sv.set, fqn, "set_parameters", |req| {
+            let (results, changes) = answer_set(&mut ctx.store(), &req);
+            ctx.log_refusals(&req, &results);
+            ctx.announce(changes);
+            rcl::SetParametersResponse { results }
+        });
+        drain(
+            &sv.set_atomically,
+            fqn,
+            "set_parameters_atomically",
+            |req| {
+                let (result, changes) = answer_set_atomically(&mut ctx.store(), &req);
+                ctx.log_refusals(&req, std::slice::from_ref(&result));
+                ctx.announce(changes);
+                rcl::SetParametersAtomicallyResponse { result }
+            },
+        );
+    }
+}
+
+impl Ctx {
+    fn store(&self) -> std::sync::MutexGuard<'_, ParamStore> {
+        // Every change to the store is one insert, so a lock poisoned by a panic elsewhere
+        // still guards a consistent store.
+        self.store.lock().unwrap_or_else(|p| p.into_inner())
     }
 
-    fn reply_err<E: std::fmt::Display>(&self, e: Option<E>, service: &str) {
-        if let Some(e) = e {
-            tracing::warn!("{}/{service}: the reply could not be sent: {e}", self.fqn);
-        }
-    }
-
-    fn log_set(&self, req: &rcl::SetParametersRequest, results: &[raw::SetParametersResult]) {
+    fn log_refusals(&self, req: &rcl::SetParametersRequest, results: &[raw::SetParametersResult]) {
         let names: Vec<&str> = req.parameter.iter().map(|p| p.name.as_str()).collect();
-        for (i, r) in results.iter().enumerate() {
+        for (i, r) in results.iter().enumerate().filter(|(_, r)| !r.successful) {
             let name = if results.len() == names.len() {
                 names[i].to_owned()
             } else {
                 names.join(", ")
             };
-            if !r.successful {
-                tracing::warn!("parameter set refused: {name}: {}", r.reason);
-            }
+            tracing::warn!("parameter set refused: {name}: {}", r.reason);
         }
     }
 

@@ -457,3 +457,36 @@ def test_mppi_pusher_parameters_list_get_describe_set_and_events(pusher_model):
     assert line in err, err
     assert "parameter goal_tolerance set to 0.05" in err, err
     assert not re.search(r"\bERROR\b", err), err
+
+
+def test_racer_reference_speed_changes_at_run_time_and_the_rest_is_read_only(tmp_path):
+    from cyclonedds.domain import DomainParticipant
+    from conftest import REPO
+    model = tmp_path / "model"
+    run("dynlab", "train", "--bag", REPO / "bags" / "car_nominal", "--kind", "physics",
+        "--steps", 1, "--physics-windows", 300, "--out", model, "--quiet", timeout=180)
+    domain = 63
+    dp = DomainParticipant(domain)
+    client = ParamClient(dp, "/racer")
+    racer = start("racer", "--ros-args", "-p", f"model:={model}",
+                  "-p", f"track:={REPO / 'launch_scripts' / 'tracks' / 'default.json'}", domain=domain)
+    try:
+        client.wait_ready()
+        assert values_of(client.call("get_parameters", GetParametersRequest(
+            names=["reference_speed", "horizon", "optimizer"]))) == [2.0, 20, "sqp"]
+        res = client.call("set_parameters", SetParametersRequest(parameters=[
+            Parameter("reference_speed", double(2.5)),
+            Parameter("reference_speed", double(100.0)),
+            Parameter("horizon", integer(10)),
+        ])).results
+        assert [r.successful for r in res] == [True, False, False], res
+        assert "outside the range [0.01, 50]" in res[1].reason
+        assert res[2].reason.startswith("read-only: restart the node with -p horizon:=value")
+        assert values_of(client.call("get_parameters", GetParametersRequest(
+            names=["reference_speed"]))) == [2.5]
+        time.sleep(0.5)
+        assert racer.poll() is None, "racer exited"
+    finally:
+        err = stop(racer, signal.SIGINT)
+    assert "reference speed 2.5 m/s from the next solve" in err, err
+    assert not re.search(r"\bERROR\b", err), err
