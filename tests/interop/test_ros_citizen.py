@@ -490,3 +490,25 @@ def test_racer_reference_speed_changes_at_run_time_and_the_rest_is_read_only(tmp
         err = stop(racer, signal.SIGINT)
     assert "reference speed 2.5 m/s from the next solve" in err, err
     assert not re.search(r"\bERROR\b", err), err
+
+
+@pytest.mark.parametrize("name,args", [
+    ("recorder", ["-o", "{tmp}/bag", "/citizen/pose"]),
+    ("player", ["{repo}/bags/push_nominal", "--loop"]),
+    ("sim_node", ["--ros-args", "-p", "world:=car"]),
+])
+def test_sigint_stops_the_node_without_an_error_line(tmp_path, name, args):
+    from cyclonedds.domain import DomainParticipant
+    from conftest import REPO
+    domain = 65
+    dp = DomainParticipant(domain)
+    disc = DataReader(dp, Topic(dp, "ros_discovery_info", ParticipantEntitiesInfo), qos=DISCOVERY)
+    proc = start(name, *[a.format(tmp=tmp_path, repo=REPO) for a in args], domain=domain)
+    try:
+        # running, with its node announced: the shutdown below tears down a live participant
+        seen = take_all(disc, 20, until=lambda got: any(
+            n.node_name == name for s in got for n in s.node_entities_info_seq))
+        assert any(n.node_name == name for s in seen for n in s.node_entities_info_seq), seen
+    finally:
+        err = stop(proc, signal.SIGINT)
+    assert not re.search(r"\bERROR\b", err), err
