@@ -34,8 +34,12 @@
 //!   [`WaitSet`] (a `mio::Poll`) with a timeout that also bounds how late it sees a shutdown
 //!   request. Node loops stay single-threaded and deterministic; nothing spawns tasks.
 //!   ros2-client's async `Spinner` is not run: it would subscribe `/clock` with the type
-//!   `builtin_interfaces/Time` (not `rosgraph_msgs/Clock`) and serve parameter services we do not
-//!   need, so parameters come from the command line and sim time from our own [`Clock`].
+//!   `builtin_interfaces/Time` (not `rosgraph_msgs/Clock`); sim time comes from our own
+//!   [`Clock`], and the parameter services run on a thread of their own ([`param_services`]),
+//!   handing accepted changes to the loop through [`Node::poll_parameter_changes`].
+//! - **A ROS 2 citizen.** Every node serves the `rcl_interfaces` parameter services, publishes
+//!   `/parameter_events` and its log lines on `/rosout` ([`rosout`]), is listed in
+//!   `ros_discovery_info`, and shuts down without RustDDS errors (see [`Node`]).
 //! - **Domain id.** ros2-client ignores `ROS_DOMAIN_ID`; [`Node::new`] reads and validates it.
 //! - **Raw messages.** ros2-client has no untyped subscriptions; [`RawSubscription`] and
 //!   [`RawPublisher`] are RustDDS readers and writers with a bytes-keeping adapter.
