@@ -163,7 +163,7 @@ pub struct DiscoveredPublication {
 /// would stop first and RustDDS would log "ERROR Cannot remove Writer GUID … Disconnected" at
 /// every shutdown. Our `context` keeps the participant alive until every writer is removed.
 pub struct Node {
-    _param_services: ParamServices,
+    param_services: ParamServices,
     _rosout: RosoutRegistration,
     ros_node: ros2_client::Node,
     raw_publisher: Option<rustdds::Publisher>,
@@ -241,7 +241,7 @@ impl Node {
             tx,
         )?;
         Ok(Node {
-            _param_services: param_services,
+            param_services,
             _rosout: rosout,
             ros_node,
             raw_publisher: None,
@@ -285,6 +285,22 @@ impl Node {
     ) -> Result<(), NodeError> {
         self.declare_parameter(name, value, descriptor)?;
         self.lock_store().set_check(name, check);
+        Ok(())
+    }
+
+    /// Sets a declared parameter from the node's own code, e.g. `goal` when a goal arrives on a
+    /// topic, so that `ros2 param get` shows what the node uses: checked for type, range and
+    /// the node's check (read-only ones too may be set this way), announced on
+    /// `/parameter_events`, not queued for [`Node::poll_parameter_changes`].
+    pub fn set_parameter(&self, name: &str, value: ParamValue) -> Result<(), NodeError> {
+        let change =
+            self.lock_store()
+                .update(name, &value)
+                .map_err(|reason| NodeError::Create {
+                    what: format!("parameter `{name}` of {}", self.fully_qualified_name()),
+                    reason,
+                })?;
+        self.param_services.announce(&[change]);
         Ok(())
     }
 

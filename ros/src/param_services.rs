@@ -279,6 +279,34 @@ pub struct ParamServices {
     stop: Arc<AtomicBool>,
     waker: Arc<mio1::Waker>,
     thread: Option<JoinHandle<()>>,
+    events: Events,
+    fqn: String,
+}
+
+type Events = Arc<Mutex<ros2_client::Publisher<raw::ParameterEvent>>>;
+
+/// The `/parameter_events` message announcing `changes` of the node `fqn`.
+pub fn parameter_event(fqn: &str, changes: &[ParamChange]) -> raw::ParameterEvent {
+    raw::ParameterEvent {
+        stamp: Time::now(),
+        node: fqn.to_owned(),
+        new_parameters: Vec::new(),
+        changed_parameters: changes
+            .iter()
+            .map(|c| raw::Parameter {
+                name: c.name.clone(),
+                value: to_wire(&c.value),
+            })
+            .collect(),
+        deleted_parameters: Vec::new(),
+    }
+}
+
+fn publish_event(events: &Events, fqn: &str, changes: &[ParamChange]) {
+    let publisher = events.lock().unwrap_or_else(|p| p.into_inner());
+    if let Err(e) = publisher.publish(parameter_event(fqn, changes)) {
+        tracing::warn!("/parameter_events: publishing failed: {e}");
+    }
 }
 
 const WAKE: mio1::Token = mio1::Token(usize::MAX);
@@ -335,10 +363,11 @@ impl ParamServices {
                 .map_err(reg)?;
         }
         let stop = Arc::new(AtomicBool::new(false));
+        let events = Arc::new(Mutex::new(events));
         let worker = Worker {
             servers,
             ctx: Ctx {
-                events,
+                events: Arc::clone(&events),
                 store,
                 changes,
                 fqn: fqn.to_owned(),
@@ -356,7 +385,14 @@ impl ParamServices {
             stop,
             waker,
             thread: Some(thread),
+            events,
+            fqn: fqn.to_owned(),
         })
+    }
+
+    /// Announces changes the node made itself on `/parameter_events`.
+    pub fn announce(&self, changes: &[ParamChange]) {
+        publish_event(&self.events, &self.fqn, changes);
     }
 }
 
@@ -377,7 +413,7 @@ struct Worker {
 
 /// What the answers need besides the servers.
 struct Ctx {
-    events: ros2_client::Publisher<raw::ParameterEvent>,
+    events: Events,
     store: Arc<Mutex<ParamStore>>,
     changes: Sender<ParamChange>,
     fqn: String,
@@ -509,22 +545,7 @@ impl Ctx {
         if changes.is_empty() {
             return;
         }
-        let event = raw::ParameterEvent {
-            stamp: Time::now(),
-            node: self.fqn.clone(),
-            new_parameters: Vec::new(),
-            changed_parameters: changes
-                .iter()
-                .map(|c| raw::Parameter {
-                    name: c.name.clone(),
-                    value: to_wire(&c.value),
-                })
-                .collect(),
-            deleted_parameters: Vec::new(),
-        };
-        if let Err(e) = self.events.publish(event) {
-            tracing::warn!("/parameter_events: publishing failed: {e}");
-        }
+        publish_event(&self.events, &self.fqn, &changes);
         for c in changes {
             tracing::info!("parameter {} set to {}", c.name, c.value);
             // The node loop may have ended already (node shutting down): nothing to apply then.

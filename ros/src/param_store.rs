@@ -260,13 +260,33 @@ impl ParamStore {
     /// Checks a new value for a parameter; returns the value to store (an integer for a double
     /// parameter becomes a double) or the reason it is refused.
     pub fn check(&self, name: &str, value: &ParamValue) -> Result<ParamValue, String> {
+        self.check_value(name, value, false)
+    }
+
+    /// Sets a parameter from the node's own code (e.g. `goal` when a goal arrives on a topic):
+    /// the checks of a remote set except the read-only one. Returns the change to announce.
+    pub fn update(&mut self, name: &str, value: &ParamValue) -> Result<ParamChange, String> {
+        let value = self.check_value(name, value, true)?;
+        self.store(name, value.clone());
+        Ok(ParamChange {
+            name: name.to_owned(),
+            value,
+        })
+    }
+
+    fn check_value(
+        &self,
+        name: &str,
+        value: &ParamValue,
+        by_node: bool,
+    ) -> Result<ParamValue, String> {
         let Some(d) = self.params.get(name) else {
             return Err(format!(
                 "parameter `{name}` is not declared by {} (ros2 param list {} shows the declared ones)",
                 self.node, self.node
             ));
         };
-        if d.descriptor.read_only {
+        if d.descriptor.read_only && !by_node {
             return Err(read_only_reason(name));
         }
         let value = match (&d.value, value) {
@@ -528,6 +548,19 @@ mod tests {
         );
         let r = s.set_each(&[("goal".into(), ParamValue::String("1,2,0".into()))]);
         assert!(r[0].is_ok());
+    }
+
+    #[test]
+    fn the_node_may_update_a_read_only_value_within_type_and_range() {
+        let mut s = store();
+        let c = s.update("samples", &ParamValue::Integer(512)).unwrap();
+        assert_eq!(c.value, ParamValue::Integer(512));
+        assert_eq!(s.get("samples").unwrap().value, ParamValue::Integer(512));
+        assert!(
+            s.update("goal_tolerance", &ParamValue::Double(3.0))
+                .is_err()
+        );
+        assert!(s.update("samples", &ParamValue::Double(3.0)).is_err());
     }
 
     #[test]

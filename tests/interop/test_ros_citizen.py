@@ -30,7 +30,7 @@ from cyclonedds.topic import Topic
 from cyclonedds.util import duration
 
 from conftest import run, start, stop
-from peers.ros_types import Time, wait_matched
+from peers.ros_types import Header, Point, Pose, PoseStamped, Time, wait_matched
 
 # --- rcl_interfaces ---------------------------------------------------------------------------
 
@@ -451,6 +451,24 @@ def test_mppi_pusher_parameters_list_get_describe_set_and_events(pusher_model):
         logs = take_all(rosout, 10, until=lambda got: any(line in l.msg for l in got))
         assert any(line in l.msg and l.name == "mppi_pusher" and l.level == 20 for l in logs), \
             [l.msg for l in logs]
+
+        # a goal from /push/goal shows in the goal parameter and on /parameter_events
+        goals = DataWriter(dp, Topic(dp, "rt/push/goal", PoseStamped), qos=SERVICES)
+        assert wait_matched(goals), "mppi_pusher does not subscribe /push/goal"
+        take_all(events, 0.2)
+        goals.write(PoseStamped(header=Header(frame_id="table"),
+                                pose=Pose(position=Point(x=0.5, y=0.1, z=0.0))))
+        deadline = time.monotonic() + 10
+        while time.monotonic() < deadline:
+            (goal,) = values_of(client.call("get_parameters", GetParametersRequest(names=["goal"])))
+            if goal == "0.5,0.1,0":
+                break
+            time.sleep(0.05)
+        assert goal == "0.5,0.1,0", goal
+        ev = take_all(events, 5, until=lambda got: any(
+            p.name == "goal" for e in got for p in e.changed_parameters))
+        assert [(p.name, p.value.string_value) for e in ev for p in e.changed_parameters] == [
+            ("goal", "0.5,0.1,0")]
         assert pusher.poll() is None, "mppi_pusher exited"
     finally:
         err = stop(pusher, signal.SIGINT)

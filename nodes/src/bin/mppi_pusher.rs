@@ -164,6 +164,8 @@ fn main() -> anyhow::Result<()> {
                 logic.on_goal(goal);
                 mppi.set_goal(goal)?;
                 mppi.reset();
+                let text = format!("{},{},{}", goal[0], goal[1], goal[2]);
+                node.set_parameter("goal", ParamValue::String(text))?;
             } else {
                 tracing::warn!("goal with a non-finite field ignored");
             }
