@@ -223,8 +223,8 @@ impl Node {
                 reason: format!("{e:?}"),
             })?;
         // Every node has use_sim_time, as in rclcpp (read-only here: the clock is chosen at
-        // start).
-        let _ = params.get_or("use_sim_time", false);
+        // start); a value that is not a bool is refused here, naming the fix.
+        params.get_or("use_sim_time", false)?;
         let rosout_publisher = ros_node
             .create_publisher::<ros2_client::Log>(
                 &context.get_rosout_topic(),
