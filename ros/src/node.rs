@@ -51,6 +51,16 @@ pub enum NodeError {
         /// The middleware's reason.
         reason: String,
     },
+    /// A parameter declaration or a node-side set does not fit the parameter's type or range.
+    #[error("parameter `{name}` of {node}: {reason}")]
+    Parameter {
+        /// The parameter.
+        name: String,
+        /// The node's fully qualified name.
+        node: String,
+        /// What does not fit.
+        reason: String,
+    },
     /// Publishing failed.
     #[error("publishing on {topic} failed: {reason}")]
     Publish {
@@ -268,8 +278,9 @@ impl Node {
     ) -> Result<(), NodeError> {
         self.lock_store()
             .declare(name, value, descriptor)
-            .map_err(|reason| NodeError::Create {
-                what: format!("parameter `{name}` of {}", self.fully_qualified_name()),
+            .map_err(|reason| NodeError::Parameter {
+                name: name.to_owned(),
+                node: self.fully_qualified_name(),
                 reason,
             })
     }
@@ -283,8 +294,16 @@ impl Node {
         descriptor: ParamDescriptor,
         check: ParamCheck,
     ) -> Result<(), NodeError> {
-        self.declare_parameter(name, value, descriptor)?;
-        self.lock_store().set_check(name, check);
+        // One lock: no remote set can come between the declaration and its check.
+        let mut store = self.lock_store();
+        store
+            .declare(name, value, descriptor)
+            .map_err(|reason| NodeError::Parameter {
+                name: name.to_owned(),
+                node: self.fully_qualified_name(),
+                reason,
+            })?;
+        store.set_check(name, check);
         Ok(())
     }
 
@@ -296,8 +315,9 @@ impl Node {
         let change =
             self.lock_store()
                 .update(name, &value)
-                .map_err(|reason| NodeError::Create {
-                    what: format!("parameter `{name}` of {}", self.fully_qualified_name()),
+                .map_err(|reason| NodeError::Parameter {
+                    name: name.to_owned(),
+                    node: self.fully_qualified_name(),
                     reason,
                 })?;
         self.param_services.announce(&[change]);
