@@ -413,14 +413,14 @@ def test_mppi_pusher_parameters_list_get_describe_set_and_events(pusher_model):
         res = client.call("set_parameters", SetParametersRequest(parameters=[
             Parameter("goal_tolerance", double(0.05)),
             Parameter("samples", integer(128)),
-            Parameter("angle_tolerance", double(5.0)),
+            Parameter("angle_tolerance", double(-1.0)),
             Parameter("goal", string("0.6,0.05")),
             Parameter("lambda", string("hot")),
             Parameter("not_a_parameter", double(1.0)),
         ])).results
         assert [r.successful for r in res] == [True, False, False, False, False, False], res
         assert res[1].reason.startswith("read-only: restart the node with -p samples:=value")
-        assert "outside the range [0, 3.14159" in res[2].reason
+        assert res[2].reason == "`angle_tolerance`: -1 is not a finite angle ≥ 0 rad"
         assert "x,y,θ" in res[3].reason
         assert "wrong type" in res[4].reason and "double" in res[4].reason
         assert "not declared by /mppi_pusher" in res[5].reason

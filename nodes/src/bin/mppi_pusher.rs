@@ -234,19 +234,33 @@ fn declare_runtime_parameters(
         ParamValue::Double(settings.goal_tolerance),
         ParamDescriptor::dynamic("goal reached within this xy distance [m]").range(0.0, 10.0),
     )?;
-    node.declare_parameter(
+    // No range for these two: a start value the node accepted (an angle tolerance above π to
+    // ignore the heading, any λ that MppiConfig::validate accepts) must stay declarable.
+    node.declare_parameter_checked(
         "angle_tolerance",
         ParamValue::Double(settings.angle_tolerance),
-        ParamDescriptor::dynamic("... and this heading error [rad]")
-            .range(0.0, std::f64::consts::PI),
+        ParamDescriptor::dynamic("... and this heading error [rad]; above π: heading ignored")
+            .constraints("finite, ≥ 0"),
+        |v| match v {
+            ParamValue::Double(a) if !(a.is_finite() && *a >= 0.0) => {
+                Err(format!("{a} is not a finite angle ≥ 0 rad"))
+            }
+            _ => Ok(()),
+        },
     )?;
-    node.declare_parameter(
+    node.declare_parameter_checked(
         "lambda",
         ParamValue::Double(cfg.lambda),
         ParamDescriptor::dynamic(
             "MPPI temperature λ; a change rebuilds the controller (warm start and noise stream restart from the seed)",
         )
-        .range(1e-9, 1e9),
+        .constraints("finite, > 0"),
+        |v| match v {
+            ParamValue::Double(l) if !(l.is_finite() && *l > 0.0) => {
+                Err(format!("{l} is not a finite temperature > 0"))
+            }
+            _ => Ok(()),
+        },
     )?;
     Ok(())
 }
