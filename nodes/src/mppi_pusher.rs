@@ -82,6 +82,17 @@ impl PusherLogic {
         })
     }
 
+    /// The settings.
+    pub fn settings(&self) -> &PusherSettings {
+        &self.settings
+    }
+
+    /// The settings, to change; the node changes them when `ros2 param set` changes `goal_tolerance` or
+    /// `angle_tolerance` (the next decision uses them).
+    pub fn settings_mut(&mut self) -> &mut PusherSettings {
+        &mut self.settings
+    }
+
     /// A new goal.
     pub fn on_goal(&mut self, goal: [f64; 3]) {
         self.goal = Some(goal);
@@ -150,6 +161,17 @@ impl PusherLogic {
     /// Records that a push was sent from the latest pose.
     pub fn pushed(&mut self) {
         self.pushed_from = self.pose.map(|p| p.1);
+    }
+}
+
+/// Reads a goal `"x,y,θ"` (m, m, rad), as the `goal` parameter gives it.
+pub fn parse_goal(text: &str) -> Result<[f64; 3], String> {
+    let v: Result<Vec<f64>, _> = text.split(',').map(|s| s.trim().parse::<f64>()).collect();
+    match v {
+        Ok(v) if v.len() == 3 && v.iter().all(|x| x.is_finite()) => Ok([v[0], v[1], v[2]]),
+        _ => Err(format!(
+            "`{text}` is not a goal: give three comma-separated finite numbers \"x,y,θ\" (m, m, rad), e.g. \"0.6,0.05,0\""
+        )),
     }
 }
 
@@ -240,6 +262,32 @@ mod tests {
         assert_eq!(l.decide(16.0), Decision::Waiting);
         l.on_pose([0.45, 0.0, 0.0], 1.9, 16.1);
         assert!(matches!(l.decide(16.1), Decision::Push(_)));
+    }
+
+    #[test]
+    fn goals_are_three_finite_numbers() {
+        assert_eq!(parse_goal("0.6, 0.05,0").unwrap(), [0.6, 0.05, 0.0]);
+        for bad in [
+            "",
+            "0.6,0.05",
+            "0.6,0.05,0,1",
+            "a,b,c",
+            "0.6,NaN,0",
+            "0.6,inf,0",
+        ] {
+            let err = parse_goal(bad).unwrap_err();
+            assert!(err.contains("x,y,θ"), "{bad}: {err}");
+        }
+    }
+
+    #[test]
+    fn changed_tolerances_apply_to_the_next_decision() {
+        let mut l = PusherLogic::new(PusherSettings::default()).unwrap();
+        l.on_goal([0.8, 0.0, 0.0]);
+        l.on_pose([0.75, 0.0, 0.0], 0.0, 0.0);
+        assert!(matches!(l.decide(0.0), Decision::Push(_)));
+        l.settings_mut().goal_tolerance = 0.1;
+        assert_eq!(l.decide(0.0), Decision::AtGoal);
     }
 
     #[test]

@@ -81,6 +81,19 @@ impl<'a> RaceClock<'a> {
         self.period
     }
 
+    /// The racer.
+    pub fn racer(&self) -> &Racer<'a> {
+        &self.racer
+    }
+
+    /// Replaces the racer, e.g. one built with a new reference speed (`ros2 param set /racer
+    /// reference_speed 2.5`); the state estimate, the commands sent and the solve schedule are
+    /// kept, the next solve starts the new racer from its initial guess.
+    pub fn replace_racer(&mut self, racer: Racer<'a>) {
+        self.period = racer.period();
+        self.racer = racer;
+    }
+
     /// Commands published after their `apply_at` (the solve took longer than the delay).
     pub fn overruns(&self) -> usize {
         self.overruns

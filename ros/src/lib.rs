@@ -34,8 +34,12 @@
 //!   [`WaitSet`] (a `mio::Poll`) with a timeout that also bounds how late it sees a shutdown
 //!   request. Node loops stay single-threaded and deterministic; nothing spawns tasks.
 //!   ros2-client's async `Spinner` is not run: it would subscribe `/clock` with the type
-//!   `builtin_interfaces/Time` (not `rosgraph_msgs/Clock`) and serve parameter services we do not
-//!   need, so parameters come from the command line and sim time from our own [`Clock`].
+//!   `builtin_interfaces/Time` (not `rosgraph_msgs/Clock`); sim time comes from our own
+//!   [`Clock`], and the parameter services run on a thread of their own ([`param_services`]),
+//!   handing accepted changes to the loop through [`Node::poll_parameter_changes`].
+//! - **A ROS 2 citizen.** Every node serves the `rcl_interfaces` parameter services, publishes
+//!   `/parameter_events` and its log lines on `/rosout` ([`rosout`]), is listed in
+//!   `ros_discovery_info`, and shuts down without RustDDS errors (see [`Node`]).
 //! - **Domain id.** ros2-client ignores `ROS_DOMAIN_ID`; [`Node::new`] reads and validates it.
 //! - **Raw messages.** ros2-client has no untyped subscriptions; [`RawSubscription`] and
 //!   [`RawPublisher`] are RustDDS readers and writers with a bytes-keeping adapter.
@@ -45,9 +49,12 @@ pub mod args;
 pub mod clock;
 pub mod names;
 pub mod node;
+pub mod param_services;
+pub mod param_store;
 pub mod params;
 pub mod qos;
 pub mod raw;
+pub mod rosout;
 pub mod shutdown;
 
 pub use args::{ArgsError, LogLevel, NodeArgs, ParamArg, Remap};
@@ -56,21 +63,32 @@ pub use node::{
     DiscoveredPublication, Node, NodeError, Publisher, RawPublisher, RawSubscription, Received,
     Subscription, WaitSet, domain_id_from_env, parse_domain_id,
 };
+pub use param_store::{ParamChange, ParamCheck, ParamDescriptor, ParamRange, ParamStore};
 pub use params::{FromParam, ParamError, ParamSource, ParamValue, Parameters};
 pub use qos::{QosPreset, QosProfile};
 pub use raw::SerializedMessage;
 pub use shutdown::{Shutdown, ShutdownError};
 
+/// Log filter directives after the level: RustDDS and ros2-client at warnings; ros2-client's
+/// service request decoding at errors, because it warns on every request of a client that sends
+/// no related-sample-identity (a plain DDS client) and then answers it correctly anyway.
+const QUIET: &str = "rustdds=warn,ros2_client=warn,ros2_client::service::wrappers=error";
+
 /// Sets up logging to stderr: `RUST_LOG` if set, else the `--log-level` threshold (default
 /// `info`). RustDDS and ros2-client are held to warnings unless `RUST_LOG` says otherwise, since
-/// their info messages describe every discovery step. Safe to call more than once.
+/// their info messages describe every discovery step. The same lines at info level and above
+/// also go to `/rosout` once the process's [`Node`] exists (see [`rosout`]). Safe to call more
+/// than once.
 pub fn init_logging(level: Option<LogLevel>) {
     use tracing_subscriber::EnvFilter;
     let level = level.unwrap_or(LogLevel::Info).directive();
     let filter = EnvFilter::try_from_default_env()
-        .unwrap_or_else(|_| EnvFilter::new(format!("{level},rustdds=warn,ros2_client=warn")));
-    let _ = tracing_subscriber::fmt()
-        .with_env_filter(filter)
-        .with_writer(std::io::stderr)
+        .unwrap_or_else(|_| EnvFilter::new(format!("{level},{QUIET}")));
+    use tracing_subscriber::layer::SubscriberExt;
+    use tracing_subscriber::util::SubscriberInitExt;
+    let _ = tracing_subscriber::registry()
+        .with(filter)
+        .with(tracing_subscriber::fmt::layer().with_writer(std::io::stderr))
+        .with(rosout::RosoutLayer)
         .try_init();
 }

@@ -3,6 +3,8 @@
 
 use std::io;
 use std::marker::PhantomData;
+use std::sync::mpsc::{self, Receiver};
+use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use dynlab_msgs::RosMessage;
@@ -18,8 +20,11 @@ use serde::{Serialize, de::DeserializeOwned};
 use crate::args::{NodeArgs, Remap};
 use crate::clock::Clock;
 use crate::names::{self, NameError};
-use crate::params::{ParamError, Parameters};
+use crate::param_services::ParamServices;
+use crate::param_store::{ParamChange, ParamCheck, ParamDescriptor, ParamStore};
+use crate::params::{ParamError, ParamValue, Parameters};
 use crate::raw::{PUBLISHED_REPRESENTATION, RawAdapter, SerializedMessage};
+use crate::rosout::RosoutRegistration;
 
 /// The highest domain id ROS 2 accepts (`ROS_DOMAIN_ID` 0–232 on Linux).
 pub const MAX_DOMAIN_ID: u16 = 232;
@@ -44,6 +49,16 @@ pub enum NodeError {
         /// What was being created.
         what: String,
         /// The middleware's reason.
+        reason: String,
+    },
+    /// A parameter declaration or a node-side set does not fit the parameter's type or range.
+    #[error("parameter `{name}` of {node}: {reason}")]
+    Parameter {
+        /// The parameter.
+        name: String,
+        /// The node's fully qualified name.
+        node: String,
+        /// What does not fit.
         reason: String,
     },
     /// Publishing failed.
@@ -146,15 +161,30 @@ pub struct DiscoveredPublication {
 }
 
 /// A ROS 2 node: name, namespace, parameters, remapping, and the entities it creates.
+///
+/// Besides the entities the node's code creates, every node offers the ROS 2 parameter services
+/// (see [`crate::param_services`]), publishes its log lines on `/rosout` (see [`crate::rosout`])
+/// and is listed with its readers and writers in `ros_discovery_info` (by ros2-client).
+///
+/// Fields drop in declaration order, and the order matters: the parameter service thread and
+/// the `/rosout` publisher go first, then the ros2-client node, and the [`Context`] (which owns
+/// the DDS participant) last. ros2-client's `Node` drops its own context handle before its
+/// `/parameter_events` writer; were that handle the last one, the participant's event loop
+/// would stop first and RustDDS would log "ERROR Cannot remove Writer GUID … Disconnected" at
+/// every shutdown. Our `context` keeps the participant alive until every writer is removed.
 pub struct Node {
-    context: Context,
+    param_services: ParamServices,
+    _rosout: RosoutRegistration,
     ros_node: ros2_client::Node,
+    raw_publisher: Option<rustdds::Publisher>,
+    raw_subscriber: Option<rustdds::Subscriber>,
+    context: Context,
     name: String,
     namespace: String,
     remaps: Vec<Remap>,
     params: Parameters,
-    raw_publisher: Option<rustdds::Publisher>,
-    raw_subscriber: Option<rustdds::Subscriber>,
+    store: Arc<Mutex<ParamStore>>,
+    changes: Receiver<ParamChange>,
 }
 
 impl Node {
@@ -181,7 +211,9 @@ impl Node {
         } else {
             format!("{namespace}/{name}")
         };
-        let params = args.parameters(&fqn)?;
+        let mut params = args.parameters(&fqn)?;
+        let store = Arc::new(Mutex::new(ParamStore::new(&fqn)));
+        params.record_into(Arc::clone(&store));
         let context = Context::with_options(ContextOptions::new().domain_id(domain_id)).map_err(
             create_err(format!("the DDS participant for domain {domain_id}")),
         )?;
@@ -189,27 +221,123 @@ impl Node {
             what: format!("node {fqn}"),
             reason: e.to_string(),
         })?;
-        // Parameter services and rosout need ros2-client's async spinner; our nodes log to
-        // stderr and read parameters from the command line, so both stay off.
+        // ros2-client's parameter services and rosout writer need its async Spinner (which
+        // would also subscribe /clock with the wrong type); ours run without it.
         let options = NodeOptions::new()
             .enable_rosout(false)
             .start_parameter_services(false);
-        let ros_node = context
+        let mut ros_node = context
             .new_node(node_name, options)
             .map_err(|e| NodeError::Create {
                 what: format!("node {fqn}"),
                 reason: format!("{e:?}"),
             })?;
+        // Every node has use_sim_time, as in rclcpp (read-only here: the clock is chosen at
+        // start); a value that is not a bool is refused here, naming the fix.
+        params.get_or("use_sim_time", false)?;
+        let rosout_publisher = ros_node
+            .create_publisher::<ros2_client::Log>(
+                &context.get_rosout_topic(),
+                Some(crate::qos::rosout()),
+            )
+            .map_err(create_err("the /rosout publisher"))?;
+        let rosout = crate::rosout::register(&fqn, rosout_publisher);
+        let (tx, changes) = mpsc::channel();
+        let param_services = ParamServices::start(
+            &mut ros_node,
+            &context.get_parameter_events_topic(),
+            &fqn,
+            Arc::clone(&store),
+            tx,
+        )?;
         Ok(Node {
-            context,
+            param_services,
+            _rosout: rosout,
             ros_node,
+            raw_publisher: None,
+            raw_subscriber: None,
+            context,
             name,
             namespace,
             remaps: args.remaps.clone(),
             params,
-            raw_publisher: None,
-            raw_subscriber: None,
+            store,
+            changes,
         })
+    }
+
+    /// Offers a parameter over the parameter services with its current value and descriptor
+    /// (replacing the read-only entry [`Parameters`] made when the node read it). Parameters
+    /// declared [`ParamDescriptor::dynamic`] can then be set while the node runs; the node loop
+    /// receives the accepted values from [`Node::poll_parameter_changes`].
+    pub fn declare_parameter(
+        &self,
+        name: &str,
+        value: ParamValue,
+        descriptor: ParamDescriptor,
+    ) -> Result<(), NodeError> {
+        self.lock_store()
+            .declare(name, value, descriptor)
+            .map_err(|reason| NodeError::Parameter {
+                name: name.to_owned(),
+                node: self.fully_qualified_name(),
+                reason,
+            })
+    }
+
+    /// Like [`Node::declare_parameter`], with the node's own check of new values (run after
+    /// the type and range checks; its `Err` is the reason a set is refused with).
+    pub fn declare_parameter_checked(
+        &self,
+        name: &str,
+        value: ParamValue,
+        descriptor: ParamDescriptor,
+        check: ParamCheck,
+    ) -> Result<(), NodeError> {
+        // One lock: no remote set can come between the declaration and its check.
+        let mut store = self.lock_store();
+        store
+            .declare(name, value, descriptor)
+            .map_err(|reason| NodeError::Parameter {
+                name: name.to_owned(),
+                node: self.fully_qualified_name(),
+                reason,
+            })?;
+        store.set_check(name, check);
+        Ok(())
+    }
+
+    /// Sets a declared parameter from the node's own code, e.g. `goal` when a goal arrives on a
+    /// topic, so that `ros2 param get` shows what the node uses: checked for type, range and
+    /// the node's check (read-only ones too may be set this way), announced on
+    /// `/parameter_events`, not queued for [`Node::poll_parameter_changes`].
+    pub fn set_parameter(&self, name: &str, value: ParamValue) -> Result<(), NodeError> {
+        let change =
+            self.lock_store()
+                .update(name, &value)
+                .map_err(|reason| NodeError::Parameter {
+                    name: name.to_owned(),
+                    node: self.fully_qualified_name(),
+                    reason,
+                })?;
+        self.param_services.announce(&[change]);
+        Ok(())
+    }
+
+    /// The current value of a declared parameter (as the parameter services report it).
+    pub fn parameter(&self, name: &str) -> Option<ParamValue> {
+        self.lock_store().get(name).map(|d| d.value.clone())
+    }
+
+    /// The parameter changes accepted by the parameter services since the last call, oldest
+    /// first. Call it once per loop iteration and apply them there: the loop decides when a
+    /// change takes effect, so runs stay deterministic.
+    pub fn poll_parameter_changes(&self) -> Vec<ParamChange> {
+        self.changes.try_iter().collect()
+    }
+
+    fn lock_store(&self) -> std::sync::MutexGuard<'_, ParamStore> {
+        self.store.lock().unwrap_or_else(|p| p.into_inner())
     }
 
     /// The node's name.

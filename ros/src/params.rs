@@ -9,8 +9,11 @@
 use std::collections::BTreeMap;
 use std::fmt;
 use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex};
 
 use serde_yaml::Value;
+
+use crate::param_store::ParamStore;
 
 /// A parameter value, with the types ROS 2 parameters have.
 #[derive(Debug, Clone, PartialEq)]
@@ -282,9 +285,15 @@ pub trait FromParam: Sized {
     const EXAMPLE: &'static str;
     /// Converts, or `Err(None)` on a type mismatch, `Err(Some(reason))` when out of range.
     fn from_param(value: &ParamValue) -> Result<Self, Option<String>>;
+    /// The parameter value of `self` (the inverse of `from_param`), as the parameter services
+    /// report it.
+    fn to_param(&self) -> ParamValue;
 }
 
 impl FromParam for bool {
+    fn to_param(&self) -> ParamValue {
+        ParamValue::Bool(*self)
+    }
     const EXPECTED: &'static str = "a bool";
     const EXAMPLE: &'static str = "true";
     fn from_param(value: &ParamValue) -> Result<Self, Option<String>> {
@@ -296,6 +305,9 @@ impl FromParam for bool {
 }
 
 impl FromParam for i64 {
+    fn to_param(&self) -> ParamValue {
+        ParamValue::Integer(*self)
+    }
     const EXPECTED: &'static str = "an integer";
     const EXAMPLE: &'static str = "10";
     fn from_param(value: &ParamValue) -> Result<Self, Option<String>> {
@@ -318,6 +330,9 @@ macro_rules! narrow_int {
                     _ => Err(None),
                 }
             }
+            fn to_param(&self) -> ParamValue {
+                ParamValue::Integer(i64::try_from(*self).unwrap_or(i64::MAX))
+            }
         }
     };
 }
@@ -328,6 +343,9 @@ narrow_int!(usize, "a non-negative integer");
 narrow_int!(u16, "a non-negative integer (16-bit)");
 
 impl FromParam for f64 {
+    fn to_param(&self) -> ParamValue {
+        ParamValue::Double(*self)
+    }
     const EXPECTED: &'static str = "a double";
     const EXAMPLE: &'static str = "1.5";
     /// Integers are accepted too (`-p rate:=100` means 100.0).
@@ -341,6 +359,9 @@ impl FromParam for f64 {
 }
 
 impl FromParam for String {
+    fn to_param(&self) -> ParamValue {
+        ParamValue::String(self.clone())
+    }
     const EXPECTED: &'static str = "a string";
     const EXAMPLE: &'static str = "text";
     fn from_param(value: &ParamValue) -> Result<Self, Option<String>> {
@@ -359,6 +380,9 @@ fn is_empty_array(value: &ParamValue) -> bool {
 }
 
 impl FromParam for Vec<f64> {
+    fn to_param(&self) -> ParamValue {
+        ParamValue::DoubleArray(self.clone())
+    }
     const EXPECTED: &'static str = "a double_array";
     const EXAMPLE: &'static str = "[1.0, 2.5]";
     fn from_param(value: &ParamValue) -> Result<Self, Option<String>> {
@@ -372,6 +396,9 @@ impl FromParam for Vec<f64> {
 }
 
 impl FromParam for Vec<i64> {
+    fn to_param(&self) -> ParamValue {
+        ParamValue::IntegerArray(self.clone())
+    }
     const EXPECTED: &'static str = "an integer_array";
     const EXAMPLE: &'static str = "[1, 2]";
     fn from_param(value: &ParamValue) -> Result<Self, Option<String>> {
@@ -384,6 +411,9 @@ impl FromParam for Vec<i64> {
 }
 
 impl FromParam for Vec<bool> {
+    fn to_param(&self) -> ParamValue {
+        ParamValue::BoolArray(self.clone())
+    }
     const EXPECTED: &'static str = "a bool_array";
     const EXAMPLE: &'static str = "[true, false]";
     fn from_param(value: &ParamValue) -> Result<Self, Option<String>> {
@@ -396,6 +426,9 @@ impl FromParam for Vec<bool> {
 }
 
 impl FromParam for Vec<String> {
+    fn to_param(&self) -> ParamValue {
+        ParamValue::StringArray(self.clone())
+    }
     const EXPECTED: &'static str = "a string_array";
     const EXAMPLE: &'static str = "[a, b]";
     fn from_param(value: &ParamValue) -> Result<Self, Option<String>> {
@@ -408,10 +441,16 @@ impl FromParam for Vec<String> {
 }
 
 /// The parameters of one node, after applying params files and `-p` overrides.
+///
+/// With [`Parameters::record_into`], every value the node reads (`get`, `get_or`, `require`) is
+/// also declared, read-only and with the value the node uses (its default when none was given),
+/// in the store the parameter services answer from: `ros2 param list/get/dump` show what the
+/// node runs with.
 #[derive(Debug, Clone, Default)]
 pub struct Parameters {
     node: String,
     values: BTreeMap<String, Param>,
+    record: Option<Arc<Mutex<ParamStore>>>,
 }
 
 impl Parameters {
@@ -420,6 +459,31 @@ impl Parameters {
         Parameters {
             node: node_fqn.to_owned(),
             values: BTreeMap::new(),
+            record: None,
+        }
+    }
+
+    /// Declares every value read from now on in `store` (read-only, as used by the node).
+    pub fn record_into(&mut self, store: Arc<Mutex<ParamStore>>) {
+        self.record = Some(store);
+    }
+
+    fn recorded<T: FromParam>(&self, key: &str, value: &T) {
+        if let Some(store) = &self.record {
+            let origin = match self.values.get(key) {
+                Some(p) => format!("set at start from {}", p.source),
+                None => "the node's default".to_owned(),
+            };
+            store
+                .lock()
+                .unwrap_or_else(|p| p.into_inner())
+                .declare_if_absent(
+                    key,
+                    value.to_param(),
+                    &format!(
+                        "read-only ({origin}); restart the node with -p {key}:=value to change it"
+                    ),
+                );
         }
     }
 
@@ -458,6 +522,7 @@ impl Parameters {
             return Ok(None);
         };
         T::from_param(&p.value)
+            .inspect(|v| self.recorded(key, v))
             .map(Some)
             .map_err(|reason| match reason {
                 None => ParamError::WrongType {
@@ -479,7 +544,13 @@ impl Parameters {
 
     /// The value of `key` as `T`, or `default` when it is not set.
     pub fn get_or<T: FromParam>(&self, key: &str, default: T) -> Result<T, ParamError> {
-        Ok(self.get(key)?.unwrap_or(default))
+        match self.get(key)? {
+            Some(v) => Ok(v),
+            None => {
+                self.recorded(key, &default);
+                Ok(default)
+            }
+        }
     }
 
     /// The value of `key` as `T`; an error naming the key when it is not set.

@@ -95,6 +95,27 @@ pub fn latched() -> QosProfile {
     }
 }
 
+/// `rmw_qos_profile_services_default`: reliable, keep last 10, volatile — service requests and
+/// replies.
+pub fn services() -> QosProfile {
+    base(reliable(), 10)
+}
+
+/// `rmw_qos_profile_parameter_events`: reliable, keep last 1000, volatile — `/parameter_events`.
+pub fn parameter_events() -> QosProfile {
+    base(reliable(), 1000)
+}
+
+/// rcl's `/rosout` profile: reliable, keep last 1000, transient local, lifespan 10 s — late
+/// subscribers get the last 10 s of log lines.
+pub fn rosout() -> QosProfile {
+    QosProfile {
+        durability: Durability::TransientLocal,
+        lifespan: Some(Duration::from_secs(10)),
+        ..base(reliable(), 1000)
+    }
+}
+
 /// The profile a recorder subscribes with so that it matches every publisher offering one of
 /// `offered`: reliable only if all of them are reliable (a reliable reader does not match a
 /// best-effort writer), transient local only if all of them are (to receive latched samples),

@@ -19,6 +19,9 @@
 //! | `obstacle` | none | `"cx,cy,sx,sy[,angle]"`: an obstacle box (m, rad) to avoid, e.g. Tu & Lin's `"0.6,0.2,0.1,0.5"` |
 //! | `block_size` | `"0.1,0.1"` | block side lengths (m) for the collision test |
 //! | `goal` | none | `"x,y,θ"`: a goal to start with (m, rad); `/push/goal` replaces it |
+//!
+//! `goal`, `goal_tolerance`, `angle_tolerance` and `lambda` can be changed while the node runs
+//! (`ros2 param set /mppi_pusher goal_tolerance 0.05`); the others are read-only.
 
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
@@ -27,10 +30,10 @@ use anyhow::{Context, bail};
 use dynlab_control::mppi::{Mppi, MppiConfig, PushTask, Rect};
 use dynlab_learn::{World, load_model};
 use dynlab_msgs::geometry_msgs::PoseStamped;
-use dynlab_nodes::mppi_pusher::{Decision, PusherLogic, PusherSettings};
+use dynlab_nodes::mppi_pusher::{Decision, PusherLogic, PusherSettings, parse_goal};
 use dynlab_nodes::stale::PoseEvent;
 use dynlab_nodes::{Started, start_node};
-use dynlab_ros::{WaitSet, qos};
+use dynlab_ros::{ParamChange, ParamDescriptor, ParamValue, WaitSet, qos};
 use dynlab_sim::PushAction;
 use dynlab_simbridge::messages as m;
 
@@ -146,10 +149,14 @@ fn main() -> anyhow::Result<()> {
         logic.on_goal([g[0], g[1], g[2]]);
         mppi.set_goal([g[0], g[1], g[2]])?;
     }
+    declare_runtime_parameters(&node, logic.settings(), mppi.config(), &goal0)?;
     let mut last = Decision::Idle;
     let mut pushes = 0u64;
     while !shutdown.requested() {
         waits.wait(POLL)?;
+        for change in node.poll_parameter_changes() {
+            apply_parameter(&change, &mut logic, &mut mppi)?;
+        }
         let now = wall0.elapsed().as_secs_f64();
         while let Some(g) = goals.take()? {
             let (goal, _) = planar(&g);
@@ -158,6 +165,8 @@ fn main() -> anyhow::Result<()> {
                 logic.on_goal(goal);
                 mppi.set_goal(goal)?;
                 mppi.reset();
+                let text = format!("{},{},{}", goal[0], goal[1], goal[2]);
+                node.set_parameter("goal", ParamValue::String(text))?;
             } else {
                 tracing::warn!("goal with a non-finite field ignored");
             }
@@ -220,6 +229,93 @@ fn main() -> anyhow::Result<()> {
         } else {
             last = Decision::Waiting;
         }
+    }
+    Ok(())
+}
+
+/// Offers the parameters that `ros2 param set` can change while the node runs (the others are
+/// read-only: restart with `-p name:=value`).
+fn declare_runtime_parameters(
+    node: &dynlab_ros::Node,
+    settings: &PusherSettings,
+    cfg: &MppiConfig,
+    goal: &str,
+) -> anyhow::Result<()> {
+    node.declare_parameter_checked(
+        "goal",
+        ParamValue::String(goal.to_owned()),
+        ParamDescriptor::dynamic("goal \"x,y,θ\" (m, m, rad); a message on /push/goal replaces it")
+            .constraints("three comma-separated finite numbers"),
+        |v| match v {
+            ParamValue::String(t) => parse_goal(t).map(|_| ()),
+            _ => Ok(()),
+        },
+    )?;
+    node.declare_parameter(
+        "goal_tolerance",
+        ParamValue::Double(settings.goal_tolerance),
+        ParamDescriptor::dynamic("goal reached within this xy distance [m]").range(0.0, 10.0),
+    )?;
+    // No range for these two: a start value the node accepted (an angle tolerance above π to
+    // ignore the heading, any λ that MppiConfig::validate accepts) must stay declarable.
+    node.declare_parameter_checked(
+        "angle_tolerance",
+        ParamValue::Double(settings.angle_tolerance),
+        ParamDescriptor::dynamic("... and this heading error [rad]; above π: heading ignored")
+            .constraints("finite, ≥ 0"),
+        |v| match v {
+            ParamValue::Double(a) if !(a.is_finite() && *a >= 0.0) => {
+                Err(format!("{a} is not a finite angle ≥ 0 rad"))
+            }
+            _ => Ok(()),
+        },
+    )?;
+    node.declare_parameter_checked(
+        "lambda",
+        ParamValue::Double(cfg.lambda),
+        ParamDescriptor::dynamic(
+            "MPPI temperature λ; a change rebuilds the controller (warm start and noise stream restart from the seed)",
+        )
+        .constraints("finite, > 0"),
+        |v| match v {
+            ParamValue::Double(l) if !(l.is_finite() && *l > 0.0) => {
+                Err(format!("{l} is not a finite temperature > 0"))
+            }
+            _ => Ok(()),
+        },
+    )?;
+    Ok(())
+}
+
+/// Applies a parameter change accepted by the parameter services (already validated).
+fn apply_parameter(
+    c: &ParamChange,
+    logic: &mut PusherLogic,
+    mppi: &mut Mppi,
+) -> anyhow::Result<()> {
+    match (c.name.as_str(), &c.value) {
+        ("goal", ParamValue::String(text)) => {
+            let goal = parse_goal(text).map_err(anyhow::Error::msg)?;
+            tracing::info!(
+                "goal ({:.3}, {:.3}, {:.3}) from the goal parameter",
+                goal[0],
+                goal[1],
+                goal[2]
+            );
+            logic.on_goal(goal);
+            mppi.set_goal(goal)?;
+            mppi.reset();
+        }
+        ("goal_tolerance", ParamValue::Double(v)) => logic.settings_mut().goal_tolerance = *v,
+        ("angle_tolerance", ParamValue::Double(v)) => logic.settings_mut().angle_tolerance = *v,
+        ("lambda", ParamValue::Double(v)) => {
+            let cfg = MppiConfig {
+                lambda: *v,
+                ..mppi.config().clone()
+            };
+            *mppi = Mppi::new(cfg, mppi.task().clone())?;
+        }
+        _ => tracing::warn!("parameter {} = {} has no run-time effect", c.name, c.value),
     }
     Ok(())
 }

@@ -15,8 +15,10 @@
 //! steps, enough for a solve at a fifth of real time: the command computed from the pose stamped `t` is published when the clock reaches
 //! `t + delay`, and the optimiser starts from the state predicted at that time under the
 //! commands already sent; 0 publishes at once and assumes no delay; see
-//! `dynlab_nodes::racer`), `use_sim_time` (follow `/clock`; recommended with `sim_node`),
-//! `stale_timeout` (s, default 0.2: twenty pose periods at 100 Hz).
+//! `dynlab_nodes::racer`), `reference_speed` (m/s, default the settings' 2.0; can be changed
+//! while the node runs: `ros2 param set /racer reference_speed 2.5`), `use_sim_time` (follow
+//! `/clock`; recommended with `sim_node`), `stale_timeout` (s, default 0.2: twenty pose periods
+//! at 100 Hz). The other parameters are read-only.
 //!
 //! Stale poses: when no pose has arrived for `stale_timeout` seconds of the node's own steady
 //! clock (not ROS time: with `use_sim_time` a stopped simulator stops `/clock` too), the racer
@@ -34,8 +36,8 @@ use dynlab_control::racing::{Optimizer, Racer, RacerSettings};
 use dynlab_msgs::geometry_msgs::PoseStamped;
 use dynlab_nodes::racer::{HoldEvent, Planned, RaceClock, StaleHold};
 use dynlab_nodes::{Started, start_node};
-use dynlab_ros::WaitSet;
 use dynlab_ros::qos::{self, History, QosProfile};
+use dynlab_ros::{ParamDescriptor, ParamValue, WaitSet};
 use dynlab_sim::{CarInput, Track};
 use dynlab_simbridge::messages as m;
 
@@ -50,6 +52,7 @@ fn main() -> anyhow::Result<()> {
         "horizon",
         "hold",
         "delay",
+        "reference_speed",
         "use_sim_time",
         "stale_timeout",
     ];
@@ -81,6 +84,7 @@ fn main() -> anyhow::Result<()> {
         .with_context(|| "parameter optimizer")?;
     settings.horizon = usize::try_from(horizon).context("parameter horizon must be ≥ 1")?;
     settings.hold = usize::try_from(hold).context("parameter hold must be ≥ 1")?;
+    settings.reference_speed = p.get_or("reference_speed", settings.reference_speed)?;
     let racer = Racer::new(&model, &track, settings)?;
     let dt = dynlab_control::racing::CarDynamics::dt(&model);
     let delay_steps = (delay / dt).round();
@@ -102,6 +106,14 @@ fn main() -> anyhow::Result<()> {
         1.0 / rc.period(),
         1e3 * rc.delay()
     );
+    node.declare_parameter(
+        "reference_speed",
+        ParamValue::Double(settings.reference_speed),
+        ParamDescriptor::dynamic(
+            "reference speed along the centre line [m/s]; a change applies from the next solve",
+        )
+        .range(0.01, 50.0),
+    )?;
     let clock = node.clock()?;
     // best effort as the publisher, but deep: poses that arrive during a long solve are kept
     let pose_qos = QosProfile {
@@ -122,6 +134,23 @@ fn main() -> anyhow::Result<()> {
     let limits = settings.limits;
     while !shutdown.requested() {
         waits.wait(POLL)?;
+        for change in node.poll_parameter_changes() {
+            if let ("reference_speed", ParamValue::Double(v)) =
+                (change.name.as_str(), &change.value)
+            {
+                let new = RacerSettings {
+                    reference_speed: *v,
+                    ..*rc.racer().settings()
+                };
+                match Racer::new(&model, &track, new) {
+                    Ok(r) => {
+                        rc.replace_racer(r);
+                        tracing::info!("reference speed {v} m/s from the next solve");
+                    }
+                    Err(e) => tracing::warn!("reference speed {v} m/s not applied: {e}"),
+                }
+            }
+        }
         while let Some(msg) = poses.take()? {
             let t = f64::from(msg.header.stamp.sec) + 1e-9 * f64::from(msg.header.stamp.nanosec);
             let event = hold.on_pose(steady0.elapsed().as_secs_f64(), t);
