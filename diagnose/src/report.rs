@@ -525,6 +525,17 @@ impl LineChart {
     }
 }
 
+/// A tick label: three decimals, or three significant digits in scientific notation when the
+/// ticks are closer than 0.001 or the values larger than 10⁴ (three decimals would print equal
+/// labels or long numbers).
+fn tick_label(v: f64, step: f64) -> String {
+    if v != 0.0 && (step.abs() < 1e-3 || v.abs() >= 1e4) {
+        format!("{v:.2e}")
+    } else {
+        format!("{v:.3}")
+    }
+}
+
 fn plot_err(title: &str) -> impl Fn(String) -> ReportError + '_ {
     move |reason| ReportError::Plot {
         title: title.to_string(),
@@ -559,7 +570,7 @@ impl Chart for LineChart {
                 .y_desc(&self.y_label)
                 .x_labels(8)
                 .y_labels(6)
-                .y_label_formatter(&|v| format!("{v:.3}"))
+                .y_label_formatter(&|v| tick_label(*v, (y1 - y0) / 6.0))
                 .light_line_style(WHITE.mix(0.0))
                 .draw()
                 .map_err(|e| err(e.to_string()))?;
@@ -844,7 +855,9 @@ impl Chart for HeatmapPanels {
                 .disable_y_axis()
                 .x_desc(&self.scale_label)
                 .x_labels(6)
-                .x_label_formatter(&|v| format!("{v:.3}"))
+                .x_label_formatter(&|v| tick_label(*v, top / 6.0))
+                .label_style(("sans-serif", 12))
+                .axis_desc_style(("sans-serif", 12))
                 .draw()
                 .map_err(|e| err(e.to_string()))?;
             let n = 60;
@@ -983,5 +996,18 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("\"none\": no panels"), "{e}");
+    }
+
+    #[test]
+    fn tick_labels_stay_distinct_for_small_and_large_values() {
+        // ticks 0.0002 apart: three decimals would print 0.001 three times
+        let small: Vec<String> = [0.0008, 0.001, 0.0012]
+            .iter()
+            .map(|&v| tick_label(v, 2e-4))
+            .collect();
+        assert_eq!(small, ["8.00e-4", "1.00e-3", "1.20e-3"]);
+        assert_eq!(tick_label(0.25, 0.05), "0.250");
+        assert_eq!(tick_label(0.0, 2e-4), "0.000");
+        assert_eq!(tick_label(25000.0, 5000.0), "2.50e4");
     }
 }

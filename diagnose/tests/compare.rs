@@ -333,9 +333,7 @@ fn baseline_figures_overlay_before_and_after_on_the_same_axes() {
     let (mb, mm) = (max_of(r.baseline.as_ref().unwrap()), max_of(&r.model));
     let map = figs.iter().find(|s| s.contains("shared scale")).unwrap();
     assert!(map.contains(&format!("shared scale, max {:.4}", mb.max(mm))));
-    assert!(map.contains(&format!(
-        "before: nominal (max {mb:.4})"
-    )));
+    assert!(map.contains(&format!("before: nominal (max {mb:.4})")));
     assert!(map.contains(&format!("after: effect (max {mm:.4})")));
     // no figure of one model alone any more
     assert!(!page.contains("position error (m), nominal"));
