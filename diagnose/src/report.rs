@@ -373,12 +373,31 @@ pub enum SeriesStyle {
     Stems,
 }
 
+/// The runs of consecutive finite points: a line is broken where a point is not finite (NaN
+/// separates trajectories), so no segment joins two runs.
+fn finite_runs(points: &[(f64, f64)]) -> Vec<Vec<(f64, f64)>> {
+    let mut runs = Vec::new();
+    let mut run = Vec::new();
+    for &(x, y) in points {
+        if x.is_finite() && y.is_finite() {
+            run.push((x, y));
+        } else if !run.is_empty() {
+            runs.push(std::mem::take(&mut run));
+        }
+    }
+    if !run.is_empty() {
+        runs.push(run);
+    }
+    runs
+}
+
 /// A named set of points of a [`LineChart`].
 #[derive(Clone, Debug, PartialEq)]
 pub struct Series {
     /// Legend text.
     pub name: String,
-    /// Points `(x, y)`; non-finite points are skipped.
+    /// Points `(x, y)`; non-finite points are skipped (and break a line: put a NaN point
+    /// between two trajectories drawn as one series).
     pub points: Vec<(f64, f64)>,
     /// Drawing style.
     pub style: SeriesStyle,
@@ -506,6 +525,17 @@ impl LineChart {
     }
 }
 
+/// A tick label: three decimals, or three significant digits in scientific notation when the
+/// ticks are closer than 0.001 or the values larger than 10⁴ (three decimals would print equal
+/// labels or long numbers).
+fn tick_label(v: f64, step: f64) -> String {
+    if v != 0.0 && (step.abs() < 1e-3 || v.abs() >= 1e4) {
+        format!("{v:.2e}")
+    } else {
+        format!("{v:.3}")
+    }
+}
+
 fn plot_err(title: &str) -> impl Fn(String) -> ReportError + '_ {
     move |reason| ReportError::Plot {
         title: title.to_string(),
@@ -540,7 +570,7 @@ impl Chart for LineChart {
                 .y_desc(&self.y_label)
                 .x_labels(8)
                 .y_labels(6)
-                .y_label_formatter(&|v| format!("{v:.3}"))
+                .y_label_formatter(&|v| tick_label(*v, (y1 - y0) / 6.0))
                 .light_line_style(WHITE.mix(0.0))
                 .draw()
                 .map_err(|e| err(e.to_string()))?;
@@ -566,7 +596,11 @@ impl Chart for LineChart {
                     .collect();
                 let anno = match s.style {
                     SeriesStyle::Line => chart
-                        .draw_series(LineSeries::new(pts, color.stroke_width(1)))
+                        .draw_series(
+                            finite_runs(&s.points)
+                                .into_iter()
+                                .map(|run| PathElement::new(run, color.stroke_width(1))),
+                        )
                         .map_err(|e| err(e.to_string()))?,
                     SeriesStyle::Points => chart
                         .draw_series(pts.into_iter().map(|p| Circle::new(p, 2, color.filled())))
@@ -616,12 +650,20 @@ pub struct Heatmap {
     pub size: (u32, u32),
 }
 
-impl Chart for Heatmap {
-    fn title(&self) -> &str {
-        &self.title
+impl Heatmap {
+    /// The largest finite value (0 when there is none): the dark red end of the colour scale.
+    pub fn max_value(&self) -> f64 {
+        self.values
+            .iter()
+            .flatten()
+            .flatten()
+            .copied()
+            .filter(|v| v.is_finite())
+            .fold(0.0, f64::max)
     }
-    fn render_svg(&self) -> Result<String, ReportError> {
-        use plotters::prelude::*;
+
+    /// Checks the grid; returns `(nx, ny)`.
+    fn grid(&self) -> Result<(usize, usize), ReportError> {
         let err = plot_err(&self.title);
         let (nx, ny) = (
             self.x_edges.len().saturating_sub(1),
@@ -630,65 +672,203 @@ impl Chart for Heatmap {
         if nx == 0 || ny == 0 || self.values.len() != ny {
             return Err(err("empty grid".into()));
         }
-        let vmax = self
-            .values
-            .iter()
-            .flatten()
-            .flatten()
-            .copied()
-            .filter(|v| v.is_finite())
-            .fold(0.0, f64::max);
-        let (x0, x1) = (self.x_edges[0], self.x_edges[nx]);
-        let (y0, y1) = (self.y_edges[0], self.y_edges[ny]);
-        if !(x1 > x0 && y1 > y0) {
+        if !(self.x_edges[nx] > self.x_edges[0] && self.y_edges[ny] > self.y_edges[0]) {
             return Err(err("degenerate extent".into()));
         }
+        Ok((nx, ny))
+    }
+
+    /// Draws the map on `area` with the colour scale `0…vmax` under `caption`.
+    fn draw_on<DB: plotters::prelude::DrawingBackend>(
+        &self,
+        area: &plotters::drawing::DrawingArea<DB, plotters::coord::Shift>,
+        caption: String,
+        vmax: f64,
+    ) -> Result<(), ReportError> {
+        use plotters::prelude::*;
+        let err = plot_err(&self.title);
+        let (nx, ny) = self.grid()?;
+        let (x0, x1) = (self.x_edges[0], self.x_edges[nx]);
+        let (y0, y1) = (self.y_edges[0], self.y_edges[ny]);
+        let mut chart = ChartBuilder::on(area)
+            .caption(caption, ("sans-serif", 16))
+            .margin(8)
+            .x_label_area_size(36)
+            .y_label_area_size(50)
+            .build_cartesian_2d(x0..x1, y0..y1)
+            .map_err(|e| err(e.to_string()))?;
+        chart
+            .configure_mesh()
+            .disable_mesh()
+            .x_desc(&self.x_label)
+            .y_desc(&self.y_label)
+            .draw()
+            .map_err(|e| err(e.to_string()))?;
+        let mut cells = Vec::new();
+        for (iy, row) in self.values.iter().enumerate() {
+            for (ix, v) in row.iter().enumerate().take(nx) {
+                cells.push(Rectangle::new(
+                    [
+                        (self.x_edges[ix], self.y_edges[iy]),
+                        (self.x_edges[ix + 1], self.y_edges[iy + 1]),
+                    ],
+                    heat_color(*v, vmax).filled(),
+                ));
+            }
+        }
+        chart.draw_series(cells).map_err(|e| err(e.to_string()))?;
+        Ok(())
+    }
+}
+
+/// The colour of a cell: white at 0 to dark red at `vmax`, grey without a value.
+fn heat_color(v: Option<f64>, vmax: f64) -> plotters::style::RGBColor {
+    use plotters::style::{RGBColor, WHITE};
+    match v {
+        Some(v) if v.is_finite() && vmax > 0.0 => {
+            let a = (v / vmax).clamp(0.0, 1.0);
+            RGBColor(
+                255 - (a * 100.0) as u8,
+                255 - (a * 235.0) as u8,
+                255 - (a * 235.0) as u8,
+            )
+        }
+        Some(_) => WHITE,
+        None => RGBColor(225, 225, 225),
+    }
+}
+
+impl Chart for Heatmap {
+    fn title(&self) -> &str {
+        &self.title
+    }
+    fn render_svg(&self) -> Result<String, ReportError> {
+        use plotters::prelude::*;
+        let err = plot_err(&self.title);
+        self.grid()?;
+        let vmax = self.max_value();
         let mut buf = String::new();
         {
             let root = SVGBackend::with_string(&mut buf, self.size).into_drawing_area();
             root.fill(&WHITE).map_err(|e| err(e.to_string()))?;
-            let mut chart = ChartBuilder::on(&root)
-                .caption(
-                    format!("{} (max {:.4})", self.title, vmax),
-                    ("sans-serif", 16),
+            self.draw_on(&root, format!("{} (max {:.4})", self.title, vmax), vmax)?;
+            root.present().map_err(|e| err(e.to_string()))?;
+        }
+        Ok(buf)
+    }
+}
+
+/// Heatmaps side by side in one figure on one colour scale — white at 0, dark red at the
+/// largest value over all panels — with a colour bar below, so that equal colours mean equal
+/// values in every panel (e.g. a model's error over the floor before and after a change).
+///
+/// Each panel keeps its own title, axis labels and grid; its `size` is ignored: the panels
+/// share the figure's width evenly.
+#[derive(Clone, Debug, PartialEq)]
+pub struct HeatmapPanels {
+    /// Title of the figure (also its caption).
+    pub title: String,
+    /// The panels, left to right.
+    pub panels: Vec<Heatmap>,
+    /// Label of the colour bar (what the colour means, with its unit).
+    pub scale_label: String,
+    /// Size of the whole figure in pixels.
+    pub size: (u32, u32),
+}
+
+impl HeatmapPanels {
+    /// Panels of `size_each` pixels side by side (plus the title and the colour bar).
+    pub fn new(
+        title: impl Into<String>,
+        scale_label: impl Into<String>,
+        panels: Vec<Heatmap>,
+        size_each: (u32, u32),
+    ) -> Self {
+        let n = panels.len().max(1) as u32;
+        Self {
+            title: title.into(),
+            scale_label: scale_label.into(),
+            panels,
+            size: (size_each.0 * n, size_each.1 + COLOUR_BAR_HEIGHT + 30),
+        }
+    }
+
+    /// The top of the shared colour scale: the largest value over all panels.
+    pub fn max_value(&self) -> f64 {
+        self.panels
+            .iter()
+            .map(Heatmap::max_value)
+            .fold(0.0, f64::max)
+    }
+}
+
+/// Height of the colour bar of [`HeatmapPanels`] in pixels.
+const COLOUR_BAR_HEIGHT: u32 = 70;
+
+impl Chart for HeatmapPanels {
+    fn title(&self) -> &str {
+        &self.title
+    }
+    fn render_svg(&self) -> Result<String, ReportError> {
+        use plotters::prelude::*;
+        let err = plot_err(&self.title);
+        if self.panels.is_empty() {
+            return Err(err("no panels".into()));
+        }
+        for p in &self.panels {
+            p.grid()?;
+        }
+        let vmax = self.max_value();
+        let mut buf = String::new();
+        {
+            let root = SVGBackend::with_string(&mut buf, self.size).into_drawing_area();
+            root.fill(&WHITE).map_err(|e| err(e.to_string()))?;
+            let body = root
+                .titled(
+                    &format!("{} (shared scale, max {:.4})", self.title, vmax),
+                    ("sans-serif", 17),
                 )
-                .margin(8)
-                .x_label_area_size(36)
-                .y_label_area_size(50)
-                .build_cartesian_2d(x0..x1, y0..y1)
                 .map_err(|e| err(e.to_string()))?;
-            chart
-                .configure_mesh()
+            let h = body.dim_in_pixel().1;
+            let (maps, bar) = body.split_vertically(h.saturating_sub(COLOUR_BAR_HEIGHT));
+            for (p, area) in self
+                .panels
+                .iter()
+                .zip(maps.split_evenly((1, self.panels.len())))
+            {
+                p.draw_on(
+                    &area,
+                    format!("{} (max {:.4})", p.title, p.max_value()),
+                    vmax,
+                )?;
+            }
+            // colour bar: the scale from 0 to the shared maximum
+            let top = if vmax > 0.0 { vmax } else { 1.0 };
+            let w = bar.dim_in_pixel().0;
+            let bar = bar.margin(4, 0, w / 6, w / 6);
+            let mut cb = ChartBuilder::on(&bar)
+                .x_label_area_size(40)
+                .build_cartesian_2d(0.0..top, 0.0..1.0)
+                .map_err(|e| err(e.to_string()))?;
+            cb.configure_mesh()
                 .disable_mesh()
-                .x_desc(&self.x_label)
-                .y_desc(&self.y_label)
+                .disable_y_axis()
+                .x_desc(&self.scale_label)
+                .x_labels(6)
+                .x_label_formatter(&|v| tick_label(*v, top / 6.0))
+                .label_style(("sans-serif", 12))
+                .axis_desc_style(("sans-serif", 12))
                 .draw()
                 .map_err(|e| err(e.to_string()))?;
-            let mut cells = Vec::new();
-            for (iy, row) in self.values.iter().enumerate() {
-                for (ix, v) in row.iter().enumerate().take(nx) {
-                    let color = match v {
-                        Some(v) if v.is_finite() && vmax > 0.0 => {
-                            let a = (v / vmax).clamp(0.0, 1.0);
-                            RGBColor(
-                                255 - (a * 100.0) as u8,
-                                255 - (a * 235.0) as u8,
-                                255 - (a * 235.0) as u8,
-                            )
-                        }
-                        Some(_) => WHITE,
-                        None => RGBColor(225, 225, 225),
-                    };
-                    cells.push(Rectangle::new(
-                        [
-                            (self.x_edges[ix], self.y_edges[iy]),
-                            (self.x_edges[ix + 1], self.y_edges[iy + 1]),
-                        ],
-                        color.filled(),
-                    ));
-                }
-            }
-            chart.draw_series(cells).map_err(|e| err(e.to_string()))?;
+            let n = 60;
+            cb.draw_series((0..n).map(|i| {
+                let (a, b) = (top * i as f64 / n as f64, top * (i + 1) as f64 / n as f64);
+                Rectangle::new(
+                    [(a, 0.0), (b, 1.0)],
+                    heat_color(Some(0.5 * (a + b)), vmax).filled(),
+                )
+            }))
+            .map_err(|e| err(e.to_string()))?;
             root.present().map_err(|e| err(e.to_string()))?;
         }
         Ok(buf)
@@ -742,5 +922,92 @@ mod tests {
         assert!(
             h.contains("figure not drawn: drawing the chart &quot;empty&quot;: no finite points")
         );
+    }
+
+    #[test]
+    fn lines_break_at_non_finite_points() {
+        let runs = finite_runs(&[
+            (0.0, 1.0),
+            (1.0, 2.0),
+            (f64::NAN, f64::NAN),
+            (2.0, 0.5),
+            (3.0, f64::INFINITY),
+            (f64::NAN, 0.0),
+        ]);
+        assert_eq!(runs, vec![vec![(0.0, 1.0), (1.0, 2.0)], vec![(2.0, 0.5)]]);
+        let svg = LineChart::new("c", "x", "y")
+            .series(Series::line(
+                "a",
+                vec![
+                    (0.0, 1.0),
+                    (1.0, 2.0),
+                    (f64::NAN, f64::NAN),
+                    (2.0, 0.0),
+                    (3.0, 1.0),
+                ],
+            ))
+            .render_svg()
+            .unwrap();
+        // two data runs and the legend swatch, all in the first colour
+        let blue = svg
+            .split("<polyline")
+            .filter(|p| p.split('>').next().unwrap().contains("#1F77B4"))
+            .count();
+        assert_eq!(blue, 3, "{svg}");
+    }
+
+    #[test]
+    fn heatmap_panels_share_one_colour_scale() {
+        let map = |title: &str, v: f64| Heatmap {
+            title: title.into(),
+            x_label: "x".into(),
+            y_label: "y".into(),
+            x_edges: vec![0.0, 1.0, 2.0],
+            y_edges: vec![0.0, 1.0],
+            values: vec![vec![Some(v), None]],
+            size: (300, 300),
+        };
+        let (a, b) = (map("a", 1.0), map("b", 2.0));
+        // alone, each map's largest value is dark red
+        let dark = "#9B1414";
+        assert!(a.render_svg().unwrap().contains(dark));
+        // together, 1 is half way (and 2 dark red), whichever panel it is in
+        let half = format!(
+            "#{:02X}{:02X}{:02X}",
+            255 - 50,
+            255 - (0.5f64 * 235.0) as u8,
+            255 - (0.5f64 * 235.0) as u8
+        );
+        let p = HeatmapPanels::new("both", "error", vec![a.clone(), b.clone()], (300, 300));
+        assert_eq!(p.max_value(), 2.0);
+        let svg = p.render_svg().unwrap();
+        assert!(svg.contains("both (shared scale, max 2.0000)"));
+        assert!(svg.contains("a (max 1.0000)") && svg.contains("b (max 2.0000)"));
+        let cell = |svg: &str, colour: &str| {
+            svg.split("<rect")
+                .filter(|r| r.split('>').next().unwrap().contains(colour))
+                .count()
+        };
+        assert_eq!(cell(&svg, &half), 1, "the cell of 1 in panel a");
+        assert!(cell(&svg, dark) >= 1);
+        // an empty grid is refused with the figure's name
+        let e = HeatmapPanels::new("none", "error", vec![], (300, 300))
+            .render_svg()
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("\"none\": no panels"), "{e}");
+    }
+
+    #[test]
+    fn tick_labels_stay_distinct_for_small_and_large_values() {
+        // ticks 0.0002 apart: three decimals would print 0.001 three times
+        let small: Vec<String> = [0.0008, 0.001, 0.0012]
+            .iter()
+            .map(|&v| tick_label(v, 2e-4))
+            .collect();
+        assert_eq!(small, ["8.00e-4", "1.00e-3", "1.20e-3"]);
+        assert_eq!(tick_label(0.25, 0.05), "0.250");
+        assert_eq!(tick_label(0.0, 2e-4), "0.000");
+        assert_eq!(tick_label(25000.0, 5000.0), "2.50e4");
     }
 }

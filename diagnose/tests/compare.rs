@@ -253,3 +253,128 @@ fn bad_input_gets_clear_errors() {
     .to_string();
     assert!(e.contains("/mocap/car") && e.contains("/car/pose"), "{e}");
 }
+
+/// The inline SVG figures of a page, in order.
+fn svgs(page: &str) -> Vec<&str> {
+    page.match_indices("<svg")
+        .map(|(i, _)| {
+            let end = page[i..].find("</svg>").expect("an unclosed <svg>");
+            &page[i..i + end]
+        })
+        .collect()
+}
+
+/// Polylines stroked in `colour` (a data line or its legend swatch) in one SVG.
+fn polylines(svg: &str, colour: &str) -> usize {
+    svg.split("<polyline")
+        .skip(1)
+        .filter(|p| p.split('>').next().is_some_and(|a| a.contains(colour)))
+        .count()
+}
+
+#[test]
+fn baseline_figures_overlay_before_and_after_on_the_same_axes() {
+    let data = load("push_com_offset");
+    let nominal = physics(World::Push, data.data.pose_dt_s, &[]);
+    let with_effect = physics(World::Push, data.data.pose_dt_s, &["com_offset"]);
+    let r = compare_with_baseline(
+        ("effect", &with_effect),
+        Some(("nominal", &nominal)),
+        &data,
+        &cfg(),
+    )
+    .unwrap();
+    let page = html::report(&r).to_html();
+    assert!(
+        !page.contains("figure not drawn"),
+        "every figure drawn (needs a sans-serif font)"
+    );
+    let (ns, ni, nq, nb) = (
+        r.states.len(),
+        r.inputs.len(),
+        r.model.binned.len(),
+        r.data.bags.len(),
+    );
+    assert_eq!((ns, ni, nb), (3, 3, 1));
+    assert!(nq >= 3);
+    let figs = svgs(&page);
+    // one chart per figure: over time per dimension and bag, binned per quantity and dimension,
+    // one map of two panels, autocorrelation and cross-correlation per input per dimension
+    assert_eq!(figs.len(), ns * nb + nq * ns + 1 + ns * (1 + ni));
+    assert_eq!(page.matches("<figure>").count(), figs.len());
+    // every chart holds both models, with their legends
+    for (i, svg) in figs.iter().enumerate() {
+        assert!(
+            svg.contains("before: nominal") && svg.contains("after: effect"),
+            "figure {i} lacks a legend"
+        );
+    }
+    // the line charts draw both series (blue before, red after): a legend swatch and data
+    let line_charts: Vec<&&str> = figs
+        .iter()
+        .filter(|s| !s.contains("shared scale"))
+        .collect();
+    assert_eq!(line_charts.len(), figs.len() - 1);
+    for svg in line_charts {
+        assert!(polylines(svg, "#1F77B4") >= 2, "before not drawn");
+        assert!(polylines(svg, "#D62728") >= 2, "after not drawn");
+    }
+    // the map: two panels under one colour scale, the larger of the two maxima
+    let max_of = |mc: &dynlab_diagnose::compare::ModelComparison| {
+        let pm = &mc.position_map;
+        pm.rmse
+            .iter()
+            .flatten()
+            .zip(pm.counts.iter().flatten())
+            .filter(|(_, c)| **c > 0)
+            .map(|(v, _)| *v)
+            .fold(0.0, f64::max)
+    };
+    let (mb, mm) = (max_of(r.baseline.as_ref().unwrap()), max_of(&r.model));
+    let map = figs.iter().find(|s| s.contains("shared scale")).unwrap();
+    assert!(map.contains(&format!("shared scale, max {:.4}", mb.max(mm))));
+    assert!(map.contains(&format!("before: nominal (max {mb:.4})")));
+    assert!(map.contains(&format!("after: effect (max {mm:.4})")));
+    // no figure of one model alone any more
+    assert!(!page.contains("position error (m), nominal"));
+    assert!(!page.contains("5-step error, nominal"));
+    // the tables still list both models
+    assert!(page.contains("Worst segments, nominal") && page.contains("Worst segments, effect"));
+    assert!(page.contains("peaks, nominal") && page.contains("peaks, effect"));
+}
+
+#[test]
+fn single_model_report_keeps_one_figure_per_model_figure() {
+    let data = load("push_com_offset");
+    let nominal = physics(World::Push, data.data.pose_dt_s, &[]);
+    let r = compare("nominal", &nominal, &data, &cfg()).unwrap();
+    let page = html::report(&r).to_html();
+    assert!(!page.contains("figure not drawn"));
+    let (ns, ni, nq) = (r.states.len(), r.inputs.len(), r.model.binned.len());
+    let figs = svgs(&page);
+    // over time per dimension, binned per quantity (all dimensions in one), one map,
+    // autocorrelation and one cross-correlation chart per input
+    assert_eq!(figs.len(), ns + nq + 1 + (1 + ni));
+    assert!(!page.contains("before:") && !page.contains("after:"));
+    assert!(!page.contains("shared scale"));
+    for s in [
+        "x: 5-step error, nominal",
+        "position error (m), nominal",
+        "Residual correlations, nominal",
+        "Worst segments, nominal",
+    ] {
+        assert!(page.contains(s), "{s}");
+    }
+    // the binned charts: one series per state dimension, relative to the overall error
+    let binned = figs
+        .iter()
+        .find(|s| s.contains(&format!("{} (", r.model.binned[0].quantity)))
+        .unwrap();
+    for name in &r.states {
+        assert!(binned.contains(&format!(">\n{name}\n</text>")), "{name}");
+    }
+    assert!(binned.contains("relative error"));
+    // the same page whether or not the baseline slot was used
+    let none = compare_with_baseline(("nominal", &nominal), None, &data, &cfg()).unwrap();
+    assert_eq!(html::report(&none).to_html(), page);
+}
