@@ -184,7 +184,11 @@ fn perturbed_nominal_car_trained_then_searched_has_no_significant_term() {
         let mut rng = SplitMix64::new(0xBEEF ^ seed);
         for name in ["Bf", "Df", "Br", "Dr", "Cm1", "Cm2", "Cr0"] {
             let i = truth.param_index(name).unwrap();
-            let sign = if rng.next_u64() % 2 == 0 { 1.1 } else { 0.9 };
+            let sign = if rng.next_u64().is_multiple_of(2) {
+                1.1
+            } else {
+                0.9
+            };
             truth.set_param(name, truth.params()[i] * sign).unwrap();
         }
         let data = car_data(&truth, 200 + seed, 2, 12.0);
@@ -222,7 +226,10 @@ fn training_with_the_custom_effect_lowers_the_held_out_error() {
     let d = search(&nominal, &data, 3);
     // ... and training with it (nominal parameters fitted too) beats training without
     let before = train(&data, &cfg, &mut |_| {}).unwrap();
-    let toml = d.effect_toml.clone().expect(&d.table());
+    let toml = d
+        .effect_toml
+        .clone()
+        .unwrap_or_else(|| panic!("{}", d.table()));
     let dir = tempfile::tempdir().unwrap();
     let file = dir.path().join("discovered.toml");
     std::fs::write(&file, &toml).unwrap();
@@ -339,7 +346,11 @@ fn pushing_block_frame_drift_is_discovered() {
             assert!(d.terms.iter().all(|t| !t.significant), "{}", d.table());
             continue;
         }
-        let found = d.terms.iter().find(|t| t.significant).expect(&d.table());
+        let found = d
+            .terms
+            .iter()
+            .find(|t| t.significant)
+            .unwrap_or_else(|| panic!("{}", d.table()));
         assert_eq!(found.state, "by", "{}", d.table());
         assert!(found.feature == "l", "{}", d.table());
         assert!(found.coefficient > 0.0, "{}", d.table());

@@ -208,7 +208,7 @@ pub struct CustomTerm {
 impl CustomTerm {
     /// Unit of the coefficient: the derivative's over the feature's.
     pub fn coefficient_unit(&self) -> Unit {
-        self.target.unit().div(self.feature.unit())
+        self.target.unit() / self.feature.unit()
     }
 }
 

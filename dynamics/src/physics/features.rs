@@ -62,14 +62,6 @@ impl Unit {
     pub const fn new(m: i32, t: i32) -> Self {
         Self { m, t }
     }
-    /// The product of two units.
-    pub fn mul(self, o: Unit) -> Unit {
-        Unit::new(self.m + o.m, self.t + o.t)
-    }
-    /// The quotient of two units.
-    pub fn div(self, o: Unit) -> Unit {
-        Unit::new(self.m - o.m, self.t - o.t)
-    }
     /// Formats the unit with the time unit's symbol (`s`, `push`): `m/s²`, `1/(m·s)`, `-`.
     pub fn format(self, time: &str) -> String {
         fn pow(base: &str, e: i32) -> String {
@@ -99,6 +91,22 @@ impl Unit {
                 }
             }
         }
+    }
+}
+
+impl std::ops::Mul for Unit {
+    type Output = Unit;
+    /// The product of two units.
+    fn mul(self, o: Unit) -> Unit {
+        Unit::new(self.m + o.m, self.t + o.t)
+    }
+}
+
+impl std::ops::Div for Unit {
+    type Output = Unit;
+    /// The quotient of two units.
+    fn div(self, o: Unit) -> Unit {
+        Unit::new(self.m - o.m, self.t - o.t)
     }
 }
 
@@ -574,7 +582,7 @@ impl Feature {
     pub fn unit(&self) -> Unit {
         self.factors
             .iter()
-            .fold(Unit::default(), |u, a| u.mul(a.unit()))
+            .fold(Unit::default(), |u, a| u * a.unit())
     }
 
     /// The feature's value (see [`Atom::eval`]).
@@ -705,7 +713,7 @@ mod tests {
         assert_eq!(f.symbol(), "δ·vₓ²");
         assert_eq!(f.unit(), Unit::new(2, -2));
         let omega_dot = Unit::new(0, -2);
-        assert_eq!(omega_dot.div(f.unit()).format("s"), "1/m²");
+        assert_eq!((omega_dot / f.unit()).format("s"), "1/m²");
         assert_eq!(Unit::new(-1, -1).format("s"), "1/(m·s)");
         assert_eq!(Unit::new(1, -2).format("s"), "m/s²");
         assert_eq!(Unit::default().format("s"), "-");
