@@ -256,7 +256,9 @@ pub struct DiscoveredTerm {
     pub symbol: String,
     /// Coefficient fitted on the fit half's k-step error.
     pub coefficient: f64,
-    /// Its standard error, clustered by trajectory.
+    /// Its standard error, clustered by trajectory (NaN, `null` in JSON, when it cannot be
+    /// computed).
+    #[serde(deserialize_with = "null_as_nan")]
     pub std: f64,
     /// Unit of the coefficient.
     pub unit: String,
@@ -265,7 +267,9 @@ pub struct DiscoveredTerm {
     /// Share of the baseline held-out k-step error this term removes when added to the terms
     /// before it.
     pub error_reduction: f64,
-    /// Lower end of the bootstrap interval of the improvement (relative to the terms before it).
+    /// Lower end of the bootstrap interval of the improvement (relative to the terms before it;
+    /// −∞, `null` in JSON, with fewer than two held-out segments).
+    #[serde(deserialize_with = "null_as_nan")]
     pub ci_lower: f64,
     /// Significant (see the [module docs](self)).
     pub significant: bool,
@@ -308,6 +312,11 @@ pub struct Discovery {
     pub summary: String,
     /// Settings.
     pub config: DiscoveryConfig,
+}
+
+/// Reads a number that JSON may hold as `null` (serde_json writes NaN and ±∞ so) as NaN.
+fn null_as_nan<'de, D: serde::Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+    Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::NAN))
 }
 
 /// Everything the k-step errors need.

@@ -119,6 +119,9 @@ fn out_of_library_steering_gain_is_discovered_over_seeds() {
             CustomEffect::from_toml(d.effect_toml.as_ref().unwrap()).unwrap(),
             *eff
         );
+        let back: Discovery = serde_json::from_str(&d.to_json()).unwrap();
+        assert_eq!(back.terms.len(), d.terms.len());
+        assert_eq!(back.effect, d.effect);
         let html = discovery_html(&d);
         assert!(html.contains("<section") && html.contains(&found.symbol));
         reductions.push(d.error_reduction);
