@@ -118,6 +118,12 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         pose: args.pose_topic.clone(),
         cmd: args.cmd_topic.clone(),
     };
+    // read the custom effect files first: a bad file fails before the bags load
+    let custom_effects = args
+        .effects_files
+        .iter()
+        .map(|f| dynlab_learn::train::read_custom_effect(f))
+        .collect::<Result<Vec<_>, _>>()?;
     let data = load_bags(&args.bags, world, &topics, &SavGol::default())?;
     if data.transitions() < 10 {
         bail!(
@@ -131,11 +137,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         steps: args.steps,
         seed: args.seed,
         effects: args.effects.clone(),
-        custom_effects: args
-            .effects_files
-            .iter()
-            .map(|f| dynlab_learn::train::read_custom_effect(f))
-            .collect::<Result<_, _>>()?,
+        custom_effects,
         threads: args.threads.max(1),
         max_samples: args.max_samples,
         augment_se2: args.augment_se2,
