@@ -359,3 +359,27 @@ fn pushing_block_frame_drift_is_discovered() {
         assert!(d.error_reduction >= 0.4, "{}", d.table());
     }
 }
+
+/// More out-of-library terms (run with `--ignored`; prints what is found): a steering gain
+/// falling with the square of speed, lateral damping growing with speed, and a slow zone on the
+/// floor (a position basis function).
+#[test]
+#[ignore]
+fn more_out_of_library_terms() {
+    let truths = [
+        ("omega", "delta*vx*vx", -60.0),
+        ("vy", "vy*vx", -3.0),
+        ("vx", "gauss(0.3,0.2,0.5)", -1.5),
+    ];
+    for (state, feature, c) in truths {
+        let truth = truth_with(&format!(
+            "name = \"t\"\n[[term]]\nstate = \"{state}\"\nfeature = \"{feature}\"\ncoefficient = {c}\n"
+        ));
+        for seed in 0..3 {
+            let data = car_data(&truth, 40 + seed, 2, 12.0);
+            let model = physics_model(PhysicsModel::car(&[]).unwrap(), data.pose_dt_s);
+            let d = search(&model, &data, seed);
+            println!("truth {state} += {c}·{feature}, seed {seed}: {}", d.summary);
+        }
+    }
+}
