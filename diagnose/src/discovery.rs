@@ -1232,6 +1232,14 @@ pub fn discovery_html(d: &Discovery) -> String {
     o
 }
 
+/// A complete offline HTML page around [`discovery_html`].
+pub fn discovery_page(d: &Discovery) -> String {
+    format!(
+        "<!doctype html>\n<html><head><meta charset=\"utf-8\"><title>dynlab term search</title></head><body>\n{}</body></html>\n",
+        discovery_html(d)
+    )
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
