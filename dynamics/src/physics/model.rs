@@ -94,7 +94,8 @@ pub struct EffectTerm {
 }
 
 /// A nominal physics model plus enabled effects, with a flat parameter vector
-/// `θ = [nominal…, effect 1…, effect 2…]`. See the [module docs](super).
+/// `θ = [nominal…, effect 1…, effect 2…, custom terms…]` (custom effects: see
+/// [`PhysicsModel::add_custom`]). See the [module docs](super).
 #[derive(Clone, Debug, PartialEq)]
 pub struct PhysicsModel {
     robot: Robot,
@@ -255,7 +256,9 @@ impl PhysicsModel {
         &self.params
     }
 
-    /// Every parameter with its owner (`None` for the nominal model), in vector order.
+    /// Every parameter with its owner (`None` for the nominal model), in vector order. Custom
+    /// coefficients come last, also with owner `None` (name: the term index, unit: the
+    /// coefficient's); [`PhysicsModel::custom_param_range`] tells them apart.
     pub fn param_specs(&self) -> Vec<(Option<Effect>, ParamSpec)> {
         let mut v: Vec<(Option<Effect>, ParamSpec)> = Self::nominal_specs(self.robot)
             .iter()
