@@ -383,3 +383,18 @@ fn more_out_of_library_terms() {
         }
     }
 }
+
+/// A model with an effect state (`motor_lag`'s filtered throttle, rebuilt from the command
+/// history at every window start) is searched like any other.
+#[test]
+fn a_model_with_an_effect_state_is_searched() {
+    use dynlab_learn::dynamics::physics::Effect;
+    let truth = PhysicsModel::car(&[]).unwrap();
+    let data = car_data(&truth, 77, 2, 12.0);
+    let mut p = PhysicsModel::car(&[Effect::MotorLag]).unwrap();
+    p.set_param("motor_lag.tau", 0.01).unwrap();
+    let model = physics_model(p, data.pose_dt_s);
+    let d = search(&model, &data, 1);
+    println!("{}", d.table());
+    assert!(d.transitions > 1000 && d.baseline_error.is_finite());
+}
