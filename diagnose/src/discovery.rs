@@ -26,7 +26,8 @@
 //!    zero at error probability `(1 − confidence)/M` (Bonferroni), and its coefficient is more
 //!    than the same threshold's `z` standard errors (clustered by trajectory) from zero. The
 //!    search stops at the first term that is not significant or after
-//!    [`DiscoveryConfig::max_terms`].
+//!    [`DiscoveryConfig::max_terms`]. Chaotic fit windows (a rollout near a spin, far more
+//!    sensitive to the coefficients than the median window) are left out of the fit.
 //!
 //! The result ([`Discovery`]) lists every term tried with coefficient ± σ, unit, the equation
 //! (`ω̇ += −3.2 · δ·vₓ   [θ: 1/(m·s)]`), its error reduction and significance, the binned
