@@ -103,7 +103,9 @@ pub struct TrainConfig {
     /// Effects of the physics model (physics and hybrid only).
     pub effects: Vec<String>,
     /// Custom effects of the physics model (physics and hybrid only; `--effects-file`), their
-    /// coefficients fitted with the other free parameters (default none).
+    /// coefficients fitted with the other free parameters (default none; not written when
+    /// empty, so the record of a model without them is unchanged).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
     pub custom_effects: Vec<CustomEffect>,
     /// The loss (default: [`Loss::default_for`] the world).
     pub loss: Option<Loss>,
