@@ -34,6 +34,11 @@ pub struct TrainArgs {
     /// Physics effects, comma-separated (physics and hybrid only), e.g. aero_drag,steering_offset.
     #[arg(long, value_delimiter = ',')]
     effects: Vec<String>,
+    /// Custom effect files (TOML: `name`, `[[term]]` tables with `state`, `feature`,
+    /// `coefficient`; see learn/README.md), repeatable or comma-separated; the coefficients are
+    /// fitted (physics and hybrid only; together with --effects).
+    #[arg(long = "effects-file", value_delimiter = ',', value_name = "FILE")]
+    effects_files: Vec<PathBuf>,
     /// Nominal physics parameters to fit, comma-separated (default: the identifiable ones; the
     /// measured mass, inertia and geometry stay fixed), e.g. Df,Dr,Cm1.
     #[arg(long, value_delimiter = ',', value_name = "NAMES")]
@@ -113,6 +118,12 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         pose: args.pose_topic.clone(),
         cmd: args.cmd_topic.clone(),
     };
+    // read the custom effect files first: a bad file fails before the bags load
+    let custom_effects = args
+        .effects_files
+        .iter()
+        .map(|f| dynlab_learn::train::read_custom_effect(f))
+        .collect::<Result<Vec<_>, _>>()?;
     let data = load_bags(&args.bags, world, &topics, &SavGol::default())?;
     if data.transitions() < 10 {
         bail!(
@@ -126,6 +137,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         steps: args.steps,
         seed: args.seed,
         effects: args.effects.clone(),
+        custom_effects,
         threads: args.threads.max(1),
         max_samples: args.max_samples,
         augment_se2: args.augment_se2,

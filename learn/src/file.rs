@@ -6,7 +6,7 @@
 use std::path::{Path, PathBuf};
 
 use dynlab_dynamics::ode::Solver;
-use dynlab_dynamics::physics::PhysicsModel;
+use dynlab_dynamics::physics::{CustomEffect, PhysicsModel};
 use dynlab_nn::Mlp;
 use serde::{Deserialize, Serialize};
 
@@ -61,7 +61,12 @@ pub struct PhysicsMeta {
     pub effects: Vec<String>,
     /// Solver of the physics model over one step.
     pub solver: Solver,
-    /// Every parameter (nominal then effects) in vector order.
+    /// Custom effects (terms over named features, see
+    /// [`dynlab_dynamics::physics::custom`]) in order, with their fitted coefficients; their
+    /// parameters are `custom.<name>.<j>` after the effects'. Absent: none.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub custom_effects: Vec<CustomEffect>,
+    /// Every parameter (nominal, effects, then custom terms) in vector order.
     pub params: Vec<ParamEntry>,
     /// The model's equations as printed by the physics crate (for reading only).
     pub equations: String,
@@ -144,6 +149,7 @@ impl ModelFile {
         let physics = model.physics().map(|p| PhysicsMeta {
             effects: p.effects().iter().map(|e| e.name().to_string()).collect(),
             solver: model.physics_solver(),
+            custom_effects: p.custom_effects(),
             params: p
                 .param_names()
                 .into_iter()
@@ -335,6 +341,10 @@ pub fn load_model(
                 PhysicsModel::parse_effects(&names).map_err(|e| corrupt(e.to_string()))?;
             let mut p = PhysicsModel::new(meta.world.robot(), &effects)
                 .map_err(|e| corrupt(e.to_string()))?;
+            for c in &pm.custom_effects {
+                p.add_custom(c.clone())
+                    .map_err(|e| corrupt(format!("physics.custom_effects: {e}")))?;
+            }
             let expected = p.param_names();
             let got: Vec<String> = pm.params.iter().map(|e| e.name.clone()).collect();
             if expected != got {

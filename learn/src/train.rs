@@ -12,7 +12,7 @@ use dynlab_dynamics::data::{
     SplitMix64, StateTrajectory, Window, split_trajectories, split_windows_overlapping, windows,
 };
 use dynlab_dynamics::ode::{self, InputTape, Solver, SolverTape, VectorField};
-use dynlab_dynamics::physics::{Effect, PhysicsModel};
+use dynlab_dynamics::physics::{CustomEffect, Effect, PhysicsModel};
 use dynlab_nn::{Activation, Adam, AdamConfig, Init, Mlp, MlpSpec};
 use serde::{Deserialize, Serialize};
 
@@ -102,6 +102,11 @@ pub struct TrainConfig {
     pub solver: Option<Solver>,
     /// Effects of the physics model (physics and hybrid only).
     pub effects: Vec<String>,
+    /// Custom effects of the physics model (physics and hybrid only; `--effects-file`), their
+    /// coefficients fitted with the other free parameters (default none; not written when
+    /// empty, so the record of a model without them is unchanged).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub custom_effects: Vec<CustomEffect>,
     /// The loss (default: [`Loss::default_for`] the world).
     pub loss: Option<Loss>,
     /// Threads (default 1; the result does not depend on it).
@@ -144,6 +149,7 @@ impl Default for TrainConfig {
             activation: None,
             solver: None,
             effects: Vec::new(),
+            custom_effects: Vec::new(),
             loss: None,
             threads: 1,
             chunk: 250,
@@ -194,6 +200,20 @@ impl TrainConfig {
                 self.effects.join(","),
                 format!(
                     "effects belong to a physics model; use --kind physics or hybrid, not {}",
+                    self.kind
+                ),
+            ));
+        }
+        if !self.custom_effects.is_empty() && !self.kind.has_physics() {
+            return Err(s(
+                "custom_effects",
+                self.custom_effects
+                    .iter()
+                    .map(|c| c.name())
+                    .collect::<Vec<_>>()
+                    .join(","),
+                format!(
+                    "custom effects belong to a physics model; use --kind physics or hybrid, not {}",
                     self.kind
                 ),
             ));
@@ -1028,6 +1048,29 @@ pub fn physics_model(world: World, effects: &[String]) -> Result<PhysicsModel, L
     Ok(PhysicsModel::new(world.robot(), &effects)?)
 }
 
+/// Builds the (unfitted) physics model with library effects and custom effects.
+pub fn physics_model_with_custom(
+    world: World,
+    effects: &[String],
+    custom: &[CustomEffect],
+) -> Result<PhysicsModel, LearnError> {
+    let mut p = physics_model(world, effects)?;
+    for c in custom {
+        p.add_custom(c.clone())?;
+    }
+    Ok(p)
+}
+
+/// Reads a custom effect file (TOML, see [`dynlab_dynamics::physics::custom`]).
+pub fn read_custom_effect(path: &std::path::Path) -> Result<CustomEffect, LearnError> {
+    let text = std::fs::read_to_string(path).map_err(|source| LearnError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    CustomEffect::from_toml(&text)
+        .map_err(|e| LearnError::setting("effects_file", path.display(), format!("{e}")))
+}
+
 /// The solver of the physics model per world: RK4 with 2 substeps per push (the pushing field
 /// turns with θ), 1 per car step (steps of ≈ 4–10 ms).
 pub fn default_physics_solver(world: World) -> Solver {
@@ -1132,7 +1175,7 @@ pub fn train(
     let mut physics_fit = None;
     let mut curve = Vec::new();
     let physics = if cfg.kind.has_physics() {
-        let mut p = physics_model(world, &cfg.effects)?;
+        let mut p = physics_model_with_custom(world, &cfg.effects, &cfg.custom_effects)?;
         let fit = crate::fit::fit_physics(
             &mut p,
             &phys_solver,

@@ -16,17 +16,25 @@
 //! parameters; [`Effect::linear_in_params`] says whether the contribution is linear in those
 //! parameters (then the diagnosis can fit it by constrained linear least squares).
 //!
+//! **Custom effects** ([`custom`]): terms `ṡ_i += θ_j · feature_j(s, u)` over the named
+//! [`features`] library, read from a small TOML file and added with
+//! [`PhysicsModel::add_custom`]; their coefficients follow the library effects' parameters.
+//!
 //! Derivatives are exact: the models are written once, generically over
 //! [`Real`](crate::real::Real), and differentiated by forward-mode dual numbers. There is no
 //! second, hand-differentiated copy of the equations to drift out of sync.
 
 mod car;
+pub mod custom;
+pub mod features;
 mod fit;
 mod model;
 mod push;
 mod step;
 
 pub use car::{CAR_FITTED_PARAMS, CAR_NOMINAL_PARAMS, MOTOR_LAG_STATE};
+pub use custom::{CustomEffect, CustomError, CustomTerm, Target};
+pub use features::{Feature, FeatureError};
 pub use fit::{ResidualJacobian, Transition, residuals, residuals_and_jacobian};
 pub use model::{EffectTerm, ModelError, PhysicsModel};
 pub use push::{PUSH_FITTED_PARAMS, PUSH_NOMINAL_PARAMS, PUSHER_RADIUS_M};

@@ -1,6 +1,7 @@
 //! [`PhysicsModel`]: nominal model + enabled effects + flat parameter vector.
 
 use super::car::{self, CAR_NOMINAL_PARAMS, Slot};
+use super::custom::{COEFFICIENT_BOUND, CustomEffect, CustomError};
 use super::push::{self, PUSH_NOMINAL_PARAMS};
 use super::{Effect, ParamSpec, Robot};
 use crate::ode::{InputTape, VectorField};
@@ -72,6 +73,9 @@ pub enum ModelError {
     /// The effect is not enabled in this model.
     #[error("effect {0} is not enabled in this model; enable it first")]
     NotEnabled(Effect),
+    /// A custom effect that cannot be added.
+    #[error(transparent)]
+    Custom(#[from] CustomError),
 }
 
 /// The contribution of one effect at a point, with its exact Jacobians.
@@ -90,7 +94,8 @@ pub struct EffectTerm {
 }
 
 /// A nominal physics model plus enabled effects, with a flat parameter vector
-/// `θ = [nominal…, effect 1…, effect 2…]`. See the [module docs](super).
+/// `θ = [nominal…, effect 1…, effect 2…, custom terms…]` (custom effects: see
+/// [`PhysicsModel::add_custom`]). See the [module docs](super).
 #[derive(Clone, Debug, PartialEq)]
 pub struct PhysicsModel {
     robot: Robot,
@@ -98,6 +103,8 @@ pub struct PhysicsModel {
     params: Vec<f64>,
     std_errors: Option<Vec<f64>>,
     dim_s: usize,
+    /// Custom effects (their coefficients follow the library effects' parameters).
+    custom: Vec<CustomEffect>,
 }
 
 impl PartialEq for Slot {
@@ -144,6 +151,7 @@ impl PhysicsModel {
             params,
             std_errors: None,
             dim_s,
+            custom: Vec::new(),
         })
     }
 
@@ -248,7 +256,9 @@ impl PhysicsModel {
         &self.params
     }
 
-    /// Every parameter with its owner (`None` for the nominal model), in vector order.
+    /// Every parameter with its owner (`None` for the nominal model), in vector order. Custom
+    /// coefficients come last, also with owner `None` (name: the term index, unit: the
+    /// coefficient's); [`PhysicsModel::custom_param_range`] tells them apart.
     pub fn param_specs(&self) -> Vec<(Option<Effect>, ParamSpec)> {
         let mut v: Vec<(Option<Effect>, ParamSpec)> = Self::nominal_specs(self.robot)
             .iter()
@@ -257,18 +267,118 @@ impl PhysicsModel {
         for s in &self.slots {
             v.extend(s.effect.params().iter().map(|p| (Some(s.effect), *p)));
         }
+        for c in &self.custom {
+            v.extend(c.terms().iter().enumerate().map(|(j, t)| {
+                let unit = t
+                    .coefficient_unit()
+                    .format(super::features::time_unit(self.robot));
+                (
+                    None,
+                    ParamSpec {
+                        name: intern(j.to_string()),
+                        symbol: "θ",
+                        unit: intern(unit),
+                        lower: -COEFFICIENT_BOUND,
+                        upper: COEFFICIENT_BOUND,
+                        default: 0.0,
+                        description: "coefficient of a custom term",
+                    },
+                )
+            }));
+        }
         v
     }
 
-    /// Qualified parameter names (`m`, `aero_drag.c`) in vector order.
+    /// Qualified parameter names (`m`, `aero_drag.c`, `custom.<name>.<j>`) in vector order.
     pub fn param_names(&self) -> Vec<String> {
-        self.param_specs()
+        let mut v: Vec<String> = self
+            .param_specs()
             .iter()
+            .take(self.custom_start())
             .map(|(e, p)| match e {
                 Some(e) => format!("{}.{}", e.name(), p.name),
                 None => p.name.to_string(),
             })
+            .collect();
+        for c in &self.custom {
+            v.extend((0..c.terms().len()).map(|j| format!("custom.{}.{j}", c.name())));
+        }
+        v
+    }
+
+    /// Index of the first custom coefficient (= number of nominal and library effect
+    /// parameters).
+    fn custom_start(&self) -> usize {
+        self.params.len() - self.custom.iter().map(|c| c.terms().len()).sum::<usize>()
+    }
+
+    /// Adds a custom effect (see [`CustomEffect`]): its coefficients (start values from the
+    /// effect) are appended to the parameter vector as `custom.<name>.<j>`; standard errors, if
+    /// set, get `NaN` for them.
+    pub fn add_custom(&mut self, c: CustomEffect) -> Result<(), ModelError> {
+        if c.robot() != self.robot {
+            return Err(CustomError::WrongRobot {
+                effect: c.name().to_string(),
+                effect_robot: c.robot(),
+                robot: self.robot,
+            }
+            .into());
+        }
+        if self.custom.iter().any(|o| o.name() == c.name()) {
+            return Err(CustomError::Duplicate(c.name().to_string()).into());
+        }
+        self.params.extend(c.terms().iter().map(|t| t.coefficient));
+        if let Some(s) = &mut self.std_errors {
+            s.extend(c.terms().iter().map(|_| f64::NAN));
+        }
+        self.custom.push(c);
+        Ok(())
+    }
+
+    /// The custom effects in order, with their coefficients at the model's current values.
+    pub fn custom_effects(&self) -> Vec<CustomEffect> {
+        self.custom
+            .iter()
+            .filter_map(|c| {
+                let r = self.custom_param_range(c.name())?;
+                Some(c.with_coefficients(&self.params[r]))
+            })
             .collect()
+    }
+
+    /// The index range of a custom effect's coefficients.
+    pub fn custom_param_range(&self, name: &str) -> Option<Range<usize>> {
+        let mut off = self.custom_start();
+        for c in &self.custom {
+            let n = c.terms().len();
+            if c.name() == name {
+                return Some(off..off + n);
+            }
+            off += n;
+        }
+        None
+    }
+
+    /// A copy of this model with the library effects `extra` enabled as well: every parameter
+    /// (nominal, effect, custom) keeps its value, the new effects start at their defaults.
+    /// Use this rather than [`PhysicsModel::new`] to extend a model that may hold custom
+    /// effects (their coefficients move behind the new effects' parameters).
+    pub fn with_effects(&self, extra: &[Effect]) -> Result<PhysicsModel, ModelError> {
+        let mut effects = self.effects();
+        effects.extend_from_slice(extra);
+        let mut m = PhysicsModel::new(self.robot, &effects)?;
+        for c in self.custom_effects() {
+            m.add_custom(c)?;
+        }
+        let names = self.param_names();
+        let mut p = m.params().to_vec();
+        for (i, n) in m.param_names().iter().enumerate() {
+            if let Some(k) = names.iter().position(|a| a == n) {
+                p[i] = self.params[k];
+            }
+        }
+        m.set_params(&p)?;
+        Ok(m)
     }
 
     /// Index of a parameter by qualified name.
@@ -294,9 +404,12 @@ impl PhysicsModel {
             Robot::Car => &super::CAR_FITTED_PARAMS,
             Robot::Pushing => &super::PUSH_FITTED_PARAMS,
         };
+        let start = self.custom_start();
         self.param_specs()
             .iter()
-            .map(|(e, p)| match e {
+            .enumerate()
+            .map(|(i, (e, p))| match e {
+                _ if i >= start => true,
                 None => fitted.contains(&p.name),
                 Some(_) => p.name != "w",
             })
@@ -366,6 +479,17 @@ impl PhysicsModel {
         match self.robot {
             Robot::Car => car::rhs(p, &self.slots, active, s, u, out),
             Robot::Pushing => push::rhs(p, &self.slots, active, s, u, out),
+        }
+        self.add_custom_terms(p, s, u, out);
+    }
+
+    /// Adds the custom effects' terms (always on) to `out`.
+    pub(crate) fn add_custom_terms<R: Real>(&self, p: &[R], s: &[R], u: &[R], out: &mut [R]) {
+        let mut off = self.custom_start();
+        for c in &self.custom {
+            let n = c.terms().len();
+            c.add_to(&p[off..off + n], p, s, u, out);
+            off += n;
         }
     }
 
@@ -650,6 +774,19 @@ impl PhysicsModel {
                 }
             }
         }
+        for c in self.custom_effects() {
+            let r = self.custom_param_range(c.name()).unwrap_or(0..0);
+            let _ = writeln!(o, "custom effect {}:", c.name());
+            for (j, i) in r.enumerate() {
+                let std = self.std_errors.as_ref().map(|s| s[i]);
+                let _ = writeln!(
+                    o,
+                    "  {}   (custom.{}.{j})",
+                    c.term_equation(j, self.params[i], std),
+                    c.name()
+                );
+            }
+        }
         let _ = writeln!(o, "nominal parameters:");
         for i in 0..Self::nominal_specs(self.robot).len() {
             let (_, spec) = self.param_specs()[i];
@@ -657,6 +794,25 @@ impl PhysicsModel {
         }
         o
     }
+}
+
+/// A `'static` copy of a short string, made once per distinct text (units and term indices of
+/// custom coefficients, which [`ParamSpec`] holds as `&'static str`): the set of distinct texts
+/// is small and bounded by the features' units.
+fn intern(s: String) -> &'static str {
+    use std::collections::HashSet;
+    use std::sync::{Mutex, OnceLock};
+    static SET: OnceLock<Mutex<HashSet<&'static str>>> = OnceLock::new();
+    let mut set = SET
+        .get_or_init(|| Mutex::new(HashSet::new()))
+        .lock()
+        .unwrap_or_else(|e| e.into_inner());
+    if let Some(&v) = set.get(s.as_str()) {
+        return v;
+    }
+    let v: &'static str = Box::leak(s.into_boxed_str());
+    set.insert(v);
+    v
 }
 
 fn sign(v: f64) -> &'static str {

@@ -37,6 +37,7 @@ impl PushLine<'_> {
             u[2],
             &mut out[..DS],
         );
+        self.model.add_custom_terms(p, &z[..DS], u, &mut out[..DS]);
         for o in &mut out[DS..] {
             *o = R::cst(0.0);
         }

@@ -1,0 +1,1324 @@
+//! Beyond the effect library: a sparse search over physics-informed terms on the residual of
+//! each state derivative, and the custom effect that adds what it finds.
+//!
+//! When no library effect explains the residual (or after the significant ones are added and
+//! the residual still has structure), [`discover_terms`] searches the [feature
+//! library](dynlab_learn::dynamics::physics::features) for terms `ṡ_i += θ·feature(s, u)`:
+//!
+//! 1. **One-step residual of each state derivative** on the fit half: `r = (s_meas(t + h) −
+//!    Φ(s(t), u))/h` for the targets of the robot (car: `vx`, `vy`, `omega`; pushing: `x`, `y`,
+//!    `theta` in the world frame and `bx`, `by` in the block frame, per push).
+//! 2. **Screen** per target: every feature regressed alone on the residual; a (target, feature)
+//!    pair passes when its coefficient's t-value (standard error clustered by trajectory,
+//!    [`cluster_std`]) clears the Bonferroni threshold for the `M` pairs tried; the strongest
+//!    [`DiscoveryConfig::max_candidates`] go on. (The one-step residual alone cannot choose: a
+//!    feature of the *estimated* state such as the slip angle `α_f` correlates with the
+//!    state-estimation noise that the stiff tire dynamics amplify, and wins the one-step fit
+//!    against the true term.)
+//! 3. **Sparse forward selection on the k-step error**: each round scores every screened pair by
+//!    its Gauss–Newton gain on the fit half's k-step open-loop error (the error each state
+//!    dimension divided by its RMS k-step change, as in the [diagnosis](crate::diagnosis)), with
+//!    the terms chosen so far in the model. The best becomes, with those, a [`CustomEffect`]
+//!    whose coefficients are refitted on the fit half (bounded Levenberg–Marquardt) and scored
+//!    on the held-out half. It is **significant** when it removes at least
+//!    [`DiscoveryConfig::min_reduction`] of the baseline error, the lower end of a one-sided
+//!    bootstrap interval over held-out segments (resampled whole) of its improvement is above
+//!    zero at error probability `(1 − confidence)/M` (Bonferroni), and its coefficient is more
+//!    than the same threshold's `z` standard errors (clustered by trajectory) from zero. The
+//!    search stops at the first term that is not significant or after
+//!    [`DiscoveryConfig::max_terms`]. Chaotic fit windows (a rollout near a spin, far more
+//!    sensitive to the coefficients than the median window) are left out of the fit.
+//!
+//! The result ([`Discovery`]) lists every term tried with coefficient ± σ, unit, the equation
+//! (`ω̇ += −3.2 · δ·vₓ   [θ: 1/(m·s)]`), its error reduction and significance, the binned
+//! residual against the term's feature (the plot that shows it), and the TOML text of the
+//! custom effect to pass to `dynlab train --effects-file`.
+
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+
+use dynlab_learn::dynamics::conventions::wrap_angle;
+use dynlab_learn::dynamics::data::{
+    DataError, SplitMix64, StateTrajectory, Window, split_trajectories, windows,
+};
+use dynlab_learn::dynamics::ode::Solver;
+use dynlab_learn::dynamics::physics::custom::{COEFFICIENT_BOUND, fmt_num};
+use dynlab_learn::dynamics::physics::features::{Area, Feature, library, time_unit};
+use dynlab_learn::dynamics::physics::{
+    CustomEffect, CustomTerm, ModelError, PhysicsModel, Robot, Target,
+};
+use dynlab_learn::fit::{bounded_least_squares, cluster_std, initial_state};
+use dynlab_learn::train::segment;
+use dynlab_learn::{Dataset, LearnError, Model, World};
+use serde::{Deserialize, Serialize};
+use thiserror::Error;
+
+use crate::report::{Chart, LineChart, Series, escape};
+
+/// Errors of a term search (finding nothing is an outcome, not an error).
+#[derive(Debug, Error)]
+pub enum DiscoveryError {
+    /// Not a physics model.
+    #[error(
+        "the term search needs a physics model (found {0}); train one with `dynlab train --kind physics` and search its residual"
+    )]
+    NotPhysics(String),
+    /// Model and data of different robots.
+    #[error("the model is for {model}, the data are {data}; use data of the model's robot")]
+    WorldMismatch {
+        /// The model's world.
+        model: World,
+        /// The data's world.
+        data: World,
+    },
+    /// Too little data.
+    #[error(
+        "too little data: {segments} segments, {windows} windows of {k} steps; record more (at least 4 segments longer than k)"
+    )]
+    TooLittleData {
+        /// Segments.
+        segments: usize,
+        /// Windows.
+        windows: usize,
+        /// Steps.
+        k: usize,
+    },
+    /// A bad setting.
+    #[error("setting {name} = {value} is invalid: {hint}")]
+    Setting {
+        /// The setting.
+        name: &'static str,
+        /// Its value.
+        value: String,
+        /// What to set.
+        hint: &'static str,
+    },
+    /// Model errors.
+    #[error(transparent)]
+    Physics(#[from] ModelError),
+    /// Learn errors.
+    #[error(transparent)]
+    Learn(#[from] LearnError),
+    /// Data errors.
+    #[error(transparent)]
+    Data(#[from] DataError),
+}
+
+/// Settings of the term search. Every field has a documented default.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct DiscoveryConfig {
+    /// Open-loop steps k of the held-out error (default: car 50 as the diagnosis, pushing 3).
+    pub steps: Option<usize>,
+    /// Seed of the split, the subsamples and the bootstrap (default 0).
+    pub seed: u64,
+    /// Fraction of segments held out (default 0.5).
+    pub holdout_fraction: f64,
+    /// Car data are cut into segments of this length \[s\] before the split (default 2 s).
+    pub segment_s: f64,
+    /// k-step windows the coefficients are fitted on (seeded subsample; default 400).
+    pub fit_windows: usize,
+    /// Held-out windows scored (default 2000).
+    pub score_windows: usize,
+    /// One-step transitions of the regression at most (seeded subsample; default 20000).
+    pub max_transitions: usize,
+    /// Most terms in the discovered effect (default 3).
+    pub max_terms: usize,
+    /// Screened (target, feature) pairs scored on the k-step error, strongest one-step t-value
+    /// first (default 30).
+    pub max_candidates: usize,
+    /// Least share of the baseline held-out error a term must remove (default 0.05).
+    pub min_reduction: f64,
+    /// Bootstrap resamples (default 2000).
+    pub bootstrap: usize,
+    /// Confidence of the one-sided tests before the Bonferroni correction (default 0.95).
+    pub confidence: f64,
+    /// Position basis functions: a `grid × grid` lattice of Gaussian bumps over the data's area
+    /// (default 3; 0: none).
+    pub grid: usize,
+    /// Levenberg–Marquardt iterations of each k-step fit (default 15).
+    pub iterations: usize,
+    /// Bins of the residual-against-feature plots (default 12).
+    pub bins: usize,
+    /// Name of the discovered custom effect (default `discovered`).
+    pub name: String,
+}
+
+impl Default for DiscoveryConfig {
+    fn default() -> Self {
+        Self {
+            steps: None,
+            seed: 0,
+            holdout_fraction: 0.5,
+            segment_s: 2.0,
+            fit_windows: 400,
+            score_windows: 2000,
+            max_transitions: 20_000,
+            max_terms: 3,
+            max_candidates: 30,
+            min_reduction: 0.05,
+            bootstrap: 2000,
+            confidence: 0.95,
+            grid: 3,
+            iterations: 15,
+            bins: 12,
+            name: "discovered".into(),
+        }
+    }
+}
+
+impl DiscoveryConfig {
+    /// The k of a world.
+    pub fn steps_for(&self, world: World) -> usize {
+        self.steps.unwrap_or(match world {
+            World::Car => 50,
+            World::Push => 3,
+        })
+    }
+
+    fn validate(&self) -> Result<(), DiscoveryError> {
+        let bad = |name, value: String, hint| Err(DiscoveryError::Setting { name, value, hint });
+        if !(self.holdout_fraction > 0.0 && self.holdout_fraction < 1.0) {
+            return bad(
+                "holdout_fraction",
+                self.holdout_fraction.to_string(),
+                "use a fraction strictly between 0 and 1",
+            );
+        }
+        if !(self.confidence > 0.0 && self.confidence < 1.0) {
+            return bad(
+                "confidence",
+                self.confidence.to_string(),
+                "use a confidence strictly between 0 and 1 (0.95)",
+            );
+        }
+        if self.max_terms == 0 || self.max_terms > 8 {
+            return bad("max_terms", self.max_terms.to_string(), "use 1 … 8 terms");
+        }
+        if self.steps == Some(0) {
+            return bad("steps", "0".into(), "use at least one step");
+        }
+        if self.fit_windows == 0 || self.score_windows == 0 || self.max_transitions < 10 {
+            return bad(
+                "fit_windows/score_windows/max_transitions",
+                format!(
+                    "{}/{}/{}",
+                    self.fit_windows, self.score_windows, self.max_transitions
+                ),
+                "use at least 1 window and 10 transitions",
+            );
+        }
+        if self.segment_s.is_nan() || self.segment_s <= 0.0 {
+            return bad(
+                "segment_s",
+                self.segment_s.to_string(),
+                "use a segment length > 0 s",
+            );
+        }
+        Ok(())
+    }
+}
+
+/// One bin of a residual-against-feature plot.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Bin {
+    /// Mean feature value in the bin.
+    pub x: f64,
+    /// Mean residual of the target derivative.
+    pub mean: f64,
+    /// Its standard error (samples treated as independent).
+    pub sem: f64,
+    /// Samples.
+    pub n: usize,
+}
+
+/// The plot that shows a term: the one-step residual of its target derivative against its
+/// feature, binned by quantiles, with the fitted line `θ·feature`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TermPlot {
+    /// Horizontal axis (`δ·vₓ [m/s]`).
+    pub x_label: String,
+    /// Vertical axis (`ω̇ residual [1/s²]`).
+    pub y_label: String,
+    /// Bins, by increasing feature.
+    pub bins: Vec<Bin>,
+    /// Slope of the one-step regression (the line through the origin).
+    pub slope: f64,
+}
+
+/// A term tried by the search.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct DiscoveredTerm {
+    /// Target state derivative (`omega`).
+    pub state: String,
+    /// Feature name (`delta*vx`).
+    pub feature: String,
+    /// Feature symbol (`δ·vₓ`).
+    pub symbol: String,
+    /// Coefficient fitted on the fit half's k-step error.
+    pub coefficient: f64,
+    /// Its standard error, clustered by trajectory (NaN, `null` in JSON, when it cannot be
+    /// computed).
+    #[serde(deserialize_with = "null_as_nan")]
+    pub std: f64,
+    /// Unit of the coefficient.
+    pub unit: String,
+    /// `ω̇ += −3.2 ± 0.1 · δ·vₓ   [θ: 1/(m·s)]`.
+    pub equation: String,
+    /// Share of the baseline held-out k-step error this term removes when added to the terms
+    /// before it.
+    pub error_reduction: f64,
+    /// Lower end of the bootstrap interval of the improvement (relative to the terms before it;
+    /// −∞, `null` in JSON, with fewer than two held-out segments).
+    #[serde(deserialize_with = "null_as_nan")]
+    pub ci_lower: f64,
+    /// Significant (see the [module docs](self)).
+    pub significant: bool,
+    /// `|θ|/σ` of the one-step regression that selected the term.
+    pub one_step_t: f64,
+    /// Share of the target's one-step residual (sum of squares) the term explains.
+    pub one_step_share: f64,
+    /// Residual against feature.
+    pub plot: TermPlot,
+}
+
+/// The result of [`discover_terms`].
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Discovery {
+    /// The robot.
+    pub world: World,
+    /// k.
+    pub steps: usize,
+    /// Fit and held-out segments.
+    pub segments: [usize; 2],
+    /// Fit and held-out windows.
+    pub windows: [usize; 2],
+    /// One-step transitions of the regression.
+    pub transitions: usize,
+    /// (target, feature) pairs tried: the Bonferroni factor.
+    pub pairs_tried: usize,
+    /// Held-out k-step error of the model (normalised).
+    pub baseline_error: f64,
+    /// … with the significant terms added.
+    pub error_after: f64,
+    /// `1 − error_after/baseline_error`.
+    pub error_reduction: f64,
+    /// Every term tried, in the order tested.
+    pub terms: Vec<DiscoveredTerm>,
+    /// The custom effect of the significant terms (fitted coefficients), if any.
+    pub effect: Option<CustomEffect>,
+    /// Its TOML text for `dynlab train --effects-file`.
+    pub effect_toml: Option<String>,
+    /// One sentence.
+    pub summary: String,
+    /// Settings.
+    pub config: DiscoveryConfig,
+}
+
+/// Reads a number that JSON may hold as `null` (serde_json writes NaN and ±∞ so) as NaN.
+fn null_as_nan<'de, D: serde::Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+    Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::NAN))
+}
+
+/// Everything the k-step errors need.
+struct Ctx<'a> {
+    trajs: &'a [StateTrajectory],
+    ds: usize,
+    du: usize,
+    k: usize,
+    scale: Vec<f64>,
+    angle: usize,
+    solver: Solver,
+    h: f64,
+}
+
+impl Ctx<'_> {
+    /// Per-window normalised k-step squared error of `p` (residuals step-major
+    /// `(step, window, dimension)` into `resid` when given).
+    fn errors(
+        &self,
+        p: &PhysicsModel,
+        ws: &[Window],
+        mut resid: Option<&mut Vec<f64>>,
+    ) -> Vec<f64> {
+        let (ds, du, k) = (self.ds, self.du, self.k);
+        let n = ws.len();
+        let dp = p.dim_state();
+        let mut s = Vec::with_capacity(n * dp);
+        for w in ws {
+            s.extend(initial_state(p, &self.trajs[w.trajectory], w.start));
+        }
+        let mut u = vec![0.0; n * du];
+        let mut next = vec![0.0; n * dp];
+        let mut err = vec![0.0; n];
+        for j in 0..k {
+            for (i, w) in ws.iter().enumerate() {
+                let t = &self.trajs[w.trajectory];
+                let a = w.start + j;
+                u[i * du..(i + 1) * du].copy_from_slice(&t.u[a * du..(a + 1) * du]);
+            }
+            p.integrate_step(&self.solver, n, &s, &u, self.h, &mut next);
+            for (i, w) in ws.iter().enumerate() {
+                let t = &self.trajs[w.trajectory];
+                let meas = &t.s[(w.start + j + 1) * ds..(w.start + j + 2) * ds];
+                for c in 0..ds {
+                    let mut e = next[i * dp + c] - meas[c];
+                    if c == self.angle {
+                        e = wrap_angle(e);
+                    }
+                    let mut z = e / self.scale[c];
+                    if !z.is_finite() {
+                        z = 1e3;
+                    }
+                    err[i] += z * z / (k * ds) as f64;
+                    if let Some(r) = resid.as_deref_mut() {
+                        r.push(z);
+                    }
+                }
+            }
+            std::mem::swap(&mut s, &mut next);
+        }
+        err
+    }
+}
+
+/// The one-step regression data of one target.
+struct Regression {
+    target: Target,
+    /// Residual of the derivative per transition.
+    y: Vec<f64>,
+}
+
+/// Searches the feature library for terms the model of `model` misses on `data`; see the
+/// [module docs](self). Car data are cut into segments of [`DiscoveryConfig::segment_s`] and
+/// split by whole segments (seeded) into a fit and a held-out half, as the diagnosis does.
+pub fn discover_terms(
+    model: &Model,
+    data: &Dataset,
+    cfg: &DiscoveryConfig,
+) -> Result<Discovery, DiscoveryError> {
+    cfg.validate()?;
+    let world = model.world();
+    if data.world != world {
+        return Err(DiscoveryError::WorldMismatch {
+            model: world,
+            data: data.world,
+        });
+    }
+    let physics = match (model.physics(), model.network()) {
+        (Some(p), None) => p,
+        _ => return Err(DiscoveryError::NotPhysics(model.kind().name().to_string())),
+    };
+    let k = cfg.steps_for(world);
+    let trajs = match world {
+        World::Car => segment(
+            &data.trajectories,
+            (cfg.segment_s / data.pose_dt_s.max(1e-9)).round().max(2.0) as usize + 1,
+        ),
+        World::Push => data.trajectories.clone(),
+    };
+    let trajs: Vec<StateTrajectory> = trajs.into_iter().filter(|t| t.len() > k).collect();
+    let too_little = |w: usize| DiscoveryError::TooLittleData {
+        segments: trajs.len(),
+        windows: w,
+        k,
+    };
+    if trajs.len() < 4 {
+        return Err(too_little(0));
+    }
+    let lengths: Vec<usize> = trajs.iter().map(|t| t.len()).collect();
+    let all = windows(&lengths, k).map_err(|_| too_little(0))?;
+    let split = split_trajectories(trajs.len(), cfg.holdout_fraction, cfg.seed)?;
+    let is_test: Vec<bool> = (0..trajs.len())
+        .map(|i| split.validation.binary_search(&i).is_ok())
+        .collect();
+    let (mut test_w, mut fit_w): (Vec<Window>, Vec<Window>) =
+        all.iter().partition(|w| is_test[w.trajectory]);
+    let subsample = |v: &mut Vec<Window>, n: usize, salt: u64| {
+        SplitMix64::new(cfg.seed ^ salt).shuffle(v);
+        v.truncate(n.max(1));
+        v.sort_by_key(|w| (w.trajectory, w.start));
+    };
+    subsample(&mut fit_w, cfg.fit_windows, 0x243F_6A88_85A3_08D3);
+    subsample(&mut test_w, cfg.score_windows, 0x1319_8A2E_0370_7344);
+    if fit_w.is_empty() || test_w.is_empty() {
+        return Err(too_little(all.len()));
+    }
+    let fit_trajs: Vec<usize> = (0..trajs.len()).filter(|&i| !is_test[i]).collect();
+    let segments = [fit_trajs.len(), split.validation.len()];
+    discover_terms_split(
+        physics,
+        &model.physics_solver(),
+        model.physics_time(),
+        &trajs,
+        &fit_trajs,
+        &fit_w,
+        &test_w,
+        k,
+        segments,
+        cfg,
+    )
+}
+
+/// The search on a given split (for a caller that already has one, such as the diagnosis):
+/// `physics` integrated by `solver` over `h` (car: the step in seconds, pushing: 1), trajectories
+/// `trajs`, the fit half's trajectories `fit_trajs` (one-step regression), k-step windows of the
+/// fit half `fit_w` and of the held-out half `test_w`.
+#[allow(clippy::too_many_arguments)]
+pub fn discover_terms_split(
+    physics: &PhysicsModel,
+    solver: &Solver,
+    h: f64,
+    trajs: &[StateTrajectory],
+    fit_trajs: &[usize],
+    fit_w: &[Window],
+    test_w: &[Window],
+    k: usize,
+    segments: [usize; 2],
+    cfg: &DiscoveryConfig,
+) -> Result<Discovery, DiscoveryError> {
+    cfg.validate()?;
+    let robot = physics.robot();
+    let world = match robot {
+        Robot::Car => World::Car,
+        Robot::Pushing => World::Push,
+    };
+    let ds = world.state_dim();
+    let du = world.action_dim();
+    let angle = world.angle_dim();
+    // scale: RMS k-step change of each dimension over the windows given
+    let mut scale = vec![0.0; ds];
+    for w in fit_w.iter().chain(test_w) {
+        let t = &trajs[w.trajectory];
+        for (c, sc) in scale.iter_mut().enumerate() {
+            let mut e = t.s[(w.start + k) * ds + c] - t.s[w.start * ds + c];
+            if c == angle {
+                e = wrap_angle(e);
+            }
+            *sc += e * e;
+        }
+    }
+    let nw = (fit_w.len() + test_w.len()).max(1) as f64;
+    for v in &mut scale {
+        *v = (*v / nw).sqrt().max(1e-6);
+    }
+    let ctx = Ctx {
+        trajs,
+        ds,
+        du,
+        k,
+        scale,
+        angle,
+        solver: *solver,
+        h,
+    };
+
+    // 1. one-step residuals of the targets on the fit half
+    let mut trans: Vec<(usize, usize)> = fit_trajs
+        .iter()
+        .flat_map(|&ti| (0..trajs[ti].len().saturating_sub(1)).map(move |a| (ti, a)))
+        .collect();
+    if trans.len() > cfg.max_transitions {
+        SplitMix64::new(cfg.seed ^ 0x0A40_9382_2299_F31D).shuffle(&mut trans);
+        trans.truncate(cfg.max_transitions);
+        trans.sort_unstable();
+    }
+    let n = trans.len();
+    if n < 10 {
+        return Err(DiscoveryError::TooLittleData {
+            segments: fit_trajs.len(),
+            windows: fit_w.len(),
+            k,
+        });
+    }
+    let dp = physics.dim_state();
+    let mut s0 = Vec::with_capacity(n * dp);
+    let mut u0 = Vec::with_capacity(n * du);
+    for &(ti, a) in &trans {
+        s0.extend(initial_state(physics, &trajs[ti], a));
+        u0.extend_from_slice(&trajs[ti].u[a * du..(a + 1) * du]);
+    }
+    let mut pred = vec![0.0; n * dp];
+    physics.integrate_step(solver, n, &s0, &u0, h, &mut pred);
+    let targets = Target::all(robot);
+    let regs: Vec<Regression> = targets
+        .iter()
+        .map(|&target| {
+            let y = trans
+                .iter()
+                .enumerate()
+                .map(|(i, &(ti, a))| {
+                    let t = &trajs[ti];
+                    let meas = &t.s[(a + 1) * ds..(a + 2) * ds];
+                    let d = |c: usize| {
+                        let e = meas[c] - pred[i * dp + c];
+                        if c == angle { wrap_angle(e) } else { e }
+                    };
+                    let th = s0[i * dp + 2];
+                    let v = match target {
+                        Target::Vx => d(3),
+                        Target::Vy => d(4),
+                        Target::Omega => d(5),
+                        Target::X => d(0),
+                        Target::Y => d(1),
+                        Target::Theta => d(2),
+                        Target::BlockX => th.cos() * d(0) + th.sin() * d(1),
+                        Target::BlockY => -th.sin() * d(0) + th.cos() * d(1),
+                    };
+                    v / h
+                })
+                .collect();
+            Regression { target, y }
+        })
+        .collect();
+    // features
+    let area = {
+        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+        for i in 0..n {
+            for c in 0..2 {
+                lo[c] = lo[c].min(s0[i * dp + c]);
+                hi[c] = hi[c].max(s0[i * dp + c]);
+            }
+        }
+        Area { lo, hi }
+    };
+    let feats: Vec<Feature> = library(robot, Some(area), cfg.grid);
+    let nf = feats.len();
+    let params = physics.params();
+    let mut x = vec![0.0; n * nf];
+    for i in 0..n {
+        let s = &s0[i * dp..(i + 1) * dp];
+        let u = &u0[i * du..(i + 1) * du];
+        for (f, feat) in feats.iter().enumerate() {
+            let v = feat.eval(robot, params, s, u);
+            x[i * nf + f] = if v.is_finite() { v } else { 0.0 };
+        }
+    }
+    let cluster: Vec<usize> = trans.iter().map(|&(ti, _)| ti).collect();
+    let pairs = nf * targets.len();
+    let alpha = (1.0 - cfg.confidence) / pairs as f64;
+    let z = normal_quantile(1.0 - alpha / 2.0);
+
+    // 2. one-step screen: single-feature regressions per target, clustered t-values
+    struct Pick {
+        target: Target,
+        feature: usize,
+        share: f64,
+        t: f64,
+        slope: f64,
+    }
+    let mut picks: Vec<Pick> = Vec::new();
+    for reg in &regs {
+        let yy: f64 = reg.y.iter().map(|v| v * v).sum();
+        if yy <= 0.0 {
+            continue;
+        }
+        for f in 0..nf {
+            let Some((b, rss)) = least_squares(&x, nf, &reg.y, &[f]) else {
+                continue;
+            };
+            let jac: Vec<f64> = (0..n).map(|i| x[i * nf + f]).collect();
+            let r: Vec<f64> = (0..n).map(|i| b[0] * jac[i] - reg.y[i]).collect();
+            let sd = cluster_std(&jac, &r, 1, &[true], &cluster);
+            let t = (b[0] / sd[0]).abs();
+            if t.is_finite() && t > z {
+                picks.push(Pick {
+                    target: reg.target,
+                    feature: f,
+                    share: (yy - rss) / yy,
+                    t,
+                    slope: b[0],
+                });
+            }
+        }
+    }
+    picks.sort_by(|a, b| b.t.total_cmp(&a.t));
+    picks.truncate(cfg.max_candidates);
+
+    // 3. forward selection on the fit half's k-step error (Gauss–Newton score of each
+    //    screened term), each chosen term refitted and tested on the held-out half
+    let base_test = ctx.errors(physics, test_w, None);
+    let sum = |v: &[f64]| v.iter().sum::<f64>();
+    let e0 = sum(&base_test);
+    let name = {
+        let taken: Vec<String> = physics
+            .custom_effects()
+            .iter()
+            .map(|c| c.name().to_string())
+            .collect();
+        let mut nm = cfg.name.clone();
+        let mut i = 2;
+        while taken.contains(&nm) {
+            nm = format!("{}_{i}", cfg.name);
+            i += 1;
+        }
+        nm
+    };
+    let with_terms = |terms: Vec<CustomTerm>| -> Result<PhysicsModel, DiscoveryError> {
+        let mut m = physics.clone();
+        if !terms.is_empty() {
+            let e = CustomEffect::new(&name, terms)
+                .map_err(|e| DiscoveryError::Physics(ModelError::Custom(e)))?;
+            m.add_custom(e)?;
+        }
+        Ok(m)
+    };
+    let mut accepted: Vec<CustomTerm> = Vec::new();
+    let mut accepted_idx: Vec<usize> = Vec::new();
+    let mut used: Vec<usize> = Vec::new();
+    let mut prev_test = base_test.clone();
+    let mut final_fit: Option<(CustomEffect, Vec<f64>, Vec<f64>)> = None;
+    let mut out_terms: Vec<DiscoveredTerm> = Vec::new();
+    for round in 0..cfg.max_terms {
+        let base_m = with_terms(accepted.clone())?;
+        let mut r0 = Vec::new();
+        ctx.errors(&base_m, fit_w, Some(&mut r0));
+        let mut best: Option<(f64, usize)> = None;
+        for (pi, pick) in picks.iter().enumerate() {
+            if used.contains(&pi)
+                || accepted
+                    .iter()
+                    .any(|t| t.target == pick.target && t.feature == feats[pick.feature])
+            {
+                continue;
+            }
+            let h = if pick.slope != 0.0 { pick.slope } else { 1.0 };
+            let mut trial = accepted.clone();
+            trial.push(CustomTerm {
+                target: pick.target,
+                feature: feats[pick.feature].clone(),
+                coefficient: h.clamp(-COEFFICIENT_BOUND, COEFFICIENT_BOUND),
+            });
+            let m = with_terms(trial)?;
+            let mut r1 = Vec::new();
+            ctx.errors(&m, fit_w, Some(&mut r1));
+            if r1.len() != r0.len() {
+                continue;
+            }
+            // secant column J = (r(h) − r(0))/h; GN gain (Jᵀr₀)²/(JᵀJ)
+            let (mut jr, mut jj) = (0.0, 0.0);
+            for (a, b) in r1.iter().zip(&r0) {
+                let jcol = (a - b) / h;
+                jr += jcol * b;
+                jj += jcol * jcol;
+            }
+            let gain = if jj > 0.0 { jr * jr / jj } else { 0.0 };
+            if gain.is_finite() && gain > best.map_or(0.0, |b| b.0) {
+                best = Some((gain, pi));
+            }
+        }
+        let Some((_, pi)) = best else { break };
+        used.push(pi);
+        let pick = &picks[pi];
+        let feature = feats[pick.feature].clone();
+        let mut trial = accepted.clone();
+        trial.push(CustomTerm {
+            target: pick.target,
+            feature: feature.clone(),
+            coefficient: pick.slope.clamp(-COEFFICIENT_BOUND, COEFFICIENT_BOUND),
+        });
+        let effect = CustomEffect::new(&name, trial)
+            .map_err(|e| DiscoveryError::Physics(ModelError::Custom(e)))?;
+        let (theta, std) = fit_effect(physics, &effect, &ctx, fit_w, cfg.iterations)?;
+        let fitted = effect.with_coefficients(&theta);
+        let mut m = physics.clone();
+        m.add_custom(fitted.clone())?;
+        let test = ctx.errors(&m, test_w, None);
+        let e_new = sum(&test);
+        let e_prev = sum(&prev_test);
+        let reduction = if e0 > 0.0 { (e_prev - e_new) / e0 } else { 0.0 };
+        let lower = bootstrap_lower(
+            test_w,
+            &prev_test,
+            &test,
+            cfg.bootstrap,
+            alpha,
+            cfg.seed ^ (round as u64 + 1).wrapping_mul(0x9E37_79B9_7F4A_7C15),
+        );
+        let j = theta.len() - 1;
+        let t_ok = (theta[j] / std[j]).abs() > z;
+        let significant = reduction >= cfg.min_reduction && lower > 0.0 && t_ok;
+        let unit_time = time_unit(robot);
+        out_terms.push(DiscoveredTerm {
+            state: pick.target.name().to_string(),
+            feature: feature.name(),
+            symbol: feature.symbol(),
+            coefficient: theta[j],
+            std: std[j],
+            unit: fitted.terms()[j].coefficient_unit().format(unit_time),
+            equation: fitted.term_equation(j, theta[j], Some(std[j])),
+            error_reduction: reduction,
+            ci_lower: lower,
+            significant,
+            one_step_t: pick.t,
+            one_step_share: pick.share,
+            plot: term_plot(
+                &regs,
+                pick.target,
+                &feature,
+                &x,
+                nf,
+                pick.feature,
+                pick.slope,
+                cfg.bins,
+                unit_time,
+            ),
+        });
+        if !significant {
+            break;
+        }
+        accepted = fitted.terms().to_vec();
+        accepted_idx.push(out_terms.len() - 1);
+        prev_test = test;
+        final_fit = Some((fitted, theta, std));
+    }
+    // accepted terms report the coefficients of the final fit
+    if let Some((eff, theta, std)) = &final_fit {
+        for (q, &i) in accepted_idx.iter().enumerate() {
+            let t = &mut out_terms[i];
+            t.coefficient = theta[q];
+            t.std = std[q];
+            t.equation = eff.term_equation(q, theta[q], Some(std[q]));
+        }
+    }
+    let e_after = sum(&prev_test);
+    let m_test = test_w.len().max(1) as f64;
+    let error_reduction = if e0 > 0.0 { 1.0 - e_after / e0 } else { 0.0 };
+    let summary = match &final_fit {
+        Some((eff, _, _)) => format!(
+            "found {} term{} outside the effect library removing {:.0} % of the held-out {k}-step error: {}",
+            eff.terms().len(),
+            if eff.terms().len() == 1 { "" } else { "s" },
+            100.0 * error_reduction,
+            accepted_idx
+                .iter()
+                .map(|&i| out_terms[i].equation.clone())
+                .collect::<Vec<_>>()
+                .join("; ")
+        ),
+        None => match out_terms
+            .iter()
+            .max_by(|a, b| a.error_reduction.total_cmp(&b.error_reduction))
+        {
+            Some(b) => format!(
+                "no significant term in the feature library (best tried: {} removes {:.1} % of the held-out error, not significant)",
+                b.equation,
+                100.0 * b.error_reduction
+            ),
+            None => "no significant term in the feature library: no feature explains the one-step residual beyond noise".to_string(),
+        },
+    };
+    Ok(Discovery {
+        world,
+        steps: k,
+        segments,
+        windows: [fit_w.len(), test_w.len()],
+        transitions: n,
+        pairs_tried: pairs,
+        baseline_error: e0 / m_test,
+        error_after: e_after / m_test,
+        error_reduction,
+        effect_toml: final_fit.as_ref().map(|f| f.0.to_toml()),
+        effect: final_fit.map(|f| f.0),
+        terms: out_terms,
+        summary,
+        config: cfg.clone(),
+    })
+}
+
+/// Fits the coefficients of `effect` (added to `physics`) on the fit windows' k-step error;
+/// returns them with standard errors clustered by trajectory.
+fn fit_effect(
+    physics: &PhysicsModel,
+    effect: &CustomEffect,
+    ctx: &Ctx,
+    fit_w: &[Window],
+    iterations: usize,
+) -> Result<(Vec<f64>, Vec<f64>), DiscoveryError> {
+    let mut with = physics.clone();
+    with.add_custom(effect.clone())?;
+    let range = with.custom_param_range(effect.name()).unwrap_or(0..0);
+    let nt = range.len();
+    let theta0: Vec<f64> = with.params()[range.clone()].to_vec();
+    let model_of = |th: &[f64]| -> Option<PhysicsModel> {
+        let mut m = with.clone();
+        let mut p = m.params().to_vec();
+        p[range.clone()].copy_from_slice(th);
+        m.set_params(&p).ok().map(|_| m)
+    };
+    let fit_w = robust_windows(ctx, fit_w, &theta0, &model_of);
+    let fit_w = fit_w.as_slice();
+    let nr = (fit_w.len() * ctx.k * ctx.ds) as f64;
+    let resid_of = |th: &[f64]| -> Vec<f64> {
+        match model_of(th) {
+            Some(m) => {
+                let mut r = Vec::new();
+                ctx.errors(&m, fit_w, Some(&mut r));
+                r.iter().map(|v| v / nr.sqrt()).collect()
+            }
+            None => vec![f64::INFINITY],
+        }
+    };
+    let mut eval = |th: &[f64], with_j: bool| -> (Vec<f64>, Vec<f64>) {
+        let r = resid_of(th);
+        if !with_j {
+            return (r, Vec::new());
+        }
+        let mut jac = vec![0.0; r.len() * nt];
+        for c in 0..nt {
+            let hstep = 1e-4 * th[c].abs().max(1e-3);
+            let mut t2 = th.to_vec();
+            t2[c] += hstep;
+            let r2 = resid_of(&t2);
+            if r2.len() != r.len() {
+                continue;
+            }
+            for (i, (a, b)) in r2.iter().zip(&r).enumerate() {
+                jac[i * nt + c] = (a - b) / hstep;
+            }
+        }
+        (r, jac)
+    };
+    let lower = vec![-COEFFICIENT_BOUND; nt];
+    let upper = vec![COEFFICIENT_BOUND; nt];
+    let free = vec![true; nt];
+    let res = bounded_least_squares(&theta0, &lower, &upper, &free, iterations, &mut eval);
+    let (r, jac) = eval(&res.theta, true);
+    let cluster: Vec<usize> = (0..ctx.k)
+        .flat_map(|_| {
+            fit_w
+                .iter()
+                .flat_map(|w| std::iter::repeat_n(w.trajectory, ctx.ds))
+        })
+        .collect();
+    let std = if r.len() == cluster.len() {
+        cluster_std(&jac, &r, nt, &free, &cluster)
+    } else {
+        vec![f64::NAN; nt]
+    };
+    Ok((res.theta, std))
+}
+
+/// The fit windows without the chaotic ones: a window whose k-step error is more than
+/// [`SENSITIVITY_LIMIT`] times as sensitive to the coefficients as the median window's (a
+/// rollout near a spin or a tire-saturation bifurcation, where a tiny change of a coefficient
+/// changes the whole trajectory) would dominate both the fit and `JᵀJ`, and shrink the
+/// standard errors to nothing. Sensitivity: `Σ (∂r/∂θ)²` over the window's residuals at the
+/// start values, by finite differences.
+fn robust_windows(
+    ctx: &Ctx,
+    fit_w: &[Window],
+    theta0: &[f64],
+    model_of: &dyn Fn(&[f64]) -> Option<PhysicsModel>,
+) -> Vec<Window> {
+    let n = fit_w.len();
+    let Some(m0) = model_of(theta0) else {
+        return fit_w.to_vec();
+    };
+    let mut r0 = Vec::new();
+    ctx.errors(&m0, fit_w, Some(&mut r0));
+    let mut sens = vec![0.0; n];
+    for c in 0..theta0.len() {
+        let h = 1e-4 * theta0[c].abs().max(1e-3);
+        let mut t = theta0.to_vec();
+        t[c] += h;
+        let Some(m) = model_of(&t) else { continue };
+        let mut r = Vec::new();
+        ctx.errors(&m, fit_w, Some(&mut r));
+        if r.len() != r0.len() {
+            continue;
+        }
+        for (row, (a, b)) in r.iter().zip(&r0).enumerate() {
+            let i = (row / ctx.ds) % n;
+            let d = (a - b) / h;
+            sens[i] += d * d;
+        }
+    }
+    let mut sorted: Vec<f64> = sens.iter().copied().filter(|v| v.is_finite()).collect();
+    if sorted.is_empty() {
+        return fit_w.to_vec();
+    }
+    sorted.sort_by(|a, b| a.total_cmp(b));
+    let median = sorted[sorted.len() / 2];
+    let keep: Vec<Window> = fit_w
+        .iter()
+        .zip(&sens)
+        .filter(|(_, s)| s.is_finite() && **s <= SENSITIVITY_LIMIT * median.max(1e-300))
+        .map(|(w, _)| *w)
+        .collect();
+    if keep.len() < n / 2 {
+        fit_w.to_vec()
+    } else {
+        keep
+    }
+}
+
+/// How many times the median window's sensitivity a fit window may have (see
+/// [`robust_windows`]).
+const SENSITIVITY_LIMIT: f64 = 100.0;
+
+/// Least squares of `y` on the columns `cols` of `x` (`n × nf`): coefficients and residual sum
+/// of squares, `None` when singular.
+fn least_squares(x: &[f64], nf: usize, y: &[f64], cols: &[usize]) -> Option<(Vec<f64>, f64)> {
+    let m = cols.len();
+    let mut a = vec![0.0; m * m];
+    let mut b = vec![0.0; m];
+    for (i, yi) in y.iter().enumerate() {
+        let row = &x[i * nf..(i + 1) * nf];
+        for p in 0..m {
+            let vp = row[cols[p]];
+            b[p] += vp * yi;
+            for q in p..m {
+                a[p * m + q] += vp * row[cols[q]];
+            }
+        }
+    }
+    for p in 0..m {
+        for q in 0..p {
+            a[p * m + q] = a[q * m + p];
+        }
+    }
+    let diag_max = (0..m).map(|p| a[p * m + p]).fold(0.0, f64::max);
+    if (0..m).any(|p| a[p * m + p] <= 1e-12 * diag_max.max(1e-300)) {
+        return None;
+    }
+    let coef = solve(&a, &b, m)?;
+    let mut rss = 0.0;
+    for (i, yi) in y.iter().enumerate() {
+        let row = &x[i * nf..(i + 1) * nf];
+        let f: f64 = cols.iter().zip(&coef).map(|(&c, k)| row[c] * k).sum();
+        rss += (yi - f) * (yi - f);
+    }
+    Some((coef, rss))
+}
+
+/// Gaussian elimination with partial pivoting; `None` when (nearly) singular.
+fn solve(a: &[f64], b: &[f64], n: usize) -> Option<Vec<f64>> {
+    let mut m = a.to_vec();
+    let mut x = b.to_vec();
+    let scale = (0..n).map(|i| m[i * n + i].abs()).fold(0.0, f64::max);
+    for col in 0..n {
+        let piv =
+            (col..n).max_by(|&i, &j| m[i * n + col].abs().total_cmp(&m[j * n + col].abs()))?;
+        if m[piv * n + col].abs() <= 1e-10 * scale {
+            return None;
+        }
+        if piv != col {
+            for c in 0..n {
+                m.swap(piv * n + c, col * n + c);
+            }
+            x.swap(piv, col);
+        }
+        for r in col + 1..n {
+            let f = m[r * n + col] / m[col * n + col];
+            for c in col..n {
+                m[r * n + c] -= f * m[col * n + c];
+            }
+            x[r] -= f * x[col];
+        }
+    }
+    for col in (0..n).rev() {
+        let mut s = x[col];
+        for c in col + 1..n {
+            s -= m[col * n + c] * x[c];
+        }
+        x[col] = s / m[col * n + col];
+    }
+    x.iter().all(|v| v.is_finite()).then_some(x)
+}
+
+/// Lower end of the one-sided bootstrap interval (error probability `alpha`) of the
+/// improvement `1 − Σafter/Σbefore`, resampling whole trajectories (segments).
+fn bootstrap_lower(
+    ws: &[Window],
+    before: &[f64],
+    after: &[f64],
+    resamples: usize,
+    alpha: f64,
+    seed: u64,
+) -> f64 {
+    let mut per: BTreeMap<usize, (f64, f64)> = BTreeMap::new();
+    for (w, (b, a)) in ws.iter().zip(before.iter().zip(after)) {
+        let e = per.entry(w.trajectory).or_insert((0.0, 0.0));
+        e.0 += b;
+        e.1 += a;
+    }
+    let per: Vec<(f64, f64)> = per.into_values().collect();
+    if per.len() < 2 || resamples == 0 {
+        return f64::NEG_INFINITY;
+    }
+    let mut rng = SplitMix64::new(seed);
+    let mut stats: Vec<f64> = (0..resamples)
+        .map(|_| {
+            let (mut b, mut a) = (0.0, 0.0);
+            for _ in 0..per.len() {
+                let i = (rng.next_u64() % per.len() as u64) as usize;
+                b += per[i].0;
+                a += per[i].1;
+            }
+            if b > 0.0 { 1.0 - a / b } else { 0.0 }
+        })
+        .collect();
+    stats.sort_by(|a, b| a.total_cmp(b));
+    let q = (alpha * resamples as f64).floor() as usize;
+    stats[q.min(resamples - 1)]
+}
+
+/// The standard normal quantile `Φ⁻¹(p)` (bisection on `erfc`, to ~1e-9).
+fn normal_quantile(p: f64) -> f64 {
+    let cdf = |x: f64| 0.5 * erfc(-x / std::f64::consts::SQRT_2);
+    let (mut lo, mut hi) = (-40.0, 40.0);
+    for _ in 0..200 {
+        let mid = 0.5 * (lo + hi);
+        if cdf(mid) < p {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    0.5 * (lo + hi)
+}
+
+/// `erfc(x)` (Numerical Recipes' Chebyshev fit, relative error < 1.2e-7).
+fn erfc(x: f64) -> f64 {
+    let z = x.abs();
+    let t = 1.0 / (1.0 + 0.5 * z);
+    let r = t
+        * (-z * z - 1.265_512_23
+            + t * (1.000_023_68
+                + t * (0.374_091_96
+                    + t * (0.096_784_18
+                        + t * (-0.186_288_06
+                            + t * (0.278_868_07
+                                + t * (-1.135_203_98
+                                    + t * (1.488_515_87
+                                        + t * (-0.822_152_23 + t * 0.170_872_77)))))))))
+            .exp();
+    if x >= 0.0 { r } else { 2.0 - r }
+}
+
+/// The binned residual of `target` against feature column `f`.
+#[allow(clippy::too_many_arguments)]
+fn term_plot(
+    regs: &[Regression],
+    target: Target,
+    feature: &Feature,
+    x: &[f64],
+    nf: usize,
+    f: usize,
+    slope: f64,
+    bins: usize,
+    time: &str,
+) -> TermPlot {
+    let y = &regs
+        .iter()
+        .find(|r| r.target == target)
+        .expect("a regression per target")
+        .y;
+    let mut idx: Vec<usize> = (0..y.len()).collect();
+    idx.sort_by(|&a, &b| x[a * nf + f].total_cmp(&x[b * nf + f]));
+    let nb = bins.max(1).min(idx.len().max(1));
+    let mut out = Vec::new();
+    for b in 0..nb {
+        let chunk = &idx[b * idx.len() / nb..(b + 1) * idx.len() / nb];
+        if chunk.is_empty() {
+            continue;
+        }
+        let m = chunk.len() as f64;
+        let xm = chunk.iter().map(|&i| x[i * nf + f]).sum::<f64>() / m;
+        let ym = chunk.iter().map(|&i| y[i]).sum::<f64>() / m;
+        let var = chunk.iter().map(|&i| (y[i] - ym).powi(2)).sum::<f64>() / (m - 1.0).max(1.0);
+        out.push(Bin {
+            x: xm,
+            mean: ym,
+            sem: (var / m).sqrt(),
+            n: chunk.len(),
+        });
+    }
+    TermPlot {
+        x_label: format!("{} [{}]", feature.symbol(), feature.unit().format(time)),
+        y_label: format!(
+            "{} residual [{}]",
+            target.symbol(),
+            target.unit().format(time)
+        ),
+        bins: out,
+        slope,
+    }
+}
+
+impl Discovery {
+    /// The terminal table: every term tried, its equation, error reduction and significance,
+    /// then the summary and (when something was found) the custom effect file to write.
+    pub fn table(&self) -> String {
+        let mut o = String::new();
+        let _ = writeln!(
+            o,
+            "term search on {} data: {} transitions (fit half), {}-step error on {} held-out segments ({} windows); {} (state, feature) pairs tried; baseline error {}",
+            self.world,
+            self.transitions,
+            self.steps,
+            self.segments[1],
+            self.windows[1],
+            self.pairs_tried,
+            fmt_num(self.baseline_error)
+        );
+        if self.terms.is_empty() {
+            let _ = writeln!(o, "(no feature passed the one-step selection)");
+        } else {
+            let _ = writeln!(
+                o,
+                "{:<52} {:>9} {:>9} {:>12}",
+                "term", "reduction", "CI low", "significant"
+            );
+            for t in &self.terms {
+                let _ = writeln!(
+                    o,
+                    "{:<52} {:>8.1}% {:>8.1}% {:>12}",
+                    t.equation,
+                    100.0 * t.error_reduction,
+                    100.0 * t.ci_lower.max(-9.99),
+                    if t.significant { "yes" } else { "no" }
+                );
+            }
+        }
+        let _ = writeln!(o, "{}", self.summary);
+        if let Some(t) = &self.effect_toml {
+            let _ = writeln!(
+                o,
+                "custom effect (save as a .toml file, then `dynlab train --kind physics --effects-file FILE`):\n{t}"
+            );
+        }
+        o
+    }
+
+    /// The JSON text (the same fields as the struct).
+    pub fn to_json(&self) -> String {
+        serde_json::to_string_pretty(self).unwrap_or_else(|e| format!("{{\"error\": \"{e}\"}}"))
+    }
+}
+
+/// The search as a self-contained HTML fragment (a `<section>`): the summary, the table of
+/// terms, a residual-against-feature plot per term and the custom effect file.
+pub fn discovery_html(d: &Discovery) -> String {
+    let mut o = String::new();
+    let _ = writeln!(
+        o,
+        "<section class=\"discovery\" style=\"font-family:sans-serif;max-width:60em\">"
+    );
+    let _ = writeln!(o, "<h2>Beyond the library: discovered terms</h2>");
+    let colour = if d.effect.is_some() {
+        "#1a7f37"
+    } else {
+        "#9a6700"
+    };
+    let _ = writeln!(
+        o,
+        "<p style=\"font-size:1.2em;color:{colour}\"><b>{}</b></p>",
+        escape(&d.summary)
+    );
+    let _ = writeln!(
+        o,
+        "<p>{} (state, feature) pairs searched on the one-step residual of {} transitions; each selected term refitted on the {}-step error of the fit half and scored on {} held-out segments ({} windows). Baseline error {} (normalised: 1 = the error of a model that predicts no motion).</p>",
+        d.pairs_tried,
+        d.transitions,
+        d.steps,
+        d.segments[1],
+        d.windows[1],
+        fmt_num(d.baseline_error)
+    );
+    let _ = writeln!(
+        o,
+        "<table style=\"border-collapse:collapse\"><tr><th align=left>term</th><th align=left>held-out error removed</th><th>bootstrap lower bound</th><th>significant</th></tr>"
+    );
+    for t in &d.terms {
+        let w = (t.error_reduction.max(0.0) * 200.0).round();
+        let _ = writeln!(
+            o,
+            "<tr style=\"border-top:1px solid #ddd\"><td>{}</td><td><span style=\"display:inline-block;height:0.8em;width:{w}px;background:{}\"></span> {:.1} %</td><td align=right>{:.1} %</td><td align=center>{}</td></tr>",
+            escape(&t.equation),
+            if t.significant { "#1a7f37" } else { "#aaa" },
+            100.0 * t.error_reduction,
+            100.0 * t.ci_lower.max(-9.99),
+            if t.significant { "yes" } else { "no" }
+        );
+    }
+    let _ = writeln!(o, "</table>");
+    for t in &d.terms {
+        let pts: Vec<(f64, f64)> = t.plot.bins.iter().map(|b| (b.x, b.mean)).collect();
+        let (x0, x1) = pts
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| {
+                (a.min(p.0), b.max(p.0))
+            });
+        let mut chart = LineChart::new(
+            format!("{} residual against {}", t.state, t.symbol),
+            t.plot.x_label.clone(),
+            t.plot.y_label.clone(),
+        )
+        .series(Series::points("binned residual (mean)", pts.clone()));
+        if x0.is_finite() && x1.is_finite() {
+            chart = chart.series(Series::line(
+                "one-step fit θ·feature",
+                vec![(x0, t.plot.slope * x0), (x1, t.plot.slope * x1)],
+            ));
+        }
+        match chart.render_svg() {
+            Ok(svg) => {
+                let _ = writeln!(
+                    o,
+                    "<figure>{svg}<figcaption>{}</figcaption></figure>",
+                    escape(&t.equation)
+                );
+            }
+            Err(e) => {
+                let _ = writeln!(
+                    o,
+                    "<p><i>plot not drawn: {}</i></p>",
+                    escape(&e.to_string())
+                );
+            }
+        }
+    }
+    if let Some(toml) = &d.effect_toml {
+        let _ = writeln!(
+            o,
+            "<h3>Custom effect file</h3><p>Save as <code>{}.toml</code> and train with <code>dynlab train --kind physics --effects-file {}.toml</code>.</p><pre>{}</pre>",
+            escape(&d.config.name),
+            escape(&d.config.name),
+            escape(toml)
+        );
+    }
+    let _ = writeln!(o, "</section>");
+    o
+}
+
+/// A complete offline HTML page around [`discovery_html`].
+pub fn discovery_page(d: &Discovery) -> String {
+    format!(
+        "<!doctype html>\n<html><head><meta charset=\"utf-8\"><title>dynlab term search</title></head><body>\n{}</body></html>\n",
+        discovery_html(d)
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn normal_quantiles() {
+        assert!((normal_quantile(0.975) - 1.959_964).abs() < 1e-5);
+        assert!((normal_quantile(0.5)).abs() < 1e-6);
+        assert!((normal_quantile(1.0 - 1e-4) - 3.719_016).abs() < 1e-4);
+    }
+
+    #[test]
+    fn least_squares_recovers_a_line() {
+        let n = 50;
+        let x: Vec<f64> = (0..n).flat_map(|i| [i as f64, 1.0]).collect();
+        let y: Vec<f64> = (0..n).map(|i| 2.0 * i as f64 - 1.0).collect();
+        let (b, rss) = least_squares(&x, 2, &y, &[0, 1]).unwrap();
+        assert!((b[0] - 2.0).abs() < 1e-9 && (b[1] + 1.0).abs() < 1e-9 && rss < 1e-12);
+        assert!(least_squares(&x, 2, &y, &[0, 0]).is_none());
+    }
+}

@@ -1,0 +1,567 @@
+//! Custom effects: named sets of terms `ṡ_i += θ_j · feature_j(s, u)` that the user adds to a
+//! physics model from a small TOML file, beside the library [`Effect`](super::Effect)s.
+//!
+//! ```toml
+//! name = "steering_gain_speed"
+//! [[term]]
+//! state = "omega"         # which state derivative
+//! feature = "delta*vx"    # a product of atoms of the feature library
+//! coefficient = -3.2      # start value; fitted by train
+//! ```
+//!
+//! **Targets.** Car (time in seconds): `vx`, `vy` (`v̇ₓ`, `v̇_y` in m/s²) and `omega` (`ω̇` in
+//! 1/s²); the pose kinematics stay as they are. Pushing (time in pushes, one push integrates
+//! normalised time over `[0, 1]`): `x`, `y`, `theta` add a rate in the **world (table) frame**,
+//! so a term constant over the push moves the block by `θ·feature` per push; `bx`, `by` add it
+//! in the **block frame** (rotated by the block's current heading `θ`), for effects that move
+//! with the block (an offset load, a skewed contact). A quasi-static block moves only while
+//! pushed: multiply pushing features by `l` (`ℓ`) unless the term should act without a push.
+//!
+//! A custom effect is linear in its parameters (one coefficient per term). In a
+//! [`PhysicsModel`](super::PhysicsModel) the coefficients are appended to the parameter vector
+//! after the library effects' (names `custom.<name>.<j>`), bounded by `±`[`COEFFICIENT_BOUND`],
+//! always fitted by `train`, and printed by `equations()` as `ω̇ += θ · δ·vₓ [unit of θ]`.
+
+use serde::{Deserialize, Serialize};
+
+use super::Robot;
+use super::features::{Atom, Feature, FeatureError, Unit, time_unit};
+use crate::real::Real;
+
+/// Bound `|θ| ≤` of a custom term's coefficient (any unit): wide, only to keep a fit finite.
+pub const COEFFICIENT_BOUND: f64 = 1e6;
+
+/// Which state derivative a custom term adds to.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Target {
+    /// Car: `v̇ₓ`.
+    Vx,
+    /// Car: `v̇_y`.
+    Vy,
+    /// Car: `ω̇`.
+    Omega,
+    /// Pushing: world `ẋ` (per push).
+    X,
+    /// Pushing: world `ẏ` (per push).
+    Y,
+    /// Pushing: `θ̇` (per push).
+    Theta,
+    /// Pushing: block-frame x rate (per push), rotated into the world by `θ`.
+    BlockX,
+    /// Pushing: block-frame y rate (per push), rotated into the world by `θ`.
+    BlockY,
+}
+
+const TARGETS: [(Target, &str, &str, Unit, Robot); 8] = [
+    (Target::Vx, "vx", "v̇ₓ", Unit::new(1, -2), Robot::Car),
+    (Target::Vy, "vy", "v̇_y", Unit::new(1, -2), Robot::Car),
+    (Target::Omega, "omega", "ω̇", Unit::new(0, -2), Robot::Car),
+    (Target::X, "x", "ẋ", Unit::new(1, -1), Robot::Pushing),
+    (Target::Y, "y", "ẏ", Unit::new(1, -1), Robot::Pushing),
+    (
+        Target::Theta,
+        "theta",
+        "θ̇",
+        Unit::new(0, -1),
+        Robot::Pushing,
+    ),
+    (
+        Target::BlockX,
+        "bx",
+        "ẋ_b",
+        Unit::new(1, -1),
+        Robot::Pushing,
+    ),
+    (
+        Target::BlockY,
+        "by",
+        "ẏ_b",
+        Unit::new(1, -1),
+        Robot::Pushing,
+    ),
+];
+
+impl Target {
+    fn entry(self) -> &'static (Target, &'static str, &'static str, Unit, Robot) {
+        TARGETS
+            .iter()
+            .find(|e| e.0 == self)
+            .expect("every target is in the table")
+    }
+    /// Name in files (`omega`, `bx`).
+    pub fn name(self) -> &'static str {
+        self.entry().1
+    }
+    /// Symbol of the derivative (`ω̇`, `ẋ_b`).
+    pub fn symbol(self) -> &'static str {
+        self.entry().2
+    }
+    /// Unit of the derivative.
+    pub fn unit(self) -> Unit {
+        self.entry().3
+    }
+    /// The robot.
+    pub fn robot(self) -> Robot {
+        self.entry().4
+    }
+    /// Targets of a robot.
+    pub fn all(robot: Robot) -> Vec<Target> {
+        TARGETS
+            .iter()
+            .filter(|e| e.4 == robot)
+            .map(|e| e.0)
+            .collect()
+    }
+    /// Looks a target up by name.
+    pub fn from_name(name: &str) -> Result<Target, CustomError> {
+        TARGETS
+            .iter()
+            .find(|e| e.1 == name.trim())
+            .map(|e| e.0)
+            .ok_or_else(|| CustomError::UnknownState {
+                name: name.to_string(),
+                known:
+                    "car: vx, vy, omega; pushing: x, y, theta (world frame), bx, by (block frame)"
+                        .into(),
+            })
+    }
+}
+
+/// Errors reading or adding a custom effect.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum CustomError {
+    /// Not valid TOML or a key is missing or unknown.
+    #[error(
+        "custom effect file: {0}; expected `name = \"…\"` and one or more [[term]] tables with \
+         `state`, `feature` and `coefficient`"
+    )]
+    Toml(String),
+    /// A name that cannot be part of a parameter name.
+    #[error(
+        "custom effect name '{0}' must be non-empty letters, digits and '_' (it becomes part of the parameter names custom.<name>.<j>)"
+    )]
+    BadName(String),
+    /// No terms.
+    #[error("custom effect '{0}' has no terms; add at least one [[term]] table")]
+    NoTerms(String),
+    /// Unknown target state.
+    #[error("unknown state '{name}' in a custom term; known: {known}")]
+    UnknownState {
+        /// The name given.
+        name: String,
+        /// The known targets.
+        known: String,
+    },
+    /// A bad feature.
+    #[error("custom effect '{effect}', term {term}: {source}")]
+    Feature {
+        /// The effect.
+        effect: String,
+        /// The term index (0-based).
+        term: usize,
+        /// What is wrong.
+        source: FeatureError,
+    },
+    /// A coefficient that is not finite or outside the bound.
+    #[error(
+        "custom effect '{effect}', term {term}: coefficient {value} must be finite with |θ| ≤ {COEFFICIENT_BOUND}"
+    )]
+    BadCoefficient {
+        /// The effect.
+        effect: String,
+        /// The term index.
+        term: usize,
+        /// The value.
+        value: f64,
+    },
+    /// Terms of both robots.
+    #[error(
+        "custom effect '{0}' mixes car and pushing terms; a custom effect belongs to one robot"
+    )]
+    MixedRobots(String),
+    /// The effect belongs to the other robot.
+    #[error("custom effect '{effect}' is for the {effect_robot:?} model, not the {robot:?} model")]
+    WrongRobot {
+        /// The effect.
+        effect: String,
+        /// Its robot.
+        effect_robot: Robot,
+        /// The model's robot.
+        robot: Robot,
+    },
+    /// Two custom effects with one name.
+    #[error("custom effect '{0}' is added twice; give each custom effect its own name")]
+    Duplicate(String),
+}
+
+/// One term `ṡ_target += θ · feature(s, u)`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CustomTerm {
+    /// The state derivative it adds to.
+    pub target: Target,
+    /// The feature.
+    pub feature: Feature,
+    /// The coefficient `θ` (start value; the model's parameter vector holds the fitted one).
+    pub coefficient: f64,
+}
+
+impl CustomTerm {
+    /// Unit of the coefficient: the derivative's over the feature's.
+    pub fn coefficient_unit(&self) -> Unit {
+        self.target.unit() / self.feature.unit()
+    }
+}
+
+/// A named set of custom terms (see the [module docs](self)). Serialises as the file format.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(try_from = "CustomEffectSpec", into = "CustomEffectSpec")]
+pub struct CustomEffect {
+    name: String,
+    terms: Vec<CustomTerm>,
+    robot: Robot,
+}
+
+/// The file format of a custom effect (what TOML and JSON hold).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CustomEffectSpec {
+    /// Name (letters, digits, `_`).
+    pub name: String,
+    /// Terms.
+    #[serde(rename = "term")]
+    pub terms: Vec<CustomTermSpec>,
+}
+
+/// One term in the file format.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CustomTermSpec {
+    /// Target state (`vx`, `vy`, `omega`; `x`, `y`, `theta`, `bx`, `by`).
+    pub state: String,
+    /// Feature (`delta*vx`).
+    pub feature: String,
+    /// Coefficient (start value).
+    pub coefficient: f64,
+}
+
+impl TryFrom<CustomEffectSpec> for CustomEffect {
+    type Error = CustomError;
+    fn try_from(spec: CustomEffectSpec) -> Result<Self, CustomError> {
+        let name = spec.name.trim().to_string();
+        if name.is_empty() || !name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_') {
+            return Err(CustomError::BadName(spec.name));
+        }
+        if spec.terms.is_empty() {
+            return Err(CustomError::NoTerms(name));
+        }
+        let mut terms = Vec::new();
+        for (j, t) in spec.terms.iter().enumerate() {
+            let target = Target::from_name(&t.state)?;
+            let feature = Feature::parse(&t.feature).map_err(|source| CustomError::Feature {
+                effect: name.clone(),
+                term: j,
+                source,
+            })?;
+            feature
+                .check_robot(target.robot())
+                .map_err(|source| CustomError::Feature {
+                    effect: name.clone(),
+                    term: j,
+                    source,
+                })?;
+            if !(t.coefficient.is_finite() && t.coefficient.abs() <= COEFFICIENT_BOUND) {
+                return Err(CustomError::BadCoefficient {
+                    effect: name,
+                    term: j,
+                    value: t.coefficient,
+                });
+            }
+            terms.push(CustomTerm {
+                target,
+                feature,
+                coefficient: t.coefficient,
+            });
+        }
+        let robot = terms[0].target.robot();
+        if terms.iter().any(|t| t.target.robot() != robot) {
+            return Err(CustomError::MixedRobots(name));
+        }
+        Ok(Self { name, terms, robot })
+    }
+}
+
+impl From<CustomEffect> for CustomEffectSpec {
+    fn from(c: CustomEffect) -> Self {
+        CustomEffectSpec {
+            name: c.name,
+            terms: c
+                .terms
+                .iter()
+                .map(|t| CustomTermSpec {
+                    state: t.target.name().to_string(),
+                    feature: t.feature.name(),
+                    coefficient: t.coefficient,
+                })
+                .collect(),
+        }
+    }
+}
+
+impl CustomEffect {
+    /// A custom effect from terms (validated as a file would be).
+    pub fn new(name: &str, terms: Vec<CustomTerm>) -> Result<Self, CustomError> {
+        CustomEffectSpec {
+            name: name.to_string(),
+            terms: terms
+                .iter()
+                .map(|t| CustomTermSpec {
+                    state: t.target.name().to_string(),
+                    feature: t.feature.name(),
+                    coefficient: t.coefficient,
+                })
+                .collect(),
+        }
+        .try_into()
+    }
+
+    /// Parses the TOML file format (see the [module docs](self)).
+    pub fn from_toml(text: &str) -> Result<Self, CustomError> {
+        let spec: CustomEffectSpec = toml::from_str(text)
+            .map_err(|e| CustomError::Toml(e.to_string().trim().to_string()))?;
+        spec.try_into()
+    }
+
+    /// The TOML text of the effect (what [`CustomEffect::from_toml`] reads back).
+    pub fn to_toml(&self) -> String {
+        let mut o = format!("name = \"{}\"\n", self.name);
+        for t in &self.terms {
+            o.push_str(&format!(
+                "\n[[term]]\nstate = \"{}\"\nfeature = \"{}\"\ncoefficient = {:e}   # {} · {} [{}]\n",
+                t.target.name(),
+                t.feature.name(),
+                t.coefficient,
+                t.target.symbol(),
+                t.feature.symbol(),
+                t.coefficient_unit().format(time_unit(self.robot)),
+            ));
+        }
+        o
+    }
+
+    /// Name.
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// Terms.
+    pub fn terms(&self) -> &[CustomTerm] {
+        &self.terms
+    }
+
+    /// The robot.
+    pub fn robot(&self) -> Robot {
+        self.robot
+    }
+
+    /// The same effect with new coefficients (one per term; fitted values).
+    pub fn with_coefficients(&self, c: &[f64]) -> Self {
+        let mut o = self.clone();
+        for (t, &v) in o.terms.iter_mut().zip(c) {
+            t.coefficient = v;
+        }
+        o
+    }
+
+    /// The equation of term `j` with coefficient `value` (and `± std` when given):
+    /// `ω̇ += −3.2 ± 0.1 · δ·vₓ   [θ: 1/(m·s)]`.
+    pub fn term_equation(&self, j: usize, value: f64, std: Option<f64>) -> String {
+        let t = &self.terms[j];
+        let c = match std {
+            Some(s) if s.is_finite() && s > 0.0 => {
+                format!("{} ± {}", fmt_num(value), fmt_num(s))
+            }
+            _ => fmt_num(value),
+        };
+        format!(
+            "{} += {} · {}   [θ: {}]",
+            t.target.symbol(),
+            c,
+            t.feature.symbol(),
+            t.coefficient_unit().format(time_unit(self.robot))
+        )
+    }
+
+    /// Adds the terms with coefficients `theta` to the vector field `out` at state `s`, input
+    /// `u` (`p`: the model's nominal parameters, for the slip-angle atoms).
+    pub(crate) fn add_to<R: Real>(&self, theta: &[R], p: &[R], s: &[R], u: &[R], out: &mut [R]) {
+        for (t, &c) in self.terms.iter().zip(theta) {
+            let v = c * t.feature.eval(self.robot, p, s, u);
+            match t.target {
+                Target::Vx => out[3] = out[3] + v,
+                Target::Vy => out[4] = out[4] + v,
+                Target::Omega => out[5] = out[5] + v,
+                Target::X => out[0] = out[0] + v,
+                Target::Y => out[1] = out[1] + v,
+                Target::Theta => out[2] = out[2] + v,
+                Target::BlockX | Target::BlockY => {
+                    let (st, ct) = (s[2].sin(), s[2].cos());
+                    let (bx, by) = if t.target == Target::BlockX {
+                        (ct, st)
+                    } else {
+                        (-st, ct)
+                    };
+                    out[0] = out[0] + v * bx;
+                    out[1] = out[1] + v * by;
+                }
+            }
+        }
+    }
+}
+
+/// Every atom name, for error messages and docs.
+pub fn known_features(robot: Robot) -> String {
+    Atom::names(robot).join(", ")
+}
+
+/// Compact number formatting: 4 significant digits, scientific outside [1e-4, 1e4), a true
+/// minus sign.
+pub fn fmt_num(v: f64) -> String {
+    let a = v.abs();
+    let s = if v == 0.0 {
+        "0".into()
+    } else if !(1e-4..1e4).contains(&a) {
+        format!("{v:.3e}")
+    } else {
+        let digits = (3 - a.log10().floor() as i32).max(0) as usize;
+        format!("{v:.digits$}")
+    };
+    s.replace('-', "−")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const FILE: &str = r#"
+name = "steering_gain_speed"
+[[term]]
+state = "omega"
+feature = "delta*vx"
+coefficient = -3.2
+"#;
+
+    #[test]
+    fn toml_round_trip() {
+        let c = CustomEffect::from_toml(FILE).unwrap();
+        assert_eq!(c.name(), "steering_gain_speed");
+        assert_eq!(c.robot(), Robot::Car);
+        assert_eq!(c.terms()[0].target, Target::Omega);
+        assert_eq!(c.terms()[0].coefficient, -3.2);
+        assert_eq!(c.terms()[0].coefficient_unit().format("s"), "1/(m·s)");
+        let back = CustomEffect::from_toml(&c.to_toml()).unwrap();
+        assert_eq!(back, c);
+        let json = serde_json::to_string(&c).unwrap();
+        assert_eq!(serde_json::from_str::<CustomEffect>(&json).unwrap(), c);
+        assert_eq!(
+            c.term_equation(0, -3.2, Some(0.1)),
+            "ω̇ += −3.200 ± 0.1000 · δ·vₓ   [θ: 1/(m·s)]"
+        );
+    }
+
+    #[test]
+    fn bad_files_say_what_is_wrong() {
+        let err = |t: &str| CustomEffect::from_toml(t).unwrap_err().to_string();
+        let e = err(&FILE.replace("delta*vx", "delta*speed"));
+        assert!(e.contains("'speed'") && e.contains("|v|"), "{e}");
+        let e = err(&FILE.replace("\"omega\"", "\"yaw\""));
+        assert!(e.contains("'yaw'") && e.contains("omega"), "{e}");
+        let e = err(&FILE.replace("coefficient = -3.2\n", ""));
+        assert!(e.contains("coefficient"), "{e}");
+        let e = err(&FILE.replace("-3.2", "nan"));
+        assert!(e.contains("finite"), "{e}");
+        let e = err(&FILE.replace("\"omega\"", "\"theta\""));
+        assert!(e.contains("'delta'"), "{e}");
+        let e =
+            err("name = \"a b\"\n[[term]]\nstate = \"vx\"\nfeature = \"vx\"\ncoefficient = 1\n");
+        assert!(e.contains("letters"), "{e}");
+        let e = err("name = \"a\"\nterm = []\n");
+        assert!(e.contains("no terms"), "{e}");
+        let e = err(&format!("{FILE}colour = 3\n"));
+        assert!(e.contains("colour"), "{e}");
+    }
+
+    #[test]
+    fn model_adds_the_terms_with_exact_jacobians() {
+        use crate::ode::Solver;
+        use crate::physics::PhysicsModel;
+        let mut m = PhysicsModel::car(&[]).unwrap();
+        let base = m.clone();
+        m.add_custom(CustomEffect::from_toml(FILE).unwrap())
+            .unwrap();
+        assert_eq!(
+            m.param_names().last().unwrap(),
+            "custom.steering_gain_speed.0"
+        );
+        assert!(*m.default_free().last().unwrap());
+        let (s, u) = ([0.1, 0.2, 0.3, 1.5, 0.05, 0.4], [0.2, 0.5]);
+        let (mut f0, mut f1) = ([0.0; 6], [0.0; 6]);
+        base.eval_one(&s, &u, &mut f0);
+        m.eval_one(&s, &u, &mut f1);
+        for i in 0..6 {
+            let want = if i == 5 { -3.2 * 0.2 * 1.5 } else { 0.0 };
+            assert!((f1[i] - f0[i] - want).abs() < 1e-12, "{i}");
+        }
+        let np = m.params().len();
+        let nz = 6 + 2 + np;
+        let mut j = vec![0.0; 6 * nz];
+        let mut f = [0.0; 6];
+        m.jacobian_full(&s, &u, &[], true, &mut f, &mut j);
+        assert!((j[5 * nz + 8 + np - 1] - 0.2 * 1.5).abs() < 1e-12);
+        assert!(
+            (j[5 * nz + 6] - (-3.2 * 1.5) - {
+                let mut jb = vec![0.0; 6 * (nz - 1)];
+                base.jacobian_full(&s, &u, &[], true, &mut f0, &mut jb);
+                jb[5 * (nz - 1) + 6]
+            })
+            .abs()
+                < 1e-9
+        );
+        let eq = m.equations();
+        assert!(
+            eq.contains("ω̇ += −3.200 · δ·vₓ   [θ: 1/(m·s)]   (custom.steering_gain_speed.0)"),
+            "{eq}"
+        );
+        assert!(
+            m.add_custom(CustomEffect::from_toml(FILE).unwrap())
+                .is_err()
+        );
+        // extending keeps the custom coefficient
+        let mut m2 = m.clone();
+        m2.set_param("custom.steering_gain_speed.0", -1.5).unwrap();
+        let m3 = m2
+            .with_effects(&[crate::physics::Effect::AeroDrag])
+            .unwrap();
+        assert_eq!(
+            m3.params()[m3.param_index("custom.steering_gain_speed.0").unwrap()],
+            -1.5
+        );
+        // pushing, no push (ℓ = 0): a block-frame drift of 5 mm per push, world x then
+        let text =
+            "name = \"drift\"\n[[term]]\nstate = \"bx\"\nfeature = \"1\"\ncoefficient = 0.005\n";
+        let mut p = PhysicsModel::pushing(&[]).unwrap();
+        assert!(
+            p.add_custom(CustomEffect::from_toml(FILE).unwrap())
+                .is_err()
+        );
+        let pb = p.clone();
+        p.add_custom(CustomEffect::from_toml(text).unwrap())
+            .unwrap();
+        let (s0, a) = ([0.5, 0.0, 0.3], [0.0, 0.2, 0.0]);
+        let (mut o0, mut o1) = ([0.0; 3], [0.0; 3]);
+        pb.integrate_step(&Solver::rk4(), 1, &s0, &a, 1.0, &mut o0);
+        p.integrate_step(&Solver::rk4(), 1, &s0, &a, 1.0, &mut o1);
+        assert_eq!(o0, s0);
+        assert!((o1[0] - o0[0] - 0.005 * 0.3f64.cos()).abs() < 1e-12);
+        assert!((o1[1] - o0[1] - 0.005 * 0.3f64.sin()).abs() < 1e-12);
+    }
+}

@@ -1,0 +1,765 @@
+//! A library of named, unit-carrying features of the state and input of each robot, the
+//! building blocks of [custom effects](super::CustomEffect) and of the term search in
+//! `dynlab-diagnose` (`discovery`).
+//!
+//! A [`Feature`] is a product of one or more [`Atom`]s, written in files as the atoms' names
+//! joined by `*` (`delta*vx`, `delta*vx*vx`, `vx*|vx|`) and printed with their symbols
+//! (`δ·vₓ`, `δ·vₓ²`, `vₓ·|vₓ|`). Every atom is written once, generically over
+//! [`Real`](crate::real::Real), so a model with custom terms keeps exact Jacobians.
+//!
+//! Atoms of the car (state `(x, y, ψ, vx, vy, ω)`, input `(δ, d)`):
+//!
+//! | name | symbol | unit | meaning |
+//! |---|---|---|---|
+//! | `vx`, `vy` | `vₓ`, `v_y` | m/s | body-frame velocity |
+//! | `omega` | `ω` | 1/s | yaw rate |
+//! | `delta` | `δ` | rad | commanded front wheel angle |
+//! | `d` | `d` | - | throttle command |
+//! | `\|v\|` | `\|v\|` | m/s | speed `√(vx² + vy²)` |
+//! | `\|vx\|` | `\|vₓ\|` | m/s | `\|vx\|` (so `vx*\|vx\|` is `vx\|vx\|`) |
+//! | `alpha_f`, `alpha_r` | `α_f`, `α_r` | rad | slip angles exactly as the nominal model computes them (`v_reg`-regularised) |
+//! | `sat_alpha_f`, `sat_alpha_r` | `tanh(α_f/α₀)` | - | saturating slip, `α₀` = [`SLIP_SCALE_RAD`] |
+//! | `beta` | `β` | rad | sideslip `atan(vy/√(vx² + v_reg²))` |
+//! | `cos_psi`, `sin_psi` | `cos ψ`, `sin ψ` | - | heading |
+//!
+//! Atoms of the pusher (state `(x, y, θ)`, action `(p, φ, ℓ)`): `p`, `phi` (`φ`, rad), `l`
+//! (`ℓ`), `cos_phi`, `sin_phi`, `theta` (`θ`, rad), `cos_theta`, `sin_theta`.
+//!
+//! Both robots: `x`, `y` (m, world/table frame), `1` (a constant) and position basis functions
+//! `gauss(cx,cy,r)` = `exp(−((x − cx)² + (y − cy)²)/(2r²))` (a Gaussian bump of width `r` \[m\]
+//! centred at `(cx, cy)`, for region-dependent effects; the term search puts them on a coarse
+//! grid over the driven area). Angles count as dimensionless in units (rad = 1), so
+//! `ω̇ += θ·δ·vₓ` has `θ` in `1/(m·s)`.
+//!
+//! Features are memoryless: lagged inputs and input rates are not in the library (they need
+//! the command history inside the vector field); a delay shows up in `diagnose`'s lagged
+//! cross-correlations and in the `motor_lag` effect instead.
+
+use std::fmt::Write as _;
+
+use super::Robot;
+use crate::real::Real;
+
+/// Scale `α₀` of the saturating slip atoms `tanh(α/α₀)` \[rad\]: about where the small ORCA
+/// tires leave their linear range.
+pub const SLIP_SCALE_RAD: f64 = 0.1;
+
+/// Most factors in one feature.
+pub const MAX_FACTORS: usize = 4;
+
+/// A physical unit as powers of metre and of the robot's time unit (seconds for the car, one
+/// push for the pusher). Angles are dimensionless.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub struct Unit {
+    /// Power of the metre.
+    pub m: i32,
+    /// Power of the time unit.
+    pub t: i32,
+}
+
+impl Unit {
+    /// `m^m · t^t`.
+    pub const fn new(m: i32, t: i32) -> Self {
+        Self { m, t }
+    }
+    /// Formats the unit with the time unit's symbol (`s`, `push`): `m/s²`, `1/(m·s)`, `-`.
+    pub fn format(self, time: &str) -> String {
+        fn pow(base: &str, e: i32) -> String {
+            match e {
+                1 => base.to_string(),
+                _ => format!("{base}{}", superscript(e)),
+            }
+        }
+        let mut num = Vec::new();
+        let mut den = Vec::new();
+        for (b, e) in [("m", self.m), (time, self.t)] {
+            match e.cmp(&0) {
+                std::cmp::Ordering::Greater => num.push(pow(b, e)),
+                std::cmp::Ordering::Less => den.push(pow(b, -e)),
+                std::cmp::Ordering::Equal => {}
+            }
+        }
+        match (num.is_empty(), den.len()) {
+            (true, 0) => "-".into(),
+            (false, 0) => num.join("·"),
+            (n, k) => {
+                let top = if n { "1".to_string() } else { num.join("·") };
+                if k == 1 {
+                    format!("{top}/{}", den[0])
+                } else {
+                    format!("{top}/({})", den.join("·"))
+                }
+            }
+        }
+    }
+}
+
+impl std::ops::Mul for Unit {
+    type Output = Unit;
+    /// The product of two units.
+    fn mul(self, o: Unit) -> Unit {
+        Unit::new(self.m + o.m, self.t + o.t)
+    }
+}
+
+impl std::ops::Div for Unit {
+    type Output = Unit;
+    /// The quotient of two units.
+    fn div(self, o: Unit) -> Unit {
+        Unit::new(self.m - o.m, self.t - o.t)
+    }
+}
+
+fn superscript(e: i32) -> String {
+    const D: [char; 10] = ['⁰', '¹', '²', '³', '⁴', '⁵', '⁶', '⁷', '⁸', '⁹'];
+    let mut s = String::new();
+    if e < 0 {
+        s.push('⁻');
+    }
+    for c in e.unsigned_abs().to_string().chars() {
+        s.push(D[c.to_digit(10).unwrap_or(0) as usize]);
+    }
+    s
+}
+
+/// The time unit's symbol of a robot (`s`, `push`).
+pub fn time_unit(robot: Robot) -> &'static str {
+    match robot {
+        Robot::Car => "s",
+        Robot::Pushing => "push",
+    }
+}
+
+/// One factor of a feature.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Atom {
+    /// Car: body-frame longitudinal velocity `vx`.
+    Vx,
+    /// Car: body-frame lateral velocity `vy`.
+    Vy,
+    /// Car: yaw rate `ω`.
+    Omega,
+    /// Car: commanded front wheel angle `δ`.
+    Delta,
+    /// Car: throttle command `d`.
+    Throttle,
+    /// Car: speed `|v|`.
+    Speed,
+    /// Car: `|vx|`.
+    AbsVx,
+    /// Car: front slip angle `α_f`.
+    AlphaF,
+    /// Car: rear slip angle `α_r`.
+    AlphaR,
+    /// Car: `tanh(α_f/α₀)`.
+    SatAlphaF,
+    /// Car: `tanh(α_r/α₀)`.
+    SatAlphaR,
+    /// Car: sideslip `β`.
+    Beta,
+    /// Car: `cos ψ`.
+    CosPsi,
+    /// Car: `sin ψ`.
+    SinPsi,
+    /// Pushing: push location `p`.
+    PushLocation,
+    /// Pushing: push angle `φ`.
+    PushAngle,
+    /// Pushing: push length `ℓ`.
+    PushLength,
+    /// Pushing: `cos φ`.
+    CosPhi,
+    /// Pushing: `sin φ`.
+    SinPhi,
+    /// Pushing: block heading `θ`.
+    Theta,
+    /// Pushing: `cos θ`.
+    CosTheta,
+    /// Pushing: `sin θ`.
+    SinTheta,
+    /// Position `x` (world/table frame).
+    X,
+    /// Position `y` (world/table frame).
+    Y,
+    /// The constant 1.
+    One,
+    /// Gaussian bump `exp(−‖(x, y) − c‖²/(2r²))` centred at `(cx, cy)` with width `r`.
+    Gauss {
+        /// Centre x \[m\].
+        cx: f64,
+        /// Centre y \[m\].
+        cy: f64,
+        /// Width \[m\].
+        r: f64,
+    },
+}
+
+/// Which robots an atom belongs to.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Owner {
+    Car,
+    Pushing,
+    Both,
+}
+
+/// Name, symbol, unit and owner of every atom but `gauss`.
+const TABLE: [(Atom, &str, &str, Unit, Owner); 25] = [
+    (Atom::Vx, "vx", "vₓ", Unit::new(1, -1), Owner::Car),
+    (Atom::Vy, "vy", "v_y", Unit::new(1, -1), Owner::Car),
+    (Atom::Omega, "omega", "ω", Unit::new(0, -1), Owner::Car),
+    (Atom::Delta, "delta", "δ", Unit::new(0, 0), Owner::Car),
+    (Atom::Throttle, "d", "d", Unit::new(0, 0), Owner::Car),
+    (Atom::Speed, "|v|", "|v|", Unit::new(1, -1), Owner::Car),
+    (Atom::AbsVx, "|vx|", "|vₓ|", Unit::new(1, -1), Owner::Car),
+    (Atom::AlphaF, "alpha_f", "α_f", Unit::new(0, 0), Owner::Car),
+    (Atom::AlphaR, "alpha_r", "α_r", Unit::new(0, 0), Owner::Car),
+    (
+        Atom::SatAlphaF,
+        "sat_alpha_f",
+        "tanh(α_f/α₀)",
+        Unit::new(0, 0),
+        Owner::Car,
+    ),
+    (
+        Atom::SatAlphaR,
+        "sat_alpha_r",
+        "tanh(α_r/α₀)",
+        Unit::new(0, 0),
+        Owner::Car,
+    ),
+    (Atom::Beta, "beta", "β", Unit::new(0, 0), Owner::Car),
+    (
+        Atom::CosPsi,
+        "cos_psi",
+        "cos ψ",
+        Unit::new(0, 0),
+        Owner::Car,
+    ),
+    (
+        Atom::SinPsi,
+        "sin_psi",
+        "sin ψ",
+        Unit::new(0, 0),
+        Owner::Car,
+    ),
+    (
+        Atom::PushLocation,
+        "p",
+        "p",
+        Unit::new(0, 0),
+        Owner::Pushing,
+    ),
+    (Atom::PushAngle, "phi", "φ", Unit::new(0, 0), Owner::Pushing),
+    (Atom::PushLength, "l", "ℓ", Unit::new(0, 0), Owner::Pushing),
+    (
+        Atom::CosPhi,
+        "cos_phi",
+        "cos φ",
+        Unit::new(0, 0),
+        Owner::Pushing,
+    ),
+    (
+        Atom::SinPhi,
+        "sin_phi",
+        "sin φ",
+        Unit::new(0, 0),
+        Owner::Pushing,
+    ),
+    (Atom::Theta, "theta", "θ", Unit::new(0, 0), Owner::Pushing),
+    (
+        Atom::CosTheta,
+        "cos_theta",
+        "cos θ",
+        Unit::new(0, 0),
+        Owner::Pushing,
+    ),
+    (
+        Atom::SinTheta,
+        "sin_theta",
+        "sin θ",
+        Unit::new(0, 0),
+        Owner::Pushing,
+    ),
+    (Atom::X, "x", "x", Unit::new(1, 0), Owner::Both),
+    (Atom::Y, "y", "y", Unit::new(1, 0), Owner::Both),
+    (Atom::One, "1", "1", Unit::new(0, 0), Owner::Both),
+];
+
+fn entry(a: &Atom) -> Option<&'static (Atom, &'static str, &'static str, Unit, Owner)> {
+    TABLE
+        .iter()
+        .find(|e| std::mem::discriminant(&e.0) == std::mem::discriminant(a))
+}
+
+/// Shortest decimal text of a number that parses back to the same `f64`.
+fn short(v: f64) -> String {
+    format!("{v}")
+}
+
+impl Atom {
+    /// Name used in files (`vx`, `alpha_f`, `gauss(0.5,-0.2,0.4)`).
+    pub fn name(&self) -> String {
+        match self {
+            Atom::Gauss { cx, cy, r } => {
+                format!("gauss({},{},{})", short(*cx), short(*cy), short(*r))
+            }
+            a => entry(a).map(|e| e.1).unwrap_or("?").to_string(),
+        }
+    }
+
+    /// Symbol for printed equations (`vₓ`, `α_f`, `g(0.5, −0.2; 0.4)`).
+    pub fn symbol(&self) -> String {
+        match self {
+            Atom::Gauss { cx, cy, r } => format!(
+                "g({}, {}; {})",
+                short(*cx).replace('-', "−"),
+                short(*cy).replace('-', "−"),
+                short(*r)
+            ),
+            a => entry(a).map(|e| e.2).unwrap_or("?").to_string(),
+        }
+    }
+
+    /// Unit.
+    pub fn unit(&self) -> Unit {
+        match self {
+            Atom::Gauss { .. } => Unit::default(),
+            a => entry(a).map(|e| e.3).unwrap_or_default(),
+        }
+    }
+
+    /// Whether the atom exists for `robot`.
+    pub fn belongs_to(&self, robot: Robot) -> bool {
+        let owner = match self {
+            Atom::Gauss { .. } => Owner::Both,
+            a => entry(a).map(|e| e.4).unwrap_or(Owner::Both),
+        };
+        match owner {
+            Owner::Both => true,
+            Owner::Car => robot == Robot::Car,
+            Owner::Pushing => robot == Robot::Pushing,
+        }
+    }
+
+    /// Names of the atoms of `robot` (`gauss(cx,cy,r)` last).
+    pub fn names(robot: Robot) -> Vec<String> {
+        TABLE
+            .iter()
+            .filter(|e| e.0.belongs_to(robot))
+            .map(|e| e.1.to_string())
+            .chain(std::iter::once("gauss(cx,cy,r)".to_string()))
+            .collect()
+    }
+
+    /// Parses one atom name (any robot).
+    pub fn parse(name: &str) -> Result<Atom, FeatureError> {
+        let n = name.trim();
+        if let Some(e) = TABLE.iter().find(|e| e.1 == n) {
+            return Ok(e.0);
+        }
+        if let Some(args) = n.strip_prefix("gauss(").and_then(|r| r.strip_suffix(')')) {
+            let v: Vec<f64> = args
+                .split(',')
+                .map(|a| a.trim().parse::<f64>())
+                .collect::<Result<_, _>>()
+                .map_err(|_| FeatureError::BadGauss(n.to_string()))?;
+            if v.len() != 3 || !v.iter().all(|x| x.is_finite()) || v[2] <= 0.0 {
+                return Err(FeatureError::BadGauss(n.to_string()));
+            }
+            return Ok(Atom::Gauss {
+                cx: v[0],
+                cy: v[1],
+                r: v[2],
+            });
+        }
+        Err(FeatureError::UnknownAtom {
+            name: n.to_string(),
+            car: Atom::names(Robot::Car).join(", "),
+            pushing: Atom::names(Robot::Pushing).join(", "),
+        })
+    }
+
+    /// The atom's value at state `s`, input `u`, with the nominal parameters `p` of the robot's
+    /// model (the car's slip angles use `l_f`, `l_r`, `v_reg`).
+    pub fn eval<R: Real>(&self, robot: Robot, p: &[R], s: &[R], u: &[R]) -> R {
+        match (robot, self) {
+            (_, Atom::X) => s[0],
+            (_, Atom::Y) => s[1],
+            (_, Atom::One) => R::cst(1.0),
+            (_, Atom::Gauss { cx, cy, r }) => {
+                let dx = s[0] - *cx;
+                let dy = s[1] - *cy;
+                (-(dx * dx + dy * dy) / (2.0 * r * r)).exp()
+            }
+            (Robot::Car, a) => car_atom(a, p, s, u),
+            (Robot::Pushing, a) => push_atom(a, s, u),
+        }
+    }
+}
+
+fn car_atom<R: Real>(a: &Atom, p: &[R], s: &[R], u: &[R]) -> R {
+    let (lf, lr, vreg) = (p[2], p[3], p[14]);
+    let (vx, vy, om) = (s[3], s[4], s[5]);
+    let delta = u[0];
+    let reg = vreg * vreg;
+    let alpha_f = || {
+        let (sd, cd) = (delta.sin(), delta.cos());
+        let vyf = vy + lf * om;
+        let v_long_f = cd * vx + sd * vyf;
+        let v_lat_f = cd * vyf - sd * vx;
+        -(v_lat_f / (v_long_f * v_long_f + reg).sqrt()).atan()
+    };
+    let alpha_r = || -((vy - lr * om) / (vx * vx + reg).sqrt()).atan();
+    match a {
+        Atom::Vx => vx,
+        Atom::Vy => vy,
+        Atom::Omega => om,
+        Atom::Delta => delta,
+        Atom::Throttle => u[1],
+        Atom::Speed => (vx * vx + vy * vy + 1e-12).sqrt(),
+        Atom::AbsVx => vx.abs(),
+        Atom::AlphaF => alpha_f(),
+        Atom::AlphaR => alpha_r(),
+        Atom::SatAlphaF => (alpha_f() / SLIP_SCALE_RAD).tanh(),
+        Atom::SatAlphaR => (alpha_r() / SLIP_SCALE_RAD).tanh(),
+        Atom::Beta => (vy / (vx * vx + reg).sqrt()).atan(),
+        Atom::CosPsi => s[2].cos(),
+        Atom::SinPsi => s[2].sin(),
+        _ => R::cst(0.0),
+    }
+}
+
+fn push_atom<R: Real>(a: &Atom, s: &[R], u: &[R]) -> R {
+    match a {
+        Atom::PushLocation => u[0],
+        Atom::PushAngle => u[1],
+        Atom::PushLength => u[2],
+        Atom::CosPhi => u[1].cos(),
+        Atom::SinPhi => u[1].sin(),
+        Atom::Theta => s[2],
+        Atom::CosTheta => s[2].cos(),
+        Atom::SinTheta => s[2].sin(),
+        _ => R::cst(0.0),
+    }
+}
+
+/// Errors parsing a feature.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum FeatureError {
+    /// An unknown atom name.
+    #[error(
+        "unknown feature '{name}'; a feature is a product of atoms joined by '*' (e.g. delta*vx); \
+         car atoms: {car}; pushing atoms: {pushing}"
+    )]
+    UnknownAtom {
+        /// The name given.
+        name: String,
+        /// Atoms of the car.
+        car: String,
+        /// Atoms of the pusher.
+        pushing: String,
+    },
+    /// A malformed Gaussian bump.
+    #[error(
+        "bad position basis '{0}'; write gauss(cx,cy,r) with finite numbers and r > 0 (metres)"
+    )]
+    BadGauss(String),
+    /// No factors or too many.
+    #[error("feature '{name}' has {got} factors; use 1 to {max} atoms joined by '*'")]
+    FactorCount {
+        /// The feature text.
+        name: String,
+        /// Factors found.
+        got: usize,
+        /// The limit.
+        max: usize,
+    },
+    /// An atom of the other robot.
+    #[error(
+        "feature '{feature}' uses '{atom}', which the {robot:?} model does not have; its atoms: {known}"
+    )]
+    WrongRobot {
+        /// The feature.
+        feature: String,
+        /// The atom.
+        atom: String,
+        /// The robot.
+        robot: Robot,
+        /// The robot's atoms.
+        known: String,
+    },
+}
+
+/// A product of atoms: one column of the term search, one term of a custom effect.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Feature {
+    factors: Vec<Atom>,
+}
+
+impl Feature {
+    /// A feature from its factors (1 to [`MAX_FACTORS`]).
+    pub fn new(factors: Vec<Atom>) -> Result<Self, FeatureError> {
+        if factors.is_empty() || factors.len() > MAX_FACTORS {
+            return Err(FeatureError::FactorCount {
+                name: factors
+                    .iter()
+                    .map(|a| a.name())
+                    .collect::<Vec<_>>()
+                    .join("*"),
+                got: factors.len(),
+                max: MAX_FACTORS,
+            });
+        }
+        Ok(Self { factors })
+    }
+
+    /// Parses `delta*vx`, `vx*|vx|`, `l*gauss(0.6,0,0.1)` (any robot's atoms; see
+    /// [`Feature::check_robot`]).
+    pub fn parse(text: &str) -> Result<Self, FeatureError> {
+        let factors = text
+            .split('*')
+            .map(Atom::parse)
+            .collect::<Result<Vec<_>, _>>()?;
+        Self::new(factors).map_err(|e| match e {
+            FeatureError::FactorCount { got, max, .. } => FeatureError::FactorCount {
+                name: text.to_string(),
+                got,
+                max,
+            },
+            e => e,
+        })
+    }
+
+    /// Checks that every atom exists for `robot`.
+    pub fn check_robot(&self, robot: Robot) -> Result<(), FeatureError> {
+        match self.factors.iter().find(|a| !a.belongs_to(robot)) {
+            None => Ok(()),
+            Some(a) => Err(FeatureError::WrongRobot {
+                feature: self.name(),
+                atom: a.name(),
+                robot,
+                known: Atom::names(robot).join(", "),
+            }),
+        }
+    }
+
+    /// The factors.
+    pub fn factors(&self) -> &[Atom] {
+        &self.factors
+    }
+
+    /// Name used in files: the atoms joined by `*`.
+    pub fn name(&self) -> String {
+        self.factors
+            .iter()
+            .map(|a| a.name())
+            .collect::<Vec<_>>()
+            .join("*")
+    }
+
+    /// Symbol with repeated neighbours as powers: `δ·vₓ²`.
+    pub fn symbol(&self) -> String {
+        let mut o = String::new();
+        let mut i = 0;
+        while i < self.factors.len() {
+            let mut j = i + 1;
+            while j < self.factors.len() && self.factors[j] == self.factors[i] {
+                j += 1;
+            }
+            if i > 0 {
+                o.push('·');
+            }
+            o.push_str(&self.factors[i].symbol());
+            if j - i > 1 {
+                let _ = write!(o, "{}", superscript((j - i) as i32));
+            }
+            i = j;
+        }
+        o
+    }
+
+    /// Unit of the product.
+    pub fn unit(&self) -> Unit {
+        self.factors
+            .iter()
+            .fold(Unit::default(), |u, a| u * a.unit())
+    }
+
+    /// The feature's value (see [`Atom::eval`]).
+    pub fn eval<R: Real>(&self, robot: Robot, p: &[R], s: &[R], u: &[R]) -> R {
+        let mut v = self.factors[0].eval(robot, p, s, u);
+        for a in &self.factors[1..] {
+            v = v * a.eval(robot, p, s, u);
+        }
+        v
+    }
+}
+
+impl std::fmt::Display for Feature {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.name())
+    }
+}
+
+/// The axis-aligned area the data cover, for the position basis functions.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Area {
+    /// Lower corner `(x, y)` \[m\].
+    pub lo: [f64; 2],
+    /// Upper corner `(x, y)` \[m\].
+    pub hi: [f64; 2],
+}
+
+/// The candidate features of the term search for `robot`: the physics-informed products of
+/// states and inputs, slip angles and their saturating functions, `x`, `y`, and, when `area`
+/// is given, Gaussian bumps on a `grid × grid` lattice over it (width: the lattice spacing).
+pub fn library(robot: Robot, area: Option<Area>, grid: usize) -> Vec<Feature> {
+    let names: &[&str] = match robot {
+        Robot::Car => &[
+            "vx",
+            "vy",
+            "omega",
+            "delta",
+            "d",
+            "|v|",
+            "vx*|vx|",
+            "vx*vx",
+            "delta*vx",
+            "delta*vx*vx",
+            "delta*|v|",
+            "omega*vx",
+            "vy*vx",
+            "d*vx",
+            "d*|vx|",
+            "alpha_f",
+            "alpha_r",
+            "sat_alpha_f",
+            "sat_alpha_r",
+            "alpha_f*vx",
+            "alpha_r*vx",
+            "beta",
+            "beta*vx",
+            "1",
+            "x",
+            "y",
+        ],
+        Robot::Pushing => &[
+            "l",
+            "l*p",
+            "l*phi",
+            "l*p*phi",
+            "l*cos_phi",
+            "l*sin_phi",
+            "l*p*p",
+            "l*cos_theta",
+            "l*sin_theta",
+            "cos_theta",
+            "sin_theta",
+            "l*x",
+            "l*y",
+            "1",
+        ],
+    };
+    let mut v: Vec<Feature> = names
+        .iter()
+        .map(|n| Feature::parse(n).expect("library feature names parse"))
+        .collect();
+    if let Some(a) = area
+        && grid > 0
+    {
+        let w = [(a.hi[0] - a.lo[0]).max(1e-3), (a.hi[1] - a.lo[1]).max(1e-3)];
+        let r = (w[0].max(w[1]) / grid as f64).max(1e-3);
+        let round = |v: f64| (v * 1000.0).round() / 1000.0;
+        for i in 0..grid {
+            for j in 0..grid {
+                let cx = round(a.lo[0] + (i as f64 + 0.5) / grid as f64 * w[0]);
+                let cy = round(a.lo[1] + (j as f64 + 0.5) / grid as f64 * w[1]);
+                let g = Atom::Gauss {
+                    cx,
+                    cy,
+                    r: round(r),
+                };
+                let f = match robot {
+                    // a quasi-static block moves only while pushed
+                    Robot::Pushing => vec![Atom::PushLength, g],
+                    Robot::Car => vec![g],
+                };
+                v.push(Feature { factors: f });
+            }
+        }
+    }
+    v
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::real::Dual;
+
+    #[test]
+    fn names_round_trip_and_units_multiply() {
+        for robot in [Robot::Car, Robot::Pushing] {
+            let area = Area {
+                lo: [-1.0, -0.5],
+                hi: [1.0, 0.5],
+            };
+            for f in library(robot, Some(area), 3) {
+                let g = Feature::parse(&f.name()).unwrap();
+                assert_eq!(g, f, "{}", f.name());
+                f.check_robot(robot).unwrap();
+            }
+        }
+        let f = Feature::parse("delta*vx*vx").unwrap();
+        assert_eq!(f.symbol(), "δ·vₓ²");
+        assert_eq!(f.unit(), Unit::new(2, -2));
+        let omega_dot = Unit::new(0, -2);
+        assert_eq!((omega_dot / f.unit()).format("s"), "1/m²");
+        assert_eq!(Unit::new(-1, -1).format("s"), "1/(m·s)");
+        assert_eq!(Unit::new(1, -2).format("s"), "m/s²");
+        assert_eq!(Unit::default().format("s"), "-");
+    }
+
+    #[test]
+    fn bad_names_say_what_exists() {
+        let e = Feature::parse("delta*speed").unwrap_err().to_string();
+        assert!(e.contains("'speed'") && e.contains("|v|"), "{e}");
+        assert!(Feature::parse("gauss(1,2)").is_err());
+        assert!(Feature::parse("vx*vx*vx*vx*vx").is_err());
+        let e = Feature::parse("l*vx")
+            .unwrap()
+            .check_robot(Robot::Pushing)
+            .unwrap_err();
+        assert!(e.to_string().contains("'vx'"));
+    }
+
+    #[test]
+    fn derivatives_match_finite_differences() {
+        let p: Vec<f64> = super::super::CAR_NOMINAL_PARAMS
+            .iter()
+            .map(|s| s.default)
+            .collect();
+        let s = [0.3, -0.2, 0.4, 1.2, 0.1, 0.8];
+        let u = [0.15, 0.4];
+        for f in library(Robot::Car, None, 0) {
+            let pd: Vec<Dual<8>> = p.iter().map(|&v| Dual::cst(v)).collect();
+            let sd: Vec<Dual<8>> = (0..6).map(|i| Dual::var(s[i], i)).collect();
+            let ud: Vec<Dual<8>> = (0..2).map(|i| Dual::var(u[i], 6 + i)).collect();
+            let v = f.eval(Robot::Car, &pd, &sd, &ud);
+            for k in 0..8 {
+                let (mut s2, mut u2) = (s, u);
+                let h = 1e-6;
+                if k < 6 {
+                    s2[k] += h;
+                } else {
+                    u2[k - 6] += h;
+                }
+                let fd = (f.eval(Robot::Car, &p, &s2, &u2) - v.v) / h;
+                assert!(
+                    (fd - v.d[k]).abs() < 1e-4 * (1.0 + fd.abs()),
+                    "{} d{k}",
+                    f.name()
+                );
+            }
+        }
+    }
+}
