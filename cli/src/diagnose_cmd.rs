@@ -45,8 +45,9 @@ pub struct DiagnoseArgs {
     /// Forward selection adds at most this many effects.
     #[arg(long, default_value_t = 3)]
     max_effects: usize,
-    /// Also train the model with the selected effects on the same bags
-    /// (`dynlab train --kind physics --effects …`), written to `<out>/model`.
+    /// Also train the model with the selected effects (and the custom effect of terms found
+    /// beyond the library) on the same bags (`dynlab train --kind physics --effects …
+    /// [--effects-file …]`), written to `<out>/model`.
     #[arg(long)]
     apply: bool,
     /// Pose topic (default from the model's world).
@@ -117,7 +118,23 @@ pub fn run(args: DiagnoseArgs) -> anyhow::Result<()> {
     std::fs::write(&html, diagnosis_page(&d))
         .with_context(|| format!("writing {}", html.display()))?;
     println!("report: {} and {}", json.display(), html.display());
-    if d.effects.is_empty() {
+    // a significant term beyond the library: its custom effect file, to train with
+    let custom = match d.discovery.as_ref().and_then(|x| {
+        x.terms
+            .iter()
+            .any(|t| t.significant)
+            .then_some(x.effect_toml.as_ref())
+            .flatten()
+    }) {
+        Some(text) => {
+            let f = args.out.join("custom_effect.toml");
+            std::fs::write(&f, text).with_context(|| format!("writing {}", f.display()))?;
+            println!("custom effect: {}", f.display());
+            Some(f)
+        }
+        None => None,
+    };
+    if d.effects.is_empty() && custom.is_none() {
         return Ok(());
     }
     let kind = if model.kind().name() == "hybrid" {
@@ -129,12 +146,13 @@ pub fn run(args: DiagnoseArgs) -> anyhow::Result<()> {
     for b in &args.bags {
         train.extend(["--bag".into(), b.display().to_string()]);
     }
-    train.extend([
-        "--kind".into(),
-        kind.into(),
-        "--effects".into(),
-        d.effects.join(","),
-    ]);
+    train.extend(["--kind".into(), kind.into()]);
+    if !d.effects.is_empty() {
+        train.extend(["--effects".into(), d.effects.join(",")]);
+    }
+    if let Some(f) = &custom {
+        train.extend(["--effects-file".into(), f.display().to_string()]);
+    }
     for (flag, v) in [
         ("--pose-topic", &args.pose_topic),
         ("--cmd-topic", &args.cmd_topic),

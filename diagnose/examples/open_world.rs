@@ -8,8 +8,10 @@
 //! falling with speed, a steering-servo rate limit, a low-grip band across the floor).
 //!
 //! Per case: how often the selected set is exactly the hidden library effects (outside the
-//! library and nominal: nothing named), the held-out error removed against the fitted model
-//! (min–mean–max over seeds), and the fitted strength against the truth.
+//! library and nominal: nothing named); the error removed by adding the selected effects, as a
+//! user does (`dynlab train --kind physics --effects …` on the diagnosed data, then the 50-step
+//! loss of both models on held-out data of the same car: min–mean–max over seeds); and the
+//! fitted strength against the truth.
 //!
 //! `cargo run --release -p dynlab-diagnose --example open_world -- [--seeds N]
 //! [--nominal-seeds N] [--perturb F] [--episodes N] [--duration S] [--only NAME] [--noise X]`
@@ -22,6 +24,7 @@ use std::time::Instant;
 use dynlab_diagnose::diagnosis::simdata::car_dataset;
 use dynlab_diagnose::diagnosis::{DiagnoseConfig, diagnose};
 use dynlab_learn::ModelKind;
+use dynlab_learn::eval::evaluate;
 use dynlab_learn::train::{TrainConfig, train};
 use dynlab_sim::car::{
     AeroDrag, GripPatch, MotorLag, SteeringGainSpeed, SteeringOffset, SteeringRateLimit,
@@ -150,20 +153,30 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         100.0 * perturb
     );
     println!(
-        "{:<36} {:>9} {:>24} {:<44} {:>7}",
+        "{:<36} {:>9} {:>24}   {:<44} {:>7}",
         "hidden effects", "recovered", "removed min/mean/max", "fitted strength (truth)", "time/s"
     );
     for case in cases {
         let name = if case.is_empty() {
             "none (nominal)".to_string()
         } else {
-            case.iter().map(|h| h.name()).collect::<Vec<_>>().join(" + ")
+            case.iter()
+                .map(|h| h.name())
+                .collect::<Vec<_>>()
+                .join(" + ")
         };
         if !only.is_empty() && !name.contains(&only) {
             continue;
         }
-        let truth: BTreeSet<&str> = case.iter().filter_map(|h| h.library().map(|l| l.0)).collect();
-        let n = if case.is_empty() { nominal_seeds } else { seeds };
+        let truth: BTreeSet<&str> = case
+            .iter()
+            .filter_map(|h| h.library().map(|l| l.0))
+            .collect();
+        let n = if case.is_empty() {
+            nominal_seeds
+        } else {
+            seeds
+        };
         let t0 = Instant::now();
         let (mut ok, mut removed, mut strength) = (0, Vec::new(), Vec::new());
         let mut wrong: BTreeSet<String> = BTreeSet::new();
@@ -204,7 +217,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 wrong.insert(g.to_string());
             }
             if let Some(j) = &d.joint {
-                removed.push(j.reduction_vs_model);
+                // add the selected effects as the user does, and score both on held-out data
+                let tc_after = TrainConfig {
+                    effects: d.effects.clone(),
+                    ..tc.clone()
+                };
+                let after = train(&data, &tc_after, &mut |_| {})?.model;
+                let test = car_dataset(&hidden, 1, 2.0 * duration, 9000 + seed, threads)?;
+                let before = evaluate(&model, &test, 50, 3.0)?.loss;
+                let after = evaluate(&after, &test, 50, 3.0)?.loss;
+                removed.push(1.0 - after / before);
                 for h in &case {
                     if let Some((_, key, _)) = h.library()
                         && let Some(v) = j.params.get(key)
@@ -232,7 +254,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     .collect();
                 if !v.is_empty() {
                     let m = v.iter().sum::<f64>() / v.len() as f64;
-                    fitted.push(format!("{} {m:.4} ({t})", key.split('.').nth(1).unwrap_or(key)));
+                    fitted.push(format!(
+                        "{} {m:.4} ({t})",
+                        key.split('.').nth(1).unwrap_or(key)
+                    ));
                 }
             }
         }

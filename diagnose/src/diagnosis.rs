@@ -52,6 +52,8 @@ use dynlab_learn::dynamics::physics::{Effect, ModelError, PhysicsModel};
 use dynlab_learn::fit::{bounded_least_squares, cluster_std, initial_state};
 use dynlab_learn::train::segment;
 use dynlab_learn::{Dataset, LearnError, Model, World};
+
+use crate::discovery::{Discovery, DiscoveryConfig, DiscoveryError, discover_terms_split};
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
@@ -111,6 +113,9 @@ pub enum DiagnosisError {
     /// From the data pipeline.
     #[error(transparent)]
     Data(#[from] DataError),
+    /// From the term search beyond the library.
+    #[error(transparent)]
+    Discovery(#[from] DiscoveryError),
     /// From the simulator (test data generation).
     #[error("simulator: {0}")]
     Simulator(String),
@@ -176,6 +181,11 @@ pub struct DiagnoseConfig {
     pub window_error_cap: f64,
     /// Forward selection adds at most this many effects (default 3).
     pub max_effects: usize,
+    /// After the selection, search terms beyond the library on the residual of the model with
+    /// the selected effects ([`crate::discovery`]; physics models only; default true).
+    pub discover: bool,
+    /// Settings of that search (its split, windows and seed are the diagnosis's own).
+    pub discovery: DiscoveryConfig,
     /// A patch effect whose disc holds at least this fraction of the data's positions is a
     /// global change of the nominal parameters, not a patch, and is not counted (default 0.9).
     pub max_patch_cover: f64,
@@ -200,6 +210,8 @@ impl Default for DiagnoseConfig {
             correct_for_candidates: true,
             window_error_cap: 1.0,
             max_effects: 3,
+            discover: true,
+            discovery: DiscoveryConfig::default(),
             max_patch_cover: 0.9,
         }
     }
@@ -391,6 +403,10 @@ pub struct Diagnosis {
     pub joint: Option<JointFit>,
     /// The first step's candidates, best (largest held-out error reduction) first.
     pub candidates: Vec<Candidate>,
+    /// Terms beyond the library found on the residual of the model with the selected effects
+    /// (`None`: not searched — a network model, or [`DiagnoseConfig::discover`] off).
+    #[serde(default)]
+    pub discovery: Option<Discovery>,
     /// The world.
     pub world: World,
     /// The model kind.
@@ -438,8 +454,8 @@ struct Fitted {
     units: Vec<String>,
     /// The effect each parameter belongs to (`None`: a refitted nominal parameter).
     owners: Vec<Option<Effect>>,
-    /// The whole parameter vector of the physics model with the fitted values in place.
-    full: Vec<f64>,
+    /// The physics model with the fitted values in place.
+    physics: PhysicsModel,
     lower: Vec<f64>,
     upper: Vec<f64>,
     /// Fitted (not held at its start value).
@@ -619,27 +635,30 @@ fn starts(e: Effect, trajs: &[StateTrajectory]) -> Vec<Vec<(&'static str, f64)>>
     }
 }
 
-/// The physics part of an augmented model at one selection step: the effects added so far (after
-/// the model's own) and the full parameter vector of [`PhysicsModel::new`] with them (nominal
-/// parameters as refitted), with its per-window errors.
+/// The physics part of an augmented model at one selection step: the model's physics with the
+/// effects added so far (nominal parameters as refitted), with its per-window errors.
 #[derive(Clone)]
 struct Current {
-    effects: Vec<Effect>,
-    params: Vec<f64>,
+    physics: PhysicsModel,
     test: Vec<f64>,
     fit: Vec<f64>,
+}
+
+impl Current {
+    fn effects(&self) -> Vec<Effect> {
+        self.physics.effects()
+    }
 }
 
 /// Everything a fit of one selection step needs.
 struct Ctx<'a> {
     model: &'a Model,
-    world: World,
     cfg: &'a DiagnoseConfig,
     d: Data<'a>,
     base: PhysicsModel,
     pure_physics: bool,
-    /// Indices of the refitted nominal parameters.
-    refit: Vec<usize>,
+    /// Names of the refitted nominal parameters.
+    refit: Vec<String>,
     /// The effects the model already has.
     have: Vec<Effect>,
     fit_w: Vec<Window>,
@@ -655,27 +674,15 @@ fn mean(v: &[f64]) -> f64 {
 }
 
 impl Ctx<'_> {
-    /// The physics model with `effects` at `params` (`None`: not a valid parameter vector).
-    fn physics(&self, effects: &[Effect], params: &[f64]) -> Option<PhysicsModel> {
-        let mut m = PhysicsModel::new(self.world.robot(), effects).ok()?;
-        m.set_params(params).ok().map(|_| m)
-    }
-
-    /// Per-window errors of the model augmented with `effects` at `params`.
-    fn errors(
-        &self,
-        effects: &[Effect],
-        params: &[f64],
-        ws: &[Window],
-        resid: Option<&mut Vec<f64>>,
-    ) -> Option<Vec<f64>> {
+    /// Per-window errors of the model augmented with the physics `with`.
+    fn errors(&self, with: PhysicsModel, ws: &[Window], resid: Option<&mut Vec<f64>>) -> Vec<f64> {
         let a = Augmented {
             model: self.model,
             base: self.base.clone(),
-            with: Some(self.physics(effects, params)?),
+            with: Some(with),
             pure_physics: self.pure_physics,
         };
-        Some(a.errors(&self.d, ws, resid))
+        a.errors(&self.d, ws, resid)
     }
 
     /// Fits, on the fit half, the refitted nominal parameters, the candidate `cand`'s and (with
@@ -687,15 +694,17 @@ impl Ctx<'_> {
         joint: bool,
     ) -> Result<Option<Fitted>, DiagnosisError> {
         let (k, ds) = (self.d.k, self.d.ds);
-        let mut effects = cur.effects.clone();
-        effects.extend(cand);
-        let with = PhysicsModel::new(self.world.robot(), &effects)?;
-        // the effects are appended in order: the current model's parameters are a prefix
-        let mut p0 = with.params().to_vec();
-        p0[..cur.params.len()].copy_from_slice(&cur.params);
-        let mut idx = self.refit.clone();
+        // every parameter keeps its value by name (custom terms included); the candidate's
+        // start at their defaults
+        let with = cur.physics.with_effects(&Vec::from_iter(cand))?;
+        let p0 = with.params().to_vec();
+        let mut idx: Vec<usize> = self
+            .refit
+            .iter()
+            .filter_map(|n| with.param_index(n))
+            .collect();
         let free_effects: Vec<Effect> = if joint {
-            cur.effects[self.have.len()..].to_vec()
+            cur.effects()[self.have.len()..].to_vec()
         } else {
             Vec::new()
         };
@@ -714,15 +723,16 @@ impl Ctx<'_> {
         let lower: Vec<f64> = specs.iter().map(|s| s.lower).collect();
         let upper: Vec<f64> = specs.iter().map(|s| s.upper).collect();
         let free: Vec<bool> = specs.iter().map(|s| s.name != "w").collect();
-        let full_of = |theta: &[f64]| -> Vec<f64> {
+        let model_of = |theta: &[f64]| -> Option<PhysicsModel> {
             let mut p = p0.clone();
             for (&i, &v) in idx.iter().zip(theta) {
                 p[i] = v;
             }
-            p
+            let mut m = with.clone();
+            m.set_params(&p).ok().map(|_| m)
         };
         let cost_of = |theta: &[f64], ws: &[Window], resid: Option<&mut Vec<f64>>| {
-            self.errors(&effects, &full_of(theta), ws, resid)
+            model_of(theta).map(|m| self.errors(m, ws, resid))
         };
         // starts: screen by cost, refine the best two
         let effect_starts = match cand {
@@ -817,7 +827,10 @@ impl Ctx<'_> {
             names: specs.iter().map(|s| s.name.to_string()).collect(),
             units: specs.iter().map(|s| s.unit.to_string()).collect(),
             owners,
-            full: full_of(&theta),
+            physics: match model_of(&theta) {
+                Some(m) => m,
+                None => return Ok(None),
+            },
             lower,
             upper,
             free,
@@ -904,7 +917,7 @@ impl Ctx<'_> {
             self.cfg.confidence_for(tested),
             self.cfg.seed
                 ^ (e as u64 + 1).wrapping_mul(0x9E37_79B9_7F4A_7C15)
-                ^ (cur.effects.len() as u64).wrapping_mul(0xD1B5_4A32_D192_ED03),
+                ^ (cur.effects().len() as u64).wrapping_mul(0xD1B5_4A32_D192_ED03),
         );
         // a reason against it matters only where the numbers alone would count it
         let counts = raw >= self.cfg.min_reduction && ci_lower > 0.0 && self.test_segments >= 2;
@@ -1067,7 +1080,8 @@ pub fn diagnose(
     let pure_physics =
         model.physics().is_some() && model.network().is_none() && base.dim_state() == ds;
     // nominal parameters refitted with every candidate and for the baseline (physics models)
-    let refit: Vec<usize> = if pure_physics && cfg.refit_nominal_for(world) {
+    let names = base.param_names();
+    let refit: Vec<String> = if pure_physics && cfg.refit_nominal_for(world) {
         base.default_free()
             .iter()
             .zip(base.param_specs())
@@ -1079,7 +1093,7 @@ pub fn diagnose(
                         None => **f && !(world == World::Car && CAR_HELD.contains(&spec.name)),
                     }
             })
-            .map(|(i, _)| i)
+            .map(|(i, _)| names[i].clone())
             .collect()
     } else {
         Vec::new()
@@ -1095,7 +1109,6 @@ pub fn diagnose(
         .collect();
     let ctx = Ctx {
         model,
-        world,
         cfg,
         d: Data {
             trajs: &trajs,
@@ -1117,8 +1130,7 @@ pub fn diagnose(
     };
     // the baseline: the model as given, or with its nominal parameters refitted on the fit half
     let mut cur = Current {
-        effects: have.clone(),
-        params: base.params().to_vec(),
+        physics: base.clone(),
         test: Vec::new(),
         fit: Vec::new(),
     };
@@ -1131,7 +1143,7 @@ pub fn diagnose(
                 .cloned()
                 .zip(f.theta.iter().copied())
                 .collect();
-            cur.params = f.full;
+            cur.physics = f.physics;
             cur.test = f.test;
             cur.fit = f.fit;
         }
@@ -1171,7 +1183,7 @@ pub fn diagnose(
     let mut joint: Option<Fitted> = None;
     while !lib.is_empty() && selection.len() < cfg.max_effects {
         let scored = ctx.step(&cur, &lib)?;
-        let given: Vec<String> = cur.effects[have.len()..]
+        let given: Vec<String> = cur.effects()[have.len()..]
             .iter()
             .map(|e| e.name().to_string())
             .collect();
@@ -1196,8 +1208,7 @@ pub fn diagnose(
             hint: "not an effect of the library",
         })?;
         let mut next = Current {
-            effects: cur.effects.iter().copied().chain([e]).collect(),
-            params: f.full.clone(),
+            physics: f.physics.clone(),
             test: f.test.clone(),
             fit: f.fit.clone(),
         };
@@ -1206,7 +1217,7 @@ pub fn diagnose(
         if let Some(j) = ctx.fit(&next, None, true)?
             && mean(&j.fit) <= mean(&next.fit)
         {
-            next.params = j.full.clone();
+            next.physics = j.physics.clone();
             next.test = j.test.clone();
             next.fit = j.fit.clone();
             step_fit = j;
@@ -1223,7 +1234,7 @@ pub fn diagnose(
         joint = Some(step_fit);
         cur = next;
     }
-    let added: Vec<Effect> = cur.effects[have.len()..].to_vec();
+    let added: Vec<Effect> = cur.effects()[have.len()..].to_vec();
     let joint = joint.map(|f| {
         let ea = mean(&cur.test);
         let raw = if baseline_error > 0.0 {
@@ -1280,6 +1291,28 @@ pub fn diagnose(
         .first()
         .map(|s| s.candidates.clone())
         .unwrap_or_default();
+    // beyond the library: terms on the residual of the model with the selected effects
+    let discovery = if cfg.discover && pure_physics {
+        let dcfg = DiscoveryConfig {
+            steps: Some(k),
+            seed: cfg.seed,
+            ..cfg.discovery.clone()
+        };
+        Some(discover_terms_split(
+            &cur.physics,
+            &model.physics_solver(),
+            model.physics_time(),
+            &trajs,
+            &split.train,
+            &ctx.fit_w,
+            &ctx.test_w,
+            k,
+            [split.train.len(), split.validation.len()],
+            &dcfg,
+        )?)
+    } else {
+        None
+    };
     let verdict = added.first().map(|e| e.name().to_string());
     let correlations = residual_correlations(model, &ctx.d, &ctx.fit_w, &ctx.test_w);
     let summary = match &joint {
@@ -1304,6 +1337,7 @@ pub fn diagnose(
         selection,
         joint,
         candidates,
+        discovery,
         world,
         model_kind: model.kind().name().to_string(),
         model_effects: have.iter().map(|e| e.name().to_string()).collect(),
@@ -1631,6 +1665,9 @@ impl Diagnosis {
                     c.dimension, c.feature, c.r
                 );
             }
+        }
+        if let Some(disc) = &self.discovery {
+            o.push_str(&disc.table());
         }
         let _ = writeln!(o, "{}", self.summary);
         o

@@ -111,6 +111,9 @@ pub fn diagnosis_html(d: &Diagnosis) -> String {
         }
         let _ = writeln!(o, "</table>");
     }
+    if let Some(disc) = &d.discovery {
+        o.push_str(&crate::discovery::discovery_html(disc));
+    }
     if !d.correlations.is_empty() {
         let _ = writeln!(
             o,
