@@ -45,7 +45,7 @@ for effect_bag in car_drag_steering car_steering_gain; do
 
   step "$effect_bag: where the baseline fails (compare)"
   "$dynlab" compare --steps 50 --model "$out/models/car_physics" --bag "$out/test/$effect_bag" \
-    --out "$out/compare/baseline@$effect_bag" | head -n 12
+    --out "$out/compare/baseline@$effect_bag" | sed -n 1,12p
 
   step "$effect_bag: diagnosis (forward selection over the library, then terms beyond it)"
   diag="$out/diagnosis/$effect_bag"
@@ -71,7 +71,7 @@ for effect_bag in car_drag_steering car_steering_gain; do
 
   step "$effect_bag: where the error fell (compare, before and after on the same axes)"
   "$dynlab" compare --steps 50 --model "$out/models/car_physics+$effect_bag" --baseline "$out/models/car_physics" \
-    --bag "$out/test/$effect_bag" --out "$out/compare/$effect_bag" | head -n 12
+    --bag "$out/test/$effect_bag" --out "$out/compare/$effect_bag" | sed -n 1,12p
 done
 
 # Pushing: the same loop on the bundled pushing bag with a hidden centre-of-mass offset (one
