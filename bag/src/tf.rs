@@ -268,26 +268,33 @@ pub fn lookup_series(bag: &Bag, parent: &str, child: &str) -> Result<TfSeries, T
             let k = v.partition_point(|s| s.0 <= t);
             k.checked_sub(1).map(|k| v[k].1)
         };
-        let mut a_child = IDENTITY;
-        for c in &to_child {
-            let Some(x) = at(c) else {
-                skipped += 1;
-                continue 'stamps;
-            };
-            a_child = compose(&a_child, &x);
-        }
-        let mut a_parent = IDENTITY;
-        for c in &to_parent {
-            let Some(x) = at(c) else {
-                skipped += 1;
-                continue 'stamps;
-            };
-            a_parent = compose(&a_parent, &x);
-        }
+        // Composed only where there is more than one link, so a direct link's transform comes
+        // out bit for bit as recorded.
+        let mut down = |links: &[String]| -> Option<Option<Transform>> {
+            let mut acc: Option<Transform> = None;
+            for c in links {
+                let x = at(c)?;
+                acc = Some(match acc {
+                    None => x,
+                    Some(a) => compose(&a, &x),
+                });
+            }
+            Some(acc)
+        };
+        let (Some(a_child), Some(a_parent)) = (down(&to_child), down(&to_parent)) else {
+            skipped += 1;
+            continue 'stamps;
+        };
+        let transform = match (a_parent, a_child) {
+            (None, Some(c)) => c,
+            (Some(p), Some(c)) => compose(&inverse(&p), &c),
+            (Some(p), None) => inverse(&p),
+            (None, None) => IDENTITY,
+        };
         samples.push(TfSample {
             t_ns: t,
             log_time_ns: log,
-            transform: compose(&inverse(&a_parent), &a_child),
+            transform,
         });
     }
     Ok(TfSeries {
