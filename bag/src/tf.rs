@@ -270,7 +270,7 @@ pub fn lookup_series(bag: &Bag, parent: &str, child: &str) -> Result<TfSeries, T
         };
         // Composed only where there is more than one link, so a direct link's transform comes
         // out bit for bit as recorded.
-        let mut down = |links: &[String]| -> Option<Option<Transform>> {
+        let down = |links: &[String]| -> Option<Option<Transform>> {
             let mut acc: Option<Transform> = None;
             for c in links {
                 let x = at(c)?;

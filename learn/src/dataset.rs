@@ -440,8 +440,9 @@ pub fn read_samples_with(
         source,
     };
     let cmd_topic = opts.topics.cmd_topic(world);
-    bag.require_topics(&[&cmd_topic]).map_err(bag_err)?;
+    // the pose source first: a bag of the other robot is named by its missing pose topic
     let (poses, mut notes) = read_poses(bag, world, opts)?;
+    bag.require_topics(&[&cmd_topic]).map_err(bag_err)?;
     if let Some(r) = bag.recovery() {
         notes.insert(
             0,

@@ -655,6 +655,56 @@ mod tests {
     }
 
     #[test]
+    fn tf_carries_the_measured_pose_of_the_pose_topic_and_static_frames() {
+        let p = Pose2::new(0.4, -0.1, 2.5);
+        for world in [SimWorld::Push, SimWorld::Car] {
+            let t = 1_250_000_000;
+            let msg = tf_msg(world, t, p);
+            let pose = pose_msg(t, world.tf_frames().0, p);
+            assert_eq!(msg.transforms.len(), 1);
+            let tr = &msg.transforms[0];
+            assert_eq!(tr.header, pose.header);
+            assert_eq!(tr.child_frame_id, world.tf_frames().1);
+            assert_eq!(tr.transform.as_pose(), pose.pose);
+        }
+        assert_eq!(SimWorld::Car.tf_frames(), ("world", "car"));
+        assert_eq!(SimWorld::Push.tf_frames(), ("table", "block"));
+        let car = CarParams::default();
+        let s = tf_static_msg(SimWorld::Car, 0, &car);
+        let axles: Vec<(&str, &str, f64)> = s
+            .transforms
+            .iter()
+            .map(|t| {
+                (
+                    t.header.frame_id.as_str(),
+                    t.child_frame_id.as_str(),
+                    t.transform.translation.x,
+                )
+            })
+            .collect();
+        assert_eq!(
+            axles,
+            [
+                ("car", "car/front_axle", car.lf),
+                ("car", "car/rear_axle", -car.lr)
+            ]
+        );
+        let s = tf_static_msg(SimWorld::Push, 0, &car);
+        assert_eq!(s.transforms[0].header.frame_id, "world");
+        assert_eq!(s.transforms[0].child_frame_id, "table");
+        // /tf_static is latched in the bag's QoS as well
+        let [tf, tf_static] = tf_topics();
+        assert_eq!(
+            tf_static.qos.recorded_profile().durability,
+            dynlab_bag::Durability::TransientLocal
+        );
+        assert_eq!(
+            tf.qos.recorded_profile().reliability,
+            dynlab_bag::Reliability::Reliable
+        );
+    }
+
+    #[test]
     fn odometry_carries_the_body_twist_in_the_car_frame() {
         let s = CarState {
             x: 1.0,
