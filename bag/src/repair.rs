@@ -84,7 +84,12 @@ impl fmt::Display for RepairReport {
     /// the first dropped messages, and the bag written.
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match &self.recovery {
-            Some(r) => writeln!(f, "read {}: damaged bag: {}", self.input.display(), r.summary())?,
+            Some(r) => writeln!(
+                f,
+                "read {}: damaged bag: {}",
+                self.input.display(),
+                r.summary()
+            )?,
             None => writeln!(
                 f,
                 "read {}: {} messages (the bag was not damaged)",

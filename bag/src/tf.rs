@@ -213,8 +213,8 @@ pub fn lookup_series(bag: &Bag, parent: &str, child: &str) -> Result<TfSeries, T
     };
     let to_child = down(&up_child);
     let to_parent = down(&up_parent);
-    let mut chain: Vec<String> = up_parent[..=up_parent.iter().position(|f| *f == common).unwrap_or(0)]
-        .to_vec();
+    let mut chain: Vec<String> =
+        up_parent[..=up_parent.iter().position(|f| *f == common).unwrap_or(0)].to_vec();
     chain.extend(to_child.iter().cloned());
 
     let moving: Vec<&String> = to_child

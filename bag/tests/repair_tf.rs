@@ -53,11 +53,7 @@ fn cut_copy(dir: &Path, to: &Path, fraction: f64) {
     std::fs::copy(dir.join("metadata.yaml"), to.join("metadata.yaml")).unwrap();
     let bytes = std::fs::read(mcap_in(dir)).unwrap();
     let keep = (bytes.len() as f64 * fraction) as usize;
-    std::fs::write(
-        to.join(mcap_in(dir).file_name().unwrap()),
-        &bytes[..keep],
-    )
-    .unwrap();
+    std::fs::write(to.join(mcap_in(dir).file_name().unwrap()), &bytes[..keep]).unwrap();
 }
 
 #[test]
@@ -75,7 +71,11 @@ fn truncated_bag_recovery_names_messages_chunks_and_time_against_the_declared() 
     assert_eq!(r.messages, n);
     assert_eq!(r.declared.messages, Some(total));
     assert_eq!(r.declared.duration_ns, Some(999 * STEP));
-    assert!(r.chunks > 0 && r.chunks < chunks_whole, "{} of {chunks_whole}", r.chunks);
+    assert!(
+        r.chunks > 0 && r.chunks < chunks_whole,
+        "{} of {chunks_whole}",
+        r.chunks
+    );
     // the cut file lost its statistics record: the chunk count is not declared
     assert_eq!(r.declared.chunks, None);
     let (first, last) = r.span_ns.unwrap();
@@ -228,7 +228,11 @@ fn tf_chains_compose_through_intermediate_and_upward_frames() {
         assert!((smp.transform.translation.x - want).abs() < 1e-12, "{i}");
         assert!((smp.transform.rotation.yaw() - 0.02 * i as f64).abs() < 1e-12);
     }
-    assert!(s.notes.iter().any(|n| n.contains("also moves")), "{:?}", s.notes);
+    assert!(
+        s.notes.iter().any(|n| n.contains("also moves")),
+        "{:?}",
+        s.notes
+    );
 
     // map → … → base through the static link (a 90° turn): x of the chain becomes y in map
     let m = lookup_series(&bag, "map", "base").unwrap();

@@ -64,8 +64,7 @@ fn write_online(
     );
     for b in &args.bags {
         let bag = dynlab_bag::Bag::open(b)?;
-        let (poses, cmds, _) =
-            dynlab_learn::dataset::read_samples_with(&bag, model.world(), opts)?;
+        let (poses, cmds, _) = dynlab_learn::dataset::read_samples_with(&bag, model.world(), opts)?;
         let mut p = OnlinePredictor::new(
             model.clone(),
             OnlineConfig {

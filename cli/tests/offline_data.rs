@@ -39,19 +39,23 @@ fn text(bytes: &[u8]) -> String {
 fn collect(dir: &Path, world: &str) -> PathBuf {
     let out = dir.join(format!("{world}_tf"));
     let o = out.to_str().unwrap();
-    ok(&["collect", world, "--episodes", "1", "--seed", "3", "--tf", "--out", o]);
+    ok(&[
+        "collect",
+        world,
+        "--episodes",
+        "1",
+        "--seed",
+        "3",
+        "--tf",
+        "--out",
+        o,
+    ]);
     out
 }
 
 fn load(bag: &Path, opts: &LoadOptions) -> TimedDataset {
-    load_bags_with(
-        &[bag.to_path_buf()],
-        None,
-        opts,
-        &SavGol::default(),
-        None,
-    )
-    .unwrap_or_else(|e| panic!("{opts:?}: {e}"))
+    load_bags_with(&[bag.to_path_buf()], None, opts, &SavGol::default(), None)
+        .unwrap_or_else(|e| panic!("{opts:?}: {e}"))
 }
 
 fn tf(pair: &str) -> LoadOptions {
@@ -108,11 +112,7 @@ fn tf_and_odometry_pose_sources_give_the_same_trajectories_as_pose_stamped() {
         &car,
         &odom_bag,
         "/car/pose",
-        Some((
-            "/mocap/odom",
-            Odometry::TYPE_NAME,
-            Odometry::definition(),
-        )),
+        Some(("/mocap/odom", Odometry::TYPE_NAME, Odometry::definition())),
         |_, data| {
             let p: PoseStamped = from_cdr(data).unwrap();
             let mut o = Odometry {
@@ -173,7 +173,10 @@ fn tf_and_odometry_pose_sources_give_the_same_trajectories_as_pose_stamped() {
     );
     let mid = 6 * (a.len() / 12);
     let d = (a[mid] - c[mid]).hypot(a[mid + 1] - c[mid + 1]);
-    assert!((d - lf).abs() < 0.1 * lf, "axle {d} m from the centre, lf = {lf}");
+    assert!(
+        (d - lf).abs() < 0.1 * lf,
+        "axle {d} m from the centre, lf = {lf}"
+    );
 }
 
 /// The car bag with pose 1000's x NaN and pose 2000 stamped 10 ms before pose 1999.
@@ -202,10 +205,7 @@ fn nan_and_out_of_order_poses_are_skipped_split_and_reported_or_refused_with_str
     let r = &d.data.reports[0];
     assert_eq!((r.non_finite_poses, r.out_of_order_poses), (1, 1));
     assert_eq!(r.splits_at_skipped, 2);
-    assert_eq!(
-        d.data.trajectories.len(),
-        clean.data.trajectories.len() + 2
-    );
+    assert_eq!(d.data.trajectories.len(), clean.data.trajectories.len() + 2);
     assert_eq!(
         d.data.transitions(),
         clean.data.transitions() - 2 - 2,
@@ -217,16 +217,12 @@ fn nan_and_out_of_order_poses_are_skipped_split_and_reported_or_refused_with_str
     let model = tmp.path().join("m");
     let model_s = model.to_str().unwrap();
     let o = ok(&[
-        "train", "--bag", bad_s, "--kind", "residual", "--epochs", "1", "--quiet", "--out",
-        model_s,
+        "train", "--bag", bad_s, "--kind", "residual", "--epochs", "1", "--quiet", "--out", model_s,
     ]);
     let err = text(&o.stderr);
     let want = "skipped 1 poses with NaN or infinite values (first at 10.000 s) and 1 poses whose \
                 stamp goes back (first at 19.890 s); the data are split there (2 split(s))";
-    assert!(
-        err.contains(&format!("warning: {bad_s}: {want}")),
-        "{err}"
-    );
+    assert!(err.contains(&format!("warning: {bad_s}: {want}")), "{err}");
     let cmp = tmp.path().join("cmp");
     let o = ok(&[
         "compare",
@@ -239,12 +235,17 @@ fn nan_and_out_of_order_poses_are_skipped_split_and_reported_or_refused_with_str
     ]);
     assert!(text(&o.stderr).contains(want));
     let report = std::fs::read_to_string(cmp.join("report.json")).unwrap();
-    assert!(report.contains(want), "report.json has no note of the skipped poses");
+    assert!(
+        report.contains(want),
+        "report.json has no note of the skipped poses"
+    );
 
     // --strict keeps the refusal
     let m2 = tmp.path().join("m2");
     for cmd in [
-        vec!["train", "--bag", bad_s, "--kind", "residual", "--epochs", "1", "--out"],
+        vec![
+            "train", "--bag", bad_s, "--kind", "residual", "--epochs", "1", "--out",
+        ],
         vec!["eval-model", "--model", model_s, "--bag", bad_s],
     ] {
         let mut args = cmd.clone();
@@ -253,7 +254,10 @@ fn nan_and_out_of_order_poses_are_skipped_split_and_reported_or_refused_with_str
         }
         args.push("--strict");
         let o = dynlab(&args);
-        assert!(!o.status.success(), "{args:?} accepted a NaN pose with --strict");
+        assert!(
+            !o.status.success(),
+            "{args:?} accepted a NaN pose with --strict"
+        );
         let err = text(&o.stderr);
         assert!(
             err.contains("non-finite value in pose.x at t = 10000000000 ns (NaN)"),
@@ -288,14 +292,19 @@ fn a_truncated_bag_is_used_with_a_warning_that_says_how_much_was_read() {
     let model_s = model.to_str().unwrap();
     let warning = format!("warning: {cut_s}: damaged bag: {summary}");
     let o = ok(&[
-        "train", "--bag", cut_s, "--kind", "residual", "--epochs", "1", "--quiet", "--out",
-        model_s,
+        "train", "--bag", cut_s, "--kind", "residual", "--epochs", "1", "--quiet", "--out", model_s,
     ]);
     assert!(text(&o.stderr).contains(&warning), "{}", text(&o.stderr));
     let o = ok(&["eval-model", "--model", model_s, "--bag", cut_s]);
     assert!(text(&o.stderr).contains(&warning), "{}", text(&o.stderr));
     // a sound bag: no warning at all
-    let o = ok(&["eval-model", "--model", model_s, "--bag", car.to_str().unwrap()]);
+    let o = ok(&[
+        "eval-model",
+        "--model",
+        model_s,
+        "--bag",
+        car.to_str().unwrap(),
+    ]);
     assert!(!text(&o.stderr).contains("warning"), "{}", text(&o.stderr));
 }
 
@@ -326,7 +335,10 @@ fn bag_repair_rewrites_what_is_recoverable_and_drops_nonfinite_poses() {
         report.contains(&format!("kept {} of {n} messages", n - 1)),
         "{report}"
     );
-    assert!(report.contains("dropped 1 with non-finite fields"), "{report}");
+    assert!(
+        report.contains("dropped 1 with non-finite fields"),
+        "{report}"
+    );
     assert!(
         report.contains("dropped /car/pose at 10.000000000: pose.position.x is NaN"),
         "{report}"

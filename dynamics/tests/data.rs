@@ -160,12 +160,8 @@ fn bad_input_gets_clear_errors() {
         matches!(&e, DataError::NonFinite { field, t_ns, .. } if field == "pose.yaw" && *t_ns == 30 * MS),
         "{e}"
     );
-    let e = build_trajectories(
-        &poses,
-        &[cmd(0, &[0.0]), cmd(5, &[f64::INFINITY])],
-        &strict,
-    )
-    .unwrap_err();
+    let e = build_trajectories(&poses, &[cmd(0, &[0.0]), cmd(5, &[f64::INFINITY])], &strict)
+        .unwrap_err();
     assert!(
         e.to_string().contains("command[0] at t = 5000000 ns"),
         "{e}"
@@ -380,7 +376,9 @@ fn normalizer_guards_constant_dimensions_and_round_trips() {
 
 /// 100 Hz poses of a body moving at 1 m/s in x; commands from t = 0.
 fn line(n: i64) -> Vec<PoseSample> {
-    (0..n).map(|i| pose(i * 10, i as f64 * 0.01, 0.0, 0.0)).collect()
+    (0..n)
+        .map(|i| pose(i * 10, i as f64 * 0.01, 0.0, 0.0))
+        .collect()
 }
 
 #[test]
@@ -401,14 +399,22 @@ fn a_nan_pose_in_the_middle_is_skipped_counted_and_splits_the_trajectory() {
         rep.skipped.iter().map(|s| s.t_ns / MS).collect::<Vec<_>>(),
         [200, 500, 510, 520]
     );
-    assert!(rep.skipped.iter().all(|s| s.reason == SkipReason::NonFinite));
+    assert!(
+        rep.skipped
+            .iter()
+            .all(|s| s.reason == SkipReason::NonFinite)
+    );
     // three pieces: 0–190 ms, 210–490 ms, 530–990 ms; no transition spans a skipped pose
     let spans: Vec<(i64, i64, usize)> = trajs
         .iter()
         .map(|t| (t.t_ns[0] / MS, t.t_ns[t.len() - 1] / MS, t.len()))
         .collect();
     assert_eq!(spans, [(0, 190, 20), (210, 490, 29), (530, 990, 47)]);
-    assert!(rep.gaps.is_empty(), "a skipped pose is not a gap: {:?}", rep.gaps);
+    assert!(
+        rep.gaps.is_empty(),
+        "a skipped pose is not a gap: {:?}",
+        rep.gaps
+    );
     assert_eq!(rep.poses_out, 96);
     assert!(
         trajs
@@ -426,7 +432,11 @@ fn a_nan_pose_in_the_middle_is_skipped_counted_and_splits_the_trajectory() {
         matches!(&e, DataError::NonFinite { field, t_ns, value } if field == "pose.x" && *t_ns == 200 * MS && value.is_nan()),
         "{e}"
     );
-    assert!(e.to_string().starts_with("non-finite value in pose.x at t = 200000000 ns"), "{e}");
+    assert!(
+        e.to_string()
+            .starts_with("non-finite value in pose.x at t = 200000000 ns"),
+        "{e}"
+    );
 }
 
 #[test]

@@ -331,7 +331,11 @@ pub fn read_samples(
     read_samples_with(bag, world, &LoadOptions::from(topics)).map(|(p, c, _)| (p, c))
 }
 
-fn planar_sample(stamp_ns: i64, log_ns: u64, pose: &dynlab_msgs::geometry_msgs::Pose) -> PoseSample {
+fn planar_sample(
+    stamp_ns: i64,
+    log_ns: u64,
+    pose: &dynlab_msgs::geometry_msgs::Pose,
+) -> PoseSample {
     let (x, y, yaw) = pose.planar_xy_yaw();
     PoseSample {
         t_ns: stamp_or_log(stamp_ns, log_ns),
@@ -353,15 +357,14 @@ fn read_poses(
         source,
     };
     if let Some(frames) = &opts.pose_tf {
-        let series = dynlab_bag::tf::lookup_series(bag, &frames.parent, &frames.child).map_err(
-            |e| {
+        let series =
+            dynlab_bag::tf::lookup_series(bag, &frames.parent, &frames.child).map_err(|e| {
                 LearnError::setting(
                     "pose-tf",
                     frames,
                     format!("in bag {}: {e}", bag.path().display()),
                 )
-            },
-        )?;
+            })?;
         let mut notes = vec![format!(
             "poses from tf {} → {} (chain {}; stamps of {}): {} transforms",
             frames.parent,
@@ -396,7 +399,13 @@ fn read_poses(
             .read::<Odometry>(&pose_topic)
             .map_err(bag_err)?
             .into_iter()
-            .map(|m| planar_sample(m.msg.header.stamp.to_nanos(), m.log_time_ns, &m.msg.pose.pose))
+            .map(|m| {
+                planar_sample(
+                    m.msg.header.stamp.to_nanos(),
+                    m.log_time_ns,
+                    &m.msg.pose.pose,
+                )
+            })
             .collect();
         return Ok((
             poses,
