@@ -437,13 +437,16 @@ fn read_poses(
     Ok((poses, Vec::new()))
 }
 
+/// Poses and commands read from one bag, with notes on where they came from.
+pub type SourcedSamples = (Vec<PoseSample>, Vec<CommandSample>, Vec<String>);
+
 /// Reads poses (from the source `opts` names) and commands of `world` from one bag, with notes
 /// on where the poses came from and, for a damaged bag, what was recovered.
 pub fn read_samples_with(
     bag: &Bag,
     world: World,
     opts: &LoadOptions,
-) -> Result<(Vec<PoseSample>, Vec<CommandSample>, Vec<String>), LearnError> {
+) -> Result<SourcedSamples, LearnError> {
     let bag_err = |source| LearnError::Bag {
         path: bag.path().to_path_buf(),
         source,
