@@ -297,6 +297,43 @@ fn a_truncated_bag_is_used_with_a_warning_that_says_how_much_was_read() {
     assert!(text(&o.stderr).contains(&warning), "{}", text(&o.stderr));
     let o = ok(&["eval-model", "--model", model_s, "--bag", cut_s]);
     assert!(text(&o.stderr).contains(&warning), "{}", text(&o.stderr));
+    // compare and diagnose: on the terminal and in the reports' data notes
+    let cmp = tmp.path().join("cmp");
+    let o = ok(&[
+        "compare",
+        "--model",
+        model_s,
+        "--bag",
+        cut_s,
+        "--out",
+        cmp.to_str().unwrap(),
+    ]);
+    assert!(text(&o.stderr).contains(&warning), "{}", text(&o.stderr));
+    let report = std::fs::read_to_string(cmp.join("report.json")).unwrap();
+    assert!(report.contains(&format!("damaged bag: {summary}")));
+    let diag = tmp.path().join("diag");
+    let o = ok(&[
+        "diagnose",
+        "--model",
+        model_s,
+        "--bag",
+        cut_s,
+        "--effects",
+        "aero_drag",
+        "--steps",
+        "5",
+        "--out",
+        diag.to_str().unwrap(),
+    ]);
+    assert!(text(&o.stderr).contains(&warning), "{}", text(&o.stderr));
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(diag.join("diagnosis.json")).unwrap())
+            .unwrap();
+    let first_note = json["data_notes"][0][0].as_str().unwrap();
+    assert!(
+        first_note.starts_with(&format!("damaged bag: {summary}")),
+        "{first_note}"
+    );
     // a sound bag: no warning at all
     let o = ok(&[
         "eval-model",
