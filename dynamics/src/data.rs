@@ -8,8 +8,10 @@
 //!
 //! Real data as they come: a pose with a NaN or infinite value (a motion capture that lost the
 //! body) and a pose whose stamp goes back (earlier than the last pose kept) are skipped, counted
-//! and listed, and the trajectory is split there, so no transition spans the bad message. A
-//! command with a NaN or infinite value is skipped (the previous command stays held).
+//! and listed, and the trajectory is split there, so no transition spans the bad message; when
+//! [`STAMP_RESET_RUN`] poses in a row go back (the clock was reset, or one pose was stamped in the
+//! future), they start a new trajectory instead of being skipped. A command with a NaN or infinite
+//! value is skipped (the previous command stays held).
 //! [`PipelineConfig::strict`] refuses such input instead.
 //!
 //! [`savgol`] smooths and differentiates on (possibly irregular) stamps; [`car_states`] turns a
@@ -257,9 +259,13 @@ pub struct PipelineReport {
     pub out_of_order_poses: usize,
     /// Every skipped pose, in input order.
     pub skipped: Vec<SkippedPose>,
-    /// Trajectory splits at skipped poses (a run of skipped poses splits once; none at the
-    /// start or end of the data).
+    /// Trajectory splits at skipped poses and stamp resets (a run of skipped poses splits once;
+    /// none at the start or end of the data).
     pub splits_at_skipped: usize,
+    /// Stamps where the pose stamps went back and stayed back ([`STAMP_RESET_RUN`] poses in a
+    /// row behind the last kept pose, in order among themselves: a clock reset, or a pose stamped
+    /// in the future before them). Each starts a new trajectory; its poses are not skipped.
+    pub stamp_resets: Vec<i64>,
     /// Commands skipped for a NaN or infinite value.
     pub non_finite_commands: usize,
     /// Notes about where the samples came from, set by the loader (pose source, a damaged bag's
@@ -360,9 +366,14 @@ fn check_commands<'a>(
     Ok((dim, kept))
 }
 
+/// Poses in a row, in order among themselves but all behind the last pose kept, that count as a
+/// reset of the stamps (a new trajectory starts with them) rather than as poses to skip.
+pub const STAMP_RESET_RUN: usize = 5;
+
 /// The poses to use, in input order, each with whether the trajectory must split before it
 /// (a skipped pose came between it and the previous kept one). Non-finite poses and poses whose
-/// stamp goes back are skipped (errors when `strict`), repeated stamps dropped.
+/// stamp goes back are skipped (errors when `strict`), repeated stamps dropped; a run of
+/// [`STAMP_RESET_RUN`] poses behind the last kept one starts a new trajectory instead.
 fn screen_poses(
     poses: &[PoseSample],
     strict: bool,
@@ -371,6 +382,8 @@ fn screen_poses(
     let mut kept: Vec<PoseSample> = Vec::with_capacity(poses.len());
     let mut split_before = Vec::with_capacity(poses.len());
     let mut pending = false;
+    // poses behind the last kept one, in order among themselves
+    let mut behind: Vec<PoseSample> = Vec::new();
     for p in poses {
         let bad = [("pose.x", p.x), ("pose.y", p.y), ("pose.yaw", p.yaw)]
             .into_iter()
@@ -394,11 +407,38 @@ fn screen_poses(
                     previous_ns: last.t_ns,
                 });
             }
+            match behind.last() {
+                Some(b) if b.t_ns == p.t_ns => {
+                    rep.duplicate_stamps += 1;
+                    continue;
+                }
+                Some(b) if b.t_ns < p.t_ns => behind.push(*p),
+                _ => {
+                    behind.clear();
+                    behind.push(*p);
+                }
+            }
             rep.out_of_order_poses += 1;
             Some(SkipReason::OutOfOrder)
         } else {
             None
         };
+        if behind.len() == STAMP_RESET_RUN {
+            // The stamps went back and stay back (a clock reset, or one pose stamped in the
+            // future before): the run is not skipped but starts a new trajectory.
+            let run: Vec<i64> = behind.iter().map(|b| b.t_ns).collect();
+            rep.out_of_order_poses -= STAMP_RESET_RUN;
+            rep.skipped
+                .retain(|s| !(s.reason == SkipReason::OutOfOrder && run.contains(&s.t_ns)));
+            rep.stamp_resets.push(run[0]);
+            rep.splits_at_skipped += 1;
+            for (i, b) in behind.drain(..).enumerate() {
+                split_before.push(i == 0);
+                kept.push(b);
+            }
+            pending = false;
+            continue;
+        }
         if let Some(reason) = reason {
             rep.skipped.push(SkippedPose {
                 t_ns: p.t_ns,
@@ -411,6 +451,7 @@ fn screen_poses(
             rep.duplicate_stamps += 1;
             continue;
         }
+        behind.clear();
         let split = pending && !kept.is_empty();
         if split {
             rep.splits_at_skipped += 1;

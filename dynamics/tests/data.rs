@@ -507,3 +507,43 @@ fn nonfinite_commands_are_skipped_and_the_one_before_stays_held() {
         "{e}"
     );
 }
+
+#[test]
+fn stamps_that_go_back_and_stay_back_start_a_new_trajectory() {
+    // a clock reset: after pose 49 (490 ms) the stamps restart at 100 ms and go on
+    let mut poses = line(50);
+    poses.extend((0..30).map(|i| pose(100 + i * 10, 1.0 + i as f64 * 0.01, 0.0, 0.0)));
+    let (trajs, rep) =
+        build_trajectories(&poses, &[cmd(0, &[0.5])], &PipelineConfig::default()).unwrap();
+    assert_eq!(rep.stamp_resets, [100 * MS]);
+    assert_eq!(rep.out_of_order_poses, 0);
+    assert!(rep.skipped.is_empty(), "{:?}", rep.skipped);
+    assert_eq!(trajs.len(), 2);
+    assert_eq!((trajs[0].len(), trajs[1].len()), (50, 30));
+    assert_eq!(trajs[1].t_ns[0], 100 * MS);
+
+    // one pose stamped 100 s in the future: the poses after it start a new trajectory, the
+    // glitch is left alone (too short) instead of every later pose being skipped
+    let mut poses = line(60);
+    poses[30].t_ns = 100_000 * MS;
+    let (trajs, rep) =
+        build_trajectories(&poses, &[cmd(0, &[0.5])], &PipelineConfig::default()).unwrap();
+    assert_eq!(rep.stamp_resets, [310 * MS]);
+    assert_eq!(rep.out_of_order_poses, 0);
+    assert_eq!(rep.short_trajectories_dropped, 1);
+    let spans: Vec<(i64, i64)> = trajs
+        .iter()
+        .map(|t| (t.t_ns[0] / MS, t.t_ns[t.len() - 1] / MS))
+        .collect();
+    assert_eq!(spans, [(0, 290), (310, 590)]);
+
+    // fewer than STAMP_RESET_RUN poses behind: skipped, as before
+    let mut poses = line(60);
+    for (k, p) in poses[30..30 + STAMP_RESET_RUN - 1].iter_mut().enumerate() {
+        p.t_ns = (10 + k as i64) * MS;
+    }
+    let (_, rep) =
+        build_trajectories(&poses, &[cmd(0, &[0.5])], &PipelineConfig::default()).unwrap();
+    assert_eq!(rep.out_of_order_poses, STAMP_RESET_RUN - 1);
+    assert!(rep.stamp_resets.is_empty());
+}

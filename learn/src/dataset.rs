@@ -787,6 +787,13 @@ pub fn pipeline_notes(report: &PipelineReport) -> Vec<String> {
             report.splits_at_skipped
         ));
     }
+    if !report.stamp_resets.is_empty() {
+        notes.push(format!(
+            "the pose stamps went back and stayed back {} time(s) (first at {:.3} s: a clock reset, or a pose stamped in the future before): a new trajectory starts at each",
+            report.stamp_resets.len(),
+            report.stamp_resets[0] as f64 * 1e-9
+        ));
+    }
     if report.non_finite_commands > 0 {
         notes.push(format!(
             "{} commands with NaN or infinite values skipped (the command before stays held)",
@@ -862,11 +869,15 @@ pub fn data_warnings(data: &Dataset) -> Vec<String> {
                 out.push(format!("{bag}{n}"));
             }
         }
-        if !r.skipped.is_empty() || r.non_finite_commands > 0 {
+        if !r.skipped.is_empty() || r.non_finite_commands > 0 || !r.stamp_resets.is_empty() {
             out.extend(
                 pipeline_notes(r)
                     .into_iter()
-                    .filter(|n| n.starts_with("skipped") || n.contains("commands with NaN"))
+                    .filter(|n| {
+                        n.starts_with("skipped")
+                            || n.contains("commands with NaN")
+                            || n.starts_with("the pose stamps went back")
+                    })
                     .map(|n| format!("{bag}{n}")),
             );
         }
