@@ -7,8 +7,8 @@ use dynlab_learn::{Dataset, LoadOptions, TfFrames, Topics, data_warnings};
 /// Pose source, command topic and strictness.
 #[derive(Debug, Clone, Args)]
 pub struct SourceArgs {
-    /// Pose topic, geometry_msgs/msg/PoseStamped or nav_msgs/msg/Odometry (the type is read from
-    /// the bag) (default /push/block_pose or /car/pose).
+    /// Pose topic: PoseStamped, Odometry, PoseWithCovarianceStamped or TransformStamped (the
+    /// type is read from the bag) (default /push/block_pose or /car/pose).
     #[arg(long, conflicts_with = "pose_tf")]
     pub pose_topic: Option<String>,
     /// Poses from tf instead: the pose of CHILD in PARENT from /tf and /tf_static, composing

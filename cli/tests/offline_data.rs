@@ -10,7 +10,9 @@ use std::process::{Command, Output};
 use dynlab_bag::{Bag, BagWriter, WriterOptions};
 use dynlab_learn::dynamics::data::SavGol;
 use dynlab_learn::{LoadOptions, TfFrames, TimedDataset, Topics, World, load_bags_with};
-use dynlab_msgs::geometry_msgs::PoseStamped;
+use dynlab_msgs::geometry_msgs::{
+    PoseStamped, PoseWithCovarianceStamped, Transform, TransformStamped, Vector3,
+};
 use dynlab_msgs::nav_msgs::Odometry;
 use dynlab_msgs::{RosMessage, from_cdr, to_cdr};
 
@@ -107,47 +109,98 @@ fn tf_and_odometry_pose_sources_give_the_same_trajectories_as_pose_stamped() {
     let tmp = tempfile::tempdir().unwrap();
     // car: world → car on /tf; the same poses as nav_msgs/Odometry on another topic
     let car = collect(tmp.path(), "car");
-    let odom_bag = tmp.path().join("car_odom");
-    rewrite(
-        &car,
-        &odom_bag,
-        "/car/pose",
-        Some(("/mocap/odom", Odometry::TYPE_NAME, Odometry::definition())),
-        |_, data| {
-            let p: PoseStamped = from_cdr(data).unwrap();
-            let mut o = Odometry {
-                header: p.header.clone(),
-                child_frame_id: "car".into(),
-                ..Default::default()
-            };
-            o.pose.pose = p.pose;
-            Some((p.header.stamp.to_nanos() as u64, to_cdr(&o).unwrap()))
-        },
-    );
+    // the same poses as the other pose types real robots publish, each on a topic of its own
+    type Convert = fn(&PoseStamped) -> Vec<u8>;
+    let conversions: [(&str, &str, &str, Convert); 3] = [
+        (
+            "/mocap/odom",
+            Odometry::TYPE_NAME,
+            Odometry::definition(),
+            |p| {
+                let mut o = Odometry {
+                    header: p.header.clone(),
+                    child_frame_id: "car".into(),
+                    ..Default::default()
+                };
+                o.pose.pose = p.pose;
+                to_cdr(&o).unwrap()
+            },
+        ),
+        (
+            "/amcl_pose",
+            PoseWithCovarianceStamped::TYPE_NAME,
+            PoseWithCovarianceStamped::definition(),
+            |p| {
+                let mut o = PoseWithCovarianceStamped {
+                    header: p.header.clone(),
+                    ..Default::default()
+                };
+                o.pose.pose = p.pose;
+                to_cdr(&o).unwrap()
+            },
+        ),
+        (
+            "/vicon/car/car",
+            TransformStamped::TYPE_NAME,
+            TransformStamped::definition(),
+            |p| {
+                let pos = p.pose.position;
+                let t = TransformStamped {
+                    header: p.header.clone(),
+                    child_frame_id: "car".into(),
+                    transform: Transform {
+                        translation: Vector3 {
+                            x: pos.x,
+                            y: pos.y,
+                            z: pos.z,
+                        },
+                        rotation: p.pose.orientation,
+                    },
+                };
+                to_cdr(&t).unwrap()
+            },
+        ),
+    ];
     let reference = load(&car, &LoadOptions::default());
     assert_eq!(reference.data.world, World::Car);
     assert!(reference.data.transitions() > 2000);
     let from_tf = load(&car, &tf("world:car"));
-    let from_odom = load(
-        &odom_bag,
-        &LoadOptions {
-            topics: Topics {
-                pose: Some("/mocap/odom".into()),
-                cmd: None,
-            },
-            ..Default::default()
-        },
-    );
-    for (name, d) in [("tf", &from_tf), ("odometry", &from_odom)] {
-        assert_eq!(d.data.trajectories, reference.data.trajectories, "{name}");
-        assert_eq!(d.stamps, reference.stamps, "{name}");
-    }
+    assert_eq!(from_tf.data.trajectories, reference.data.trajectories);
+    assert_eq!(from_tf.stamps, reference.stamps);
     let notes = &from_tf.data.reports[0].source_notes;
     assert!(
         notes[0].starts_with("poses from tf world → car (chain world → car"),
         "{notes:?}"
     );
-    assert!(from_odom.data.reports[0].source_notes[0].contains("nav_msgs/msg/Odometry"));
+    for (topic, type_name, definition, convert) in conversions {
+        let other = tmp.path().join(topic.replace('/', "_"));
+        rewrite(
+            &car,
+            &other,
+            "/car/pose",
+            Some((topic, type_name, definition)),
+            |_, data| {
+                let p: PoseStamped = from_cdr(data).unwrap();
+                Some((p.header.stamp.to_nanos() as u64, convert(&p)))
+            },
+        );
+        let d = load(
+            &other,
+            &LoadOptions {
+                topics: Topics {
+                    pose: Some(topic.into()),
+                    cmd: None,
+                },
+                ..Default::default()
+            },
+        );
+        assert_eq!(
+            d.data.trajectories, reference.data.trajectories,
+            "{type_name}"
+        );
+        assert_eq!(d.stamps, reference.stamps, "{type_name}");
+        assert!(d.data.reports[0].source_notes[0].contains(type_name));
+    }
 
     // pushing: table → block directly, and world → block through the static world → table
     let push = collect(tmp.path(), "push");

@@ -88,8 +88,10 @@ impl std::fmt::Display for TfFrames {
 /// How bags are read: topic names, where the poses come from, and how bad messages are handled.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct LoadOptions {
-    /// Pose and command topics. The pose topic may carry `geometry_msgs/msg/PoseStamped` or
-    /// `nav_msgs/msg/Odometry` (its `pose.pose`); the type is read from the bag.
+    /// Pose and command topics. The pose topic may carry `geometry_msgs/msg/PoseStamped`,
+    /// `nav_msgs/msg/Odometry` or `geometry_msgs/msg/PoseWithCovarianceStamped` (their
+    /// `pose.pose`) or `geometry_msgs/msg/TransformStamped` (a motion-capture bridge's
+    /// `transform`); the type is read from the bag.
     pub topics: Topics,
     /// Read the poses from tf instead of a pose topic (default `None`).
     pub pose_tf: Option<TfFrames>,
@@ -394,47 +396,61 @@ fn read_poses(
         .map(|t| t.type_name.clone())
         .unwrap_or_default();
     use dynlab_msgs::RosMessage;
-    if type_name == Odometry::TYPE_NAME {
-        let poses = bag
-            .read::<Odometry>(&pose_topic)
-            .map_err(bag_err)?
+    use dynlab_msgs::geometry_msgs::{PoseWithCovarianceStamped, TransformStamped};
+    // Every supported type: its name, the field the pose is read from, and the reader.
+    type Reader = fn(&Bag, &str) -> Result<Vec<PoseSample>, dynlab_bag::BagError>;
+    fn poses_of<T: RosMessage>(
+        bag: &Bag,
+        topic: &str,
+        pose: impl Fn(&T) -> (i64, dynlab_msgs::geometry_msgs::Pose),
+    ) -> Result<Vec<PoseSample>, dynlab_bag::BagError> {
+        Ok(bag
+            .read::<T>(topic)?
             .into_iter()
             .map(|m| {
-                planar_sample(
-                    m.msg.header.stamp.to_nanos(),
-                    m.log_time_ns,
-                    &m.msg.pose.pose,
-                )
+                let (stamp, p) = pose(&m.msg);
+                planar_sample(stamp, m.log_time_ns, &p)
             })
-            .collect();
-        return Ok((
-            poses,
-            vec![format!(
-                "poses from {pose_topic} ({}: pose.pose)",
-                Odometry::TYPE_NAME
-            )],
-        ));
+            .collect())
     }
-    if type_name != PoseStamped::TYPE_NAME {
+    let readers: [(&str, &str, Reader); 4] = [
+        (PoseStamped::TYPE_NAME, "pose", |b, t| {
+            poses_of::<PoseStamped>(b, t, |m| (m.header.stamp.to_nanos(), m.pose))
+        }),
+        (Odometry::TYPE_NAME, "pose.pose", |b, t| {
+            poses_of::<Odometry>(b, t, |m| (m.header.stamp.to_nanos(), m.pose.pose))
+        }),
+        (PoseWithCovarianceStamped::TYPE_NAME, "pose.pose", |b, t| {
+            poses_of::<PoseWithCovarianceStamped>(b, t, |m| {
+                (m.header.stamp.to_nanos(), m.pose.pose)
+            })
+        }),
+        (TransformStamped::TYPE_NAME, "transform", |b, t| {
+            poses_of::<TransformStamped>(b, t, |m| {
+                (m.header.stamp.to_nanos(), m.transform.as_pose())
+            })
+        }),
+    ];
+    let Some(&(name, field, read)) = readers.iter().find(|(n, _, _)| *n == type_name) else {
+        let names: Vec<&str> = readers.iter().map(|(n, _, _)| *n).collect();
         return Err(LearnError::setting(
             "pose-topic",
             &pose_topic,
             format!(
-                "in bag {} it carries {type_name}; poses are read from {} or {} topics, or from tf \
-                 (--pose-tf PARENT:CHILD)",
+                "in bag {} it carries {type_name}; poses are read from topics of type {}, or from \
+                 tf (--pose-tf PARENT:CHILD)",
                 bag.path().display(),
-                PoseStamped::TYPE_NAME,
-                Odometry::TYPE_NAME
+                names.join(", ")
             ),
         ));
-    }
-    let poses = bag
-        .read::<PoseStamped>(&pose_topic)
-        .map_err(bag_err)?
-        .into_iter()
-        .map(|m| planar_sample(m.msg.header.stamp.to_nanos(), m.log_time_ns, &m.msg.pose))
-        .collect();
-    Ok((poses, Vec::new()))
+    };
+    let poses = read(bag, &pose_topic).map_err(bag_err)?;
+    let notes = if name == PoseStamped::TYPE_NAME {
+        Vec::new()
+    } else {
+        vec![format!("poses from {pose_topic} ({name}: {field})")]
+    };
+    Ok((poses, notes))
 }
 
 /// Poses and commands read from one bag, with notes on where they came from.

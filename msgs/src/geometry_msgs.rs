@@ -213,6 +213,17 @@ impl Default for PoseWithCovariance {
     }
 }
 
+/// `geometry_msgs/msg/PoseWithCovarianceStamped`: a pose with its uncertainty and a header (what
+/// localisation such as AMCL publishes).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PoseWithCovarianceStamped {
+    /// Stamp and frame.
+    pub header: Header,
+    /// The pose and its covariance.
+    pub pose: PoseWithCovariance,
+}
+
 /// `geometry_msgs/msg/TwistWithCovariance`: a twist with its uncertainty.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -305,6 +316,14 @@ Pose pose
 float64[36] covariance
 ";
 
+/// `PoseWithCovarianceStamped.msg` text.
+pub(crate) const POSE_WITH_COVARIANCE_STAMPED_MSG: &str = "\
+# A pose with its uncertainty, with a time stamp and the frame it is expressed in.
+
+std_msgs/Header header
+PoseWithCovariance pose
+";
+
 /// `TwistWithCovariance.msg` text.
 pub(crate) const TWIST_WITH_COVARIANCE_MSG: &str = "\
 # A twist with its uncertainty.
@@ -358,6 +377,11 @@ impl_ros_message!(
     PoseWithCovariance,
     "geometry_msgs/msg/PoseWithCovariance",
     POSE_WITH_COVARIANCE_MSG
+);
+impl_ros_message!(
+    PoseWithCovarianceStamped,
+    "geometry_msgs/msg/PoseWithCovarianceStamped",
+    POSE_WITH_COVARIANCE_STAMPED_MSG
 );
 impl_ros_message!(
     TwistWithCovariance,

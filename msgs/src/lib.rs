@@ -64,6 +64,7 @@ macro_rules! with_all_message_types {
             crate::geometry_msgs::Twist,
             crate::geometry_msgs::TwistStamped,
             crate::geometry_msgs::PoseWithCovariance,
+            crate::geometry_msgs::PoseWithCovarianceStamped,
             crate::geometry_msgs::TwistWithCovariance,
             crate::geometry_msgs::Transform,
             crate::geometry_msgs::TransformStamped,

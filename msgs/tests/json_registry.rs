@@ -162,6 +162,7 @@ fn registry_lists_every_type_once() {
         "rosgraph_msgs/msg/Clock",
         "geometry_msgs/msg/Transform",
         "geometry_msgs/msg/TransformStamped",
+        "geometry_msgs/msg/PoseWithCovarianceStamped",
         "tf2_msgs/msg/TFMessage",
         "dynlab_msgs/msg/PushAction",
     ] {

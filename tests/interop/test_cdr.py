@@ -176,6 +176,7 @@ def all_type_names():
         "ackermann_msgs/msg/AckermannDrive", "ackermann_msgs/msg/AckermannDriveStamped",
         "rosgraph_msgs/msg/Clock", "dynlab_msgs/msg/PushAction",
         "geometry_msgs/msg/Transform", "geometry_msgs/msg/TransformStamped", "tf2_msgs/msg/TFMessage",
+        "geometry_msgs/msg/PoseWithCovarianceStamped",
     ]
 
 

@@ -5,8 +5,8 @@ use dynlab_msgs::ackermann_msgs::{AckermannDrive, AckermannDriveStamped};
 use dynlab_msgs::builtin_interfaces::{Duration, Time};
 use dynlab_msgs::dynlab_msgs::PushAction;
 use dynlab_msgs::geometry_msgs::{
-    Point, Pose, PoseStamped, PoseWithCovariance, Quaternion, Transform, TransformStamped, Twist,
-    TwistStamped, TwistWithCovariance, Vector3,
+    Point, Pose, PoseStamped, PoseWithCovariance, PoseWithCovarianceStamped, Quaternion, Transform,
+    TransformStamped, Twist, TwistStamped, TwistWithCovariance, Vector3,
 };
 use dynlab_msgs::nav_msgs::{Odometry, Path};
 use dynlab_msgs::rosgraph_msgs::Clock;
@@ -206,6 +206,15 @@ impl Sample for PoseWithCovariance {
     }
 }
 
+impl Sample for PoseWithCovarianceStamped {
+    fn sample(rng: &mut Rng) -> Self {
+        PoseWithCovarianceStamped {
+            header: Header::sample(rng),
+            pose: PoseWithCovariance::sample(rng),
+        }
+    }
+}
+
 impl Sample for TwistWithCovariance {
     fn sample(rng: &mut Rng) -> Self {
         TwistWithCovariance {
@@ -319,6 +328,7 @@ macro_rules! for_every_type {
         $body!(dynlab_msgs::geometry_msgs::Twist);
         $body!(dynlab_msgs::geometry_msgs::TwistStamped);
         $body!(dynlab_msgs::geometry_msgs::PoseWithCovariance);
+        $body!(dynlab_msgs::geometry_msgs::PoseWithCovarianceStamped);
         $body!(dynlab_msgs::geometry_msgs::TwistWithCovariance);
         $body!(dynlab_msgs::geometry_msgs::Transform);
         $body!(dynlab_msgs::geometry_msgs::TransformStamped);
