@@ -1040,6 +1040,18 @@ mod tests {
     }
 
     #[test]
+    fn tf_frame_pairs_parse_or_say_how_to_write_them() {
+        let f = TfFrames::parse("world:car").unwrap();
+        assert_eq!((f.parent.as_str(), f.child.as_str()), ("world", "car"));
+        let f = TfFrames::parse("/map:base_link").unwrap();
+        assert_eq!(f.to_string(), "map:base_link");
+        for bad in ["world", "world:", ":car", "car:car", "a:b:c", "wor ld:car"] {
+            let e = TfFrames::parse(bad).unwrap_err().to_string();
+            assert!(e.contains("PARENT:CHILD"), "{bad}: {e}");
+        }
+    }
+
+    #[test]
     fn a_car_standing_still_is_too_little_excitation() {
         let poses: Vec<PoseSample> = (0..100)
             .map(|i| PoseSample {
