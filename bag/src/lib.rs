@@ -29,6 +29,8 @@ mod error;
 mod metadata;
 mod qos;
 mod reader;
+mod repair;
+pub mod tf;
 mod type_hash;
 mod writer;
 
@@ -36,7 +38,9 @@ pub use error::{BagError, TopicSummary};
 pub use metadata::METADATA_VERSION;
 pub use qos::{Durability, History, Liveliness, QosDuration, QosProfile, Reliability};
 pub use reader::{
-    Bag, BagInfo, FileInfo, FileRecovery, RawMessage, Recovery, SkippedChunk, Stamped, TopicInfo,
+    Bag, BagInfo, Declared, FileInfo, FileRecovery, RawMessage, Recovery, SkippedChunk, Stamped,
+    TopicInfo,
 };
+pub use repair::{DroppedMessage, RepairOptions, RepairReport, TopicRepair, repair};
 pub use type_hash::rihs01;
 pub use writer::{BagSummary, BagWriter, Compression, TopicId, WriterOptions};

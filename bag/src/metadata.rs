@@ -155,6 +155,10 @@ pub(crate) struct ReadMetadata {
     pub version: u64,
     pub relative_file_paths: Vec<String>,
     pub message_count: Option<u64>,
+    /// `starting_time.nanoseconds_since_epoch`, when given.
+    pub starting_time_ns: Option<u64>,
+    /// `duration.nanoseconds`, when given.
+    pub duration_ns: Option<u64>,
 }
 
 /// Reads the parts of `metadata.yaml` this crate uses.
@@ -200,10 +204,20 @@ pub(crate) fn read_metadata(path: &Path) -> Result<ReadMetadata, BagError> {
         )));
     }
     let message_count = info.get("message_count").and_then(Value::as_u64);
+    let starting_time_ns = info
+        .get("starting_time")
+        .and_then(|t| t.get("nanoseconds_since_epoch"))
+        .and_then(Value::as_u64);
+    let duration_ns = info
+        .get("duration")
+        .and_then(|t| t.get("nanoseconds"))
+        .and_then(Value::as_u64);
     Ok(ReadMetadata {
         version,
         relative_file_paths,
         message_count,
+        starting_time_ns,
+        duration_ns,
     })
 }
 

@@ -64,6 +64,8 @@ pub struct FileInfo {
     pub bytes: u64,
     /// Messages read from it.
     pub message_count: u64,
+    /// Chunks read whole from it (damaged chunks not counted).
+    pub chunks: u64,
     /// Whether the file ended properly (footer and closing magic).
     pub complete: bool,
 }
@@ -89,6 +91,11 @@ pub struct FileRecovery {
     pub readable_bytes: u64,
     /// Messages recovered from the file.
     pub messages: u64,
+    /// Chunks read whole.
+    pub chunks: u64,
+    /// The chunk count the file's statistics record declares, when that record was readable
+    /// (a cut file has lost it).
+    pub declared_chunks: Option<u64>,
     /// Where reading stopped (byte offset), if it stopped before the end of the data.
     pub stopped_at: Option<u64>,
     /// Why reading stopped, or what was missing.
@@ -97,11 +104,34 @@ pub struct FileRecovery {
     pub skipped_chunks: Vec<SkippedChunk>,
 }
 
+/// What a bag says it holds: from `metadata.yaml` (messages, start, duration) and the files'
+/// statistics records (chunks). Each is `None` when nothing readable declares it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Declared {
+    /// Messages `metadata.yaml` lists (only when it lists every file and all are present).
+    pub messages: Option<u64>,
+    /// Log time of the first message, from `metadata.yaml`.
+    pub start_ns: Option<u64>,
+    /// Time from first to last message, from `metadata.yaml`.
+    pub duration_ns: Option<u64>,
+    /// Chunks, summed over the files whose statistics record was readable (only when every
+    /// file's was).
+    pub chunks: Option<u64>,
+}
+
 /// For a damaged bag: how much was readable, where and why reading stopped.
 #[derive(Debug, Clone, PartialEq, Eq, Default)]
 pub struct Recovery {
     /// Messages recovered in total.
     pub messages: u64,
+    /// Chunks read whole, over all files.
+    pub chunks: u64,
+    /// Damaged chunks skipped, over all files.
+    pub skipped_chunks: u64,
+    /// Log times of the first and last message recovered.
+    pub span_ns: Option<(u64, u64)>,
+    /// What the bag declares it holds, to compare with what was recovered.
+    pub declared: Declared,
     /// The damaged files.
     pub files: Vec<FileRecovery>,
     /// Problems with the bag directory itself (missing or unusable `metadata.yaml`, missing
@@ -109,9 +139,41 @@ pub struct Recovery {
     pub notes: Vec<String>,
 }
 
+impl Recovery {
+    /// One line: what was recovered against what the bag declares, e.g. `recovered 545 of 1800
+    /// messages (30.3 %), 3 chunks (1 damaged chunk skipped), 3.017 s of 9.995 s`.
+    pub fn summary(&self) -> String {
+        let mut out = format!("recovered {}", self.messages);
+        match self.declared.messages {
+            Some(n) if n > 0 => out.push_str(&format!(
+                " of {n} messages ({:.1} %)",
+                100.0 * self.messages as f64 / n as f64
+            )),
+            _ => out.push_str(" messages"),
+        }
+        out.push_str(&format!(", {} chunks", self.chunks));
+        if let Some(n) = self.declared.chunks {
+            out.push_str(&format!(" of {n}"));
+        }
+        if self.skipped_chunks > 0 {
+            out.push_str(&format!(
+                " ({} damaged chunk{} skipped)",
+                self.skipped_chunks,
+                if self.skipped_chunks == 1 { "" } else { "s" }
+            ));
+        }
+        let span = self.span_ns.map_or(0, |(a, b)| b - a);
+        out.push_str(&format!(", {:.3} s", span as f64 * 1e-9));
+        if let Some(d) = self.declared.duration_ns {
+            out.push_str(&format!(" of {:.3} s", d as f64 * 1e-9));
+        }
+        out
+    }
+}
+
 impl fmt::Display for Recovery {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        writeln!(f, "damaged bag: recovered {} messages", self.messages)?;
+        writeln!(f, "damaged bag: {}", self.summary())?;
         for note in &self.notes {
             writeln!(f, "  note: {note}")?;
         }
@@ -283,9 +345,9 @@ pub struct Bag {
     recovery: Option<Recovery>,
 }
 
-/// Which `.mcap` files a path means, notes about the directory, and the message count
-/// `metadata.yaml` gives (when it is used).
-type ResolvedFiles = (Vec<PathBuf>, Vec<String>, Option<u64>);
+/// Which `.mcap` files a path means, notes about the directory, and what `metadata.yaml`
+/// declares (when it is used).
+type ResolvedFiles = (Vec<PathBuf>, Vec<String>, Declared);
 
 fn resolve_files(path: &Path) -> Result<ResolvedFiles, BagError> {
     let not_a_bag = |reason: String| BagError::NotABag {
@@ -298,7 +360,7 @@ fn resolve_files(path: &Path) -> Result<ResolvedFiles, BagError> {
         ));
     }
     if path.is_file() {
-        return Ok((vec![path.to_path_buf()], Vec::new(), None));
+        return Ok((vec![path.to_path_buf()], Vec::new(), Declared::default()));
     }
     let mut notes = Vec::new();
     let meta_path = path.join("metadata.yaml");
@@ -332,8 +394,13 @@ fn resolve_files(path: &Path) -> Result<ResolvedFiles, BagError> {
                     ));
                 }
                 if !present.is_empty() {
-                    let count = missing.is_empty().then_some(meta.message_count).flatten();
-                    return Ok((present, notes, count));
+                    let declared = Declared {
+                        messages: missing.is_empty().then_some(meta.message_count).flatten(),
+                        start_ns: meta.starting_time_ns,
+                        duration_ns: meta.duration_ns,
+                        chunks: None,
+                    };
+                    return Ok((present, notes, declared));
                 }
                 if meta.relative_file_paths.is_empty() {
                     notes.push("metadata.yaml lists no files".into());
@@ -384,7 +451,7 @@ fn resolve_files(path: &Path) -> Result<ResolvedFiles, BagError> {
             }
         )));
     }
-    Ok((found, notes, None))
+    Ok((found, notes, Declared::default()))
 }
 
 /// The largest uncompressed chunk this reader will inflate (rosbag2 chunks are 1–4 MiB).
@@ -396,6 +463,7 @@ struct FileReader<'b> {
     schemas: HashMap<u16, (String, String, String)>,
     channels: HashMap<u16, u32>,
     messages: u64,
+    chunks: u64,
 }
 
 #[derive(Default)]
@@ -640,15 +708,22 @@ fn op_name(opcode: u8) -> String {
     name.to_string()
 }
 
-/// Reads one file into `bag`; returns its info and, if damaged, its recovery record.
-fn read_file(bag: &mut BagBuilder, path: &Path, data: &[u8]) -> (FileInfo, Option<FileRecovery>) {
+/// Reads one file into `bag`; returns its info, its recovery record if damaged, and the chunk
+/// count its statistics record declares (when readable).
+fn read_file(
+    bag: &mut BagBuilder,
+    path: &Path,
+    data: &[u8],
+) -> (FileInfo, Option<FileRecovery>, Option<u64>) {
     let mut fr = FileReader {
         bag,
         schemas: HashMap::new(),
         channels: HashMap::new(),
         messages: 0,
+        chunks: 0,
     };
     let mut skipped = Vec::new();
+    let mut declared_chunks = None;
     let len = data.len();
     let mut pos = 0usize;
     let mut complete = false;
@@ -720,7 +795,10 @@ fn read_file(bag: &mut BagBuilder, path: &Path, data: &[u8]) -> (FileInfo, Optio
                 fr.check(&batch)?;
                 Ok(batch)
             }) {
-                Ok(batch) => fr.apply(batch),
+                Ok(batch) => {
+                    fr.chunks += 1;
+                    fr.apply(batch)
+                }
                 Err(reason) => {
                     if plausible_record_at(data, next) {
                         skipped.push(SkippedChunk {
@@ -756,6 +834,11 @@ fn read_file(bag: &mut BagBuilder, path: &Path, data: &[u8]) -> (FileInfo, Optio
                 }
             }
             op::DATA_END => data_end = true,
+            op::STATISTICS => {
+                if let Ok(Record::Statistics(st)) = mcap::parse_record(opcode, body) {
+                    declared_chunks = Some(u64::from(st.chunk_count));
+                }
+            }
             op::FOOTER => {
                 let end = next + mcap::MAGIC.len();
                 if data.get(next..end) == Some(mcap::MAGIC) {
@@ -791,6 +874,7 @@ fn read_file(bag: &mut BagBuilder, path: &Path, data: &[u8]) -> (FileInfo, Optio
         path: path.to_path_buf(),
         bytes: len as u64,
         message_count: fr.messages,
+        chunks: fr.chunks,
         complete,
     };
     let recovery = (stop.is_some() || !skipped.is_empty()).then(|| {
@@ -800,12 +884,14 @@ fn read_file(bag: &mut BagBuilder, path: &Path, data: &[u8]) -> (FileInfo, Optio
             file_bytes: len as u64,
             readable_bytes: readable,
             messages: fr.messages,
+            chunks: fr.chunks,
+            declared_chunks,
             stopped_at,
             reason,
             skipped_chunks: skipped,
         }
     });
-    (info, recovery)
+    (info, recovery, declared_chunks)
 }
 
 impl Bag {
@@ -815,20 +901,33 @@ impl Bag {
     /// read.
     pub fn open(path: impl AsRef<Path>) -> Result<Bag, BagError> {
         let path = path.as_ref();
-        let (files, mut notes, listed_count) = resolve_files(path)?;
+        let (files, mut notes, mut declared) = resolve_files(path)?;
+        let listed_count = declared.messages;
         let mut builder = BagBuilder::default();
         let mut infos = Vec::new();
         let mut damaged = Vec::new();
+        let mut declared_chunks = Some(0u64);
         for file in &files {
             let data = std::fs::read(file).map_err(|e| BagError::io("reading", file, e))?;
-            let (info, recovery) = read_file(&mut builder, file, &data);
+            let (info, recovery, chunks) = read_file(&mut builder, file, &data);
+            declared_chunks = declared_chunks.zip(chunks).map(|(a, b)| a + b);
             infos.push(info);
             damaged.extend(recovery);
         }
+        declared.chunks = declared_chunks;
         let total = builder.entries.len() as u64;
+        let chunks = infos.iter().map(|i| i.chunks).sum();
+        let skipped_chunks = damaged
+            .iter()
+            .map(|r: &FileRecovery| r.skipped_chunks.len() as u64)
+            .sum();
         if total == 0 && !damaged.is_empty() {
             let recovery = Recovery {
                 messages: 0,
+                chunks,
+                skipped_chunks,
+                span_ns: None,
+                declared,
                 files: damaged,
                 notes,
             };
@@ -859,8 +958,17 @@ impl Bag {
             ));
         }
         builder.entries.sort_by_key(|e| e.log_time_ns);
+        let span_ns = builder
+            .entries
+            .first()
+            .zip(builder.entries.last())
+            .map(|(a, b)| (a.log_time_ns, b.log_time_ns));
         let recovery = (!damaged.is_empty() || !notes.is_empty()).then_some(Recovery {
             messages: total,
+            chunks,
+            skipped_chunks,
+            span_ns,
+            declared,
             files: damaged,
             notes,
         });

@@ -1,4 +1,5 @@
-//! `dynlab bag info | export | import`: look into bags and convert them to and from JSON lines.
+//! `dynlab bag info | export | import | repair`: look into bags, convert them to and from JSON
+//! lines, and rewrite damaged ones.
 //!
 //! The JSON-lines form has one message per line:
 //! `{"topic": "/car/pose", "type": "geometry_msgs/msg/PoseStamped", "log_time_ns": …,
@@ -63,6 +64,21 @@ enum BagCommand {
         #[arg(long, value_enum, default_value_t = QosArg::Default)]
         qos: QosArg,
     },
+    /// Rewrites a damaged or truncated bag whole: everything the recovering reader can read,
+    /// into a fresh, valid bag (MCAP with summary + metadata.yaml); prints what was kept and
+    /// dropped.
+    Repair {
+        /// The damaged bag (a directory or an .mcap file).
+        input: PathBuf,
+        /// The bag directory to create (must not exist or be empty).
+        output: PathBuf,
+        /// Also drop messages with NaN or infinite fields (an occluded motion-capture body).
+        #[arg(long)]
+        drop_nonfinite: bool,
+        /// Chunk compression of the new bag.
+        #[arg(long, value_enum, default_value_t = CompressionArg::Zstd)]
+        compression: CompressionArg,
+    },
 }
 
 #[derive(Debug, Clone, Copy, ValueEnum)]
@@ -98,6 +114,27 @@ pub fn run(args: BagArgs) -> anyhow::Result<()> {
             chunk_size,
             qos,
         } => import(jsonl, out, compression, chunk_size, qos),
+        BagCommand::Repair {
+            input,
+            output,
+            drop_nonfinite,
+            compression,
+        } => {
+            let options = dynlab_bag::RepairOptions {
+                drop_nonfinite,
+                writer: WriterOptions {
+                    compression: match compression {
+                        CompressionArg::Zstd => Compression::Zstd,
+                        CompressionArg::None => Compression::None,
+                    },
+                    ..WriterOptions::default()
+                },
+            };
+            let report = dynlab_bag::repair(&input, &output, &options)
+                .with_context(|| format!("repairing {}", input.display()))?;
+            print!("{report}");
+            Ok(())
+        }
     }
 }
 

@@ -81,6 +81,10 @@ pub struct CollectArgs {
     /// already, and `ros2 bag play --clock` publishes /clock from them).
     #[arg(long)]
     clock: bool,
+    /// Also write /tf (the measured pose as table → block or world → car, at every pose) and
+    /// /tf_static (once), as sim_node publishes them.
+    #[arg(long)]
+    tf: bool,
     /// Replay these actions (JSON lines) from the scenario start, as sim_node in lock-step mode,
     /// instead of exploring.
     #[arg(long, value_name = "FILE", conflicts_with_all = ["episodes", "explore"])]
@@ -239,7 +243,7 @@ pub fn run(args: CollectArgs) -> anyhow::Result<()> {
     }
     let gap_ns = (args.episode_gap * 1e9).round() as u64;
     let samples = concatenate(&episodes, 0, gap_ns);
-    let summary = write_bag(&args.out, world, args.clock, options, &samples)?;
+    let summary = write_bag(&args, &scenario, world, options, &samples)?;
     print_summary(&summary, Some((count, left_table)), started);
     Ok(())
 }
@@ -307,14 +311,22 @@ fn race_episodes(
 }
 
 fn write_bag(
-    out: &Path,
+    args: &CollectArgs,
+    scenario: &Scenario,
     world: SimWorld,
-    clock: bool,
     options: WriterOptions,
     samples: &[Sample],
 ) -> anyhow::Result<BagSummary> {
-    let mut w = SimBagWriter::create(out, world, clock, options)
+    let out = &args.out;
+    let mut w = SimBagWriter::create(out, world, args.clock, options)
         .with_context(|| format!("creating bag {}", out.display()))?;
+    if args.tf {
+        let car = match scenario {
+            Scenario::Car(s) => s.car.clone(),
+            Scenario::Push(_) => Default::default(),
+        };
+        w = w.with_tf(&car)?;
+    }
     for s in samples {
         w.write(s)?;
     }
@@ -444,7 +456,7 @@ fn replay(
             }
         }
     }
-    write_bag(&args.out, world, args.clock, options, &samples)
+    write_bag(args, scenario, world, options, &samples)
 }
 
 #[cfg(test)]

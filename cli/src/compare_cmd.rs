@@ -8,7 +8,7 @@ use anyhow::{Context, bail};
 use clap::Args;
 use dynlab_diagnose::compare::{CompareConfig, compare_with_baseline, html};
 use dynlab_learn::dynamics::data::SavGol;
-use dynlab_learn::{Topics, load_bags_timed, load_bags_timed_at, load_model};
+use dynlab_learn::{LoadOptions, load_bags_with, load_model};
 
 /// `dynlab compare …`
 #[derive(Debug, Args)]
@@ -37,12 +37,8 @@ pub struct CompareArgs {
     /// Worst segments to list.
     #[arg(long, default_value_t = 10)]
     worst: usize,
-    /// Pose topic (default from the model's world: /car/pose or /push/block_pose).
-    #[arg(long)]
-    pose_topic: Option<String>,
-    /// Command topic (default /car/cmd or /push/action).
-    #[arg(long, alias = "action-topic")]
-    cmd_topic: Option<String>,
+    #[command(flatten)]
+    source: crate::source_args::SourceArgs,
     /// Also replay the bag(s) through the live predictor of the `model_server` node and write its
     /// predictions, one JSON object per pose, to this file (what the node publishes on the same
     /// data).
@@ -56,7 +52,7 @@ pub struct CompareArgs {
 fn write_online(
     args: &CompareArgs,
     model: &dynlab_learn::Model,
-    topics: &Topics,
+    opts: &LoadOptions,
 ) -> anyhow::Result<()> {
     use dynlab_diagnose::compare::online::{OnlineConfig, OnlinePredictor, replay};
     use std::io::Write as _;
@@ -68,7 +64,7 @@ fn write_online(
     );
     for b in &args.bags {
         let bag = dynlab_bag::Bag::open(b)?;
-        let (poses, cmds) = dynlab_learn::dataset::read_samples(&bag, model.world(), topics)?;
+        let (poses, cmds, _) = dynlab_learn::dataset::read_samples_with(&bag, model.world(), opts)?;
         let mut p = OnlinePredictor::new(
             model.clone(),
             OnlineConfig {
@@ -101,7 +97,7 @@ pub fn run(args: CompareArgs) -> anyhow::Result<()> {
     };
     let world = model.world();
     // a bag of the other robot: say so rather than "topic missing"
-    if args.pose_topic.is_none() {
+    if !args.source.names_pose_source() {
         for b in &args.bags {
             if let Ok(bag) = dynlab_bag::Bag::open(b)
                 && let Ok(w) = dynlab_learn::dataset::infer_world(&bag)
@@ -109,7 +105,7 @@ pub fn run(args: CompareArgs) -> anyhow::Result<()> {
                 && bag.topic(world.default_pose_topic()).is_none()
             {
                 bail!(
-                    "the model {} is a {} model but {} holds {} data ({}); compare it on a bag of the same robot, or name the pose topic with --pose-topic",
+                    "the model {} is a {} model but {} holds {} data ({}); compare it on a bag of the same robot, or name the pose source with --pose-topic or --pose-tf",
                     args.model.display(),
                     world,
                     b.display(),
@@ -119,11 +115,8 @@ pub fn run(args: CompareArgs) -> anyhow::Result<()> {
             }
         }
     }
-    let topics = Topics {
-        pose: args.pose_topic.clone(),
-        cmd: args.cmd_topic.clone(),
-    };
-    let mut data = load_bags_timed(&args.bags, Some(world), &topics, &SavGol::default())?;
+    let opts = args.source.options()?;
+    let mut data = load_bags_with(&args.bags, Some(world), &opts, &SavGol::default(), None)?;
     // a car model steps a fixed dt: poses at another rate (a 240 Hz motion capture) are
     // resampled to it
     if world == dynlab_learn::World::Car
@@ -135,14 +128,15 @@ pub fn run(args: CompareArgs) -> anyhow::Result<()> {
             1.0 / data.data.pose_dt_s,
             model.dt() * 1e3
         );
-        data = load_bags_timed_at(
+        data = load_bags_with(
             &args.bags,
             Some(world),
-            &topics,
+            &opts,
             &SavGol::default(),
             Some(model.dt()),
         )?;
     }
+    crate::source_args::warn_about_data(&data.data);
     let cfg = CompareConfig {
         steps: args.steps,
         segment_s: args.segment,
@@ -168,7 +162,7 @@ pub fn run(args: CompareArgs) -> anyhow::Result<()> {
     std::fs::write(&json, serde_json::to_string_pretty(&report)?)
         .with_context(|| format!("writing {}", json.display()))?;
     let page = html::report(&report).write(&args.out)?;
-    write_online(&args, &model, &topics)?;
+    write_online(&args, &model, &opts)?;
     print!("{}", report.summary());
     println!("report: {} and {}", page.display(), json.display());
     Ok(())

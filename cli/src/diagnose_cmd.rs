@@ -8,7 +8,7 @@ use clap::{Args, Parser};
 use dynlab_diagnose::diagnosis::{DiagnoseConfig, diagnose, diagnosis_page};
 use dynlab_learn::dynamics::data::SavGol;
 use dynlab_learn::dynamics::physics::PhysicsModel;
-use dynlab_learn::{Topics, load_bags, load_bags_timed_at, load_model};
+use dynlab_learn::{load_bags_with, load_model, pipeline_notes};
 
 /// `dynlab diagnose …`
 #[derive(Debug, Args)]
@@ -50,22 +50,22 @@ pub struct DiagnoseArgs {
     /// [--effects-file …]`), written to `<out>/model`.
     #[arg(long)]
     apply: bool,
-    /// Pose topic (default from the model's world).
-    #[arg(long)]
-    pose_topic: Option<String>,
-    /// Command topic (default from the model's world).
-    #[arg(long, alias = "action-topic")]
-    cmd_topic: Option<String>,
+    #[command(flatten)]
+    source: crate::source_args::SourceArgs,
 }
 
 pub fn run(args: DiagnoseArgs) -> anyhow::Result<()> {
     let (model, _meta) = load_model(&args.model, None, None)
         .with_context(|| format!("loading the model {}", args.model.display()))?;
-    let topics = Topics {
-        pose: args.pose_topic.clone(),
-        cmd: args.cmd_topic.clone(),
-    };
-    let mut data = load_bags(&args.bags, Some(model.world()), &topics, &SavGol::default())?;
+    let opts = args.source.options()?;
+    let mut data = load_bags_with(
+        &args.bags,
+        Some(model.world()),
+        &opts,
+        &SavGol::default(),
+        None,
+    )?
+    .data;
     // a car model steps a fixed dt: poses at another rate are resampled to it (as compare does)
     if model.world() == dynlab_learn::World::Car
         && (data.pose_dt_s - model.dt()).abs() > 0.01 * model.dt()
@@ -75,15 +75,16 @@ pub fn run(args: DiagnoseArgs) -> anyhow::Result<()> {
             data.pose_dt_s * 1e3,
             model.dt() * 1e3
         );
-        data = load_bags_timed_at(
+        data = load_bags_with(
             &args.bags,
             Some(model.world()),
-            &topics,
+            &opts,
             &SavGol::default(),
             Some(model.dt()),
         )?
         .data;
     }
+    crate::source_args::warn_about_data(&data);
     let effects = match &args.effects {
         Some(names) => {
             let n: Vec<&str> = names.iter().map(|s| s.as_str()).collect();
@@ -112,7 +113,13 @@ pub fn run(args: DiagnoseArgs) -> anyhow::Result<()> {
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
     let json = args.out.join("diagnosis.json");
-    std::fs::write(&json, serde_json::to_string_pretty(&d.to_json())? + "\n")
+    let mut value = d.to_json();
+    if let Some(obj) = value.as_object_mut() {
+        // how the data were read: pose source, a damaged bag's recovery, skipped poses
+        let notes: Vec<Vec<String>> = data.reports.iter().map(pipeline_notes).collect();
+        obj.insert("data_notes".into(), serde_json::to_value(notes)?);
+    }
+    std::fs::write(&json, serde_json::to_string_pretty(&value)? + "\n")
         .with_context(|| format!("writing {}", json.display()))?;
     let html = args.out.join("diagnosis.html");
     std::fs::write(&html, diagnosis_page(&d))
@@ -153,13 +160,18 @@ pub fn run(args: DiagnoseArgs) -> anyhow::Result<()> {
     if let Some(f) = &custom {
         train.extend(["--effects-file".into(), f.display().to_string()]);
     }
+    let src = &args.source;
     for (flag, v) in [
-        ("--pose-topic", &args.pose_topic),
-        ("--cmd-topic", &args.cmd_topic),
+        ("--pose-topic", &src.pose_topic),
+        ("--pose-tf", &src.pose_tf),
+        ("--cmd-topic", &src.cmd_topic),
     ] {
         if let Some(v) = v {
             train.extend([flag.into(), v.clone()]);
         }
+    }
+    if src.strict {
+        train.push("--strict".into());
     }
     train.extend(["--out".into(), args.out.join("model").display().to_string()]);
     let shown = train.join(" ");

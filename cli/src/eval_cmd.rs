@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use clap::Args;
 use dynlab_learn::dynamics::data::SavGol;
-use dynlab_learn::{Topics, evaluate, load_bags, load_model};
+use dynlab_learn::{evaluate, load_bags_with, load_model};
 
 /// `dynlab eval-model …`
 #[derive(Debug, Args)]
@@ -22,12 +22,8 @@ pub struct EvalArgs {
     /// Car: length of the TVE segments (s) (Kohler et al.: 3 s).
     #[arg(long, default_value_t = 3.0)]
     segment: f64,
-    /// Pose topic (default from the model's world).
-    #[arg(long)]
-    pose_topic: Option<String>,
-    /// Command topic (default from the model's world).
-    #[arg(long, alias = "action-topic")]
-    cmd_topic: Option<String>,
+    #[command(flatten)]
+    source: crate::source_args::SourceArgs,
     /// Print JSON instead of a table.
     #[arg(long)]
     json: bool,
@@ -35,11 +31,16 @@ pub struct EvalArgs {
 
 pub fn run(args: EvalArgs) -> anyhow::Result<()> {
     let (model, _meta) = load_model(&args.model, None, None)?;
-    let topics = Topics {
-        pose: args.pose_topic.clone(),
-        cmd: args.cmd_topic.clone(),
-    };
-    let data = load_bags(&args.bags, Some(model.world()), &topics, &SavGol::default())?;
+    let opts = args.source.options()?;
+    let data = load_bags_with(
+        &args.bags,
+        Some(model.world()),
+        &opts,
+        &SavGol::default(),
+        None,
+    )?
+    .data;
+    crate::source_args::warn_about_data(&data);
     let report = evaluate(&model, &data, args.steps, args.segment)?;
     if args.json {
         println!("{}", serde_json::to_string_pretty(&report)?);

@@ -11,6 +11,7 @@ mod eval_cmd;
 mod eval_group;
 mod eval_push_cmd;
 mod eval_race_cmd;
+mod source_args;
 mod train_cmd;
 
 use std::process::ExitCode;

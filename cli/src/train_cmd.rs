@@ -12,7 +12,7 @@ use dynlab_learn::dynamics::data::SavGol;
 use dynlab_learn::dynamics::ode::Solver;
 use dynlab_learn::file::TrainingMeta;
 use dynlab_learn::{
-    Loss, ModelKind, Progress, Split, Topics, TrainConfig, World, load_bags, save_model, train,
+    Loss, ModelKind, Progress, Split, TrainConfig, World, load_bags_with, save_model, train,
 };
 use indicatif::{ProgressBar, ProgressStyle};
 
@@ -83,12 +83,8 @@ pub struct TrainArgs {
     /// Dopri5 absolute tolerance (node-dopri5).
     #[arg(long)]
     atol: Option<f64>,
-    /// Pose topic (default /push/block_pose or /car/pose).
-    #[arg(long)]
-    pose_topic: Option<String>,
-    /// Command topic (default /push/action or /car/cmd).
-    #[arg(long, alias = "action-topic")]
-    cmd_topic: Option<String>,
+    #[command(flatten)]
+    source: crate::source_args::SourceArgs,
     /// Output model directory.
     #[arg(long)]
     out: PathBuf,
@@ -114,17 +110,15 @@ enum NormArg {
 pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     let kind = ModelKind::from_name(&args.kind)?;
     let world = args.world.as_deref().map(World::from_name).transpose()?;
-    let topics = Topics {
-        pose: args.pose_topic.clone(),
-        cmd: args.cmd_topic.clone(),
-    };
     // read the custom effect files first: a bad file fails before the bags load
     let custom_effects = args
         .effects_files
         .iter()
         .map(|f| dynlab_learn::train::read_custom_effect(f))
         .collect::<Result<Vec<_>, _>>()?;
-    let data = load_bags(&args.bags, world, &topics, &SavGol::default())?;
+    let opts = args.source.options()?;
+    let data = load_bags_with(&args.bags, world, &opts, &SavGol::default(), None)?.data;
+    crate::source_args::warn_about_data(&data);
     if data.transitions() < 10 {
         bail!(
             "too little data: {} transitions in {} trajectories; record more (at least 10 transitions, better thousands)",

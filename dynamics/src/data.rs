@@ -1,10 +1,18 @@
 //! From recorded poses and commands to training data.
 //!
 //! [`build_trajectories`] turns time-stamped poses `(t, x, y, yaw)` and commands at other rates
-//! into [`Trajectory`]s: sorted, split at gaps, yaw unwrapped, resampled to a fixed step when the
+//! into [`Trajectory`]s: split at gaps, yaw unwrapped, resampled to a fixed step when the
 //! stamps jitter, and each pose given the command held over the interval that starts at it
 //! (zero-order hold, never a command from the future; see [`CommandHold`]). Everything it
 //! changes or drops is counted in a [`PipelineReport`].
+//!
+//! Real data as they come: a pose with a NaN or infinite value (a motion capture that lost the
+//! body) and a pose whose stamp goes back (earlier than the last pose kept) are skipped, counted
+//! and listed, and the trajectory is split there, so no transition spans the bad message; when
+//! [`STAMP_RESET_RUN`] poses in a row go back (the clock was reset, or one pose was stamped in the
+//! future), they start a new trajectory instead of being skipped. A command with a NaN or infinite
+//! value is skipped (the previous command stays held).
+//! [`PipelineConfig::strict`] refuses such input instead.
 //!
 //! [`savgol`] smooths and differentiates on (possibly irregular) stamps; [`car_states`] turns a
 //! trajectory into the car state `(x, y, ψ, vx, vy, ω)` with body-frame velocities as in Kohler
@@ -30,9 +38,11 @@ pub enum DataError {
         /// Number of poses seen.
         poses: usize,
     },
-    /// A NaN or infinite value.
+    /// A NaN or infinite value (only with [`PipelineConfig::strict`]; otherwise such messages
+    /// are skipped).
     #[error(
-        "non-finite value in {field} at t = {t_ns} ns ({value}); remove or repair that message"
+        "non-finite value in {field} at t = {t_ns} ns ({value}); remove or repair that message \
+         (`dynlab bag repair --drop-nonfinite`), or leave out --strict to skip such messages"
     )]
     NonFinite {
         /// Which field (`pose.x`, `command[1]`, …).
@@ -41,6 +51,31 @@ pub enum DataError {
         t_ns: i64,
         /// The offending value.
         value: f64,
+    },
+    /// A pose stamped before the pose received before it (only with [`PipelineConfig::strict`];
+    /// otherwise such poses are skipped).
+    #[error(
+        "pose stamps go back: the pose at t = {t_ns} ns comes after one at t = {previous_ns} ns; \
+         fix the stamps, or leave out --strict to skip such poses and split the trajectory there"
+    )]
+    OutOfOrder {
+        /// Stamp of the pose that goes back \[ns\].
+        t_ns: i64,
+        /// Stamp of the pose before it \[ns\].
+        previous_ns: i64,
+    },
+    /// Every pose was skipped.
+    #[error(
+        "no usable poses: all {poses} poses were skipped ({non_finite} with NaN or infinite \
+         values, {out_of_order} with stamps going back); check the pose source"
+    )]
+    NoUsablePoses {
+        /// Poses given.
+        poses: usize,
+        /// Of which non-finite.
+        non_finite: usize,
+        /// Of which out of order.
+        out_of_order: usize,
     },
     /// Commands of different lengths.
     #[error(
@@ -162,6 +197,10 @@ pub struct PipelineConfig {
     pub min_poses: usize,
     /// Resampling (default `Auto { max_jitter: 0.1 }`).
     pub resample: Resample,
+    /// Refuse non-finite poses and commands and poses whose stamp goes back, with an error
+    /// naming the message (default `false`: skip them, count them and split the trajectory at
+    /// each skipped pose).
+    pub strict: bool,
 }
 
 impl Default for PipelineConfig {
@@ -172,6 +211,7 @@ impl Default for PipelineConfig {
             max_command_age_ns: None,
             min_poses: 2,
             resample: Resample::Auto { max_jitter: 0.1 },
+            strict: false,
         }
     }
 }
@@ -185,6 +225,25 @@ pub struct Gap {
     pub to_ns: i64,
 }
 
+/// Why a pose was skipped.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SkipReason {
+    /// A NaN or infinite x, y or yaw.
+    NonFinite,
+    /// Its stamp is before the last pose kept.
+    OutOfOrder,
+}
+
+/// A pose [`build_trajectories`] skipped.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct SkippedPose {
+    /// Its stamp \[ns\].
+    pub t_ns: i64,
+    /// Why.
+    pub reason: SkipReason,
+}
+
 /// What [`build_trajectories`] did to the data.
 #[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct PipelineReport {
@@ -194,8 +253,24 @@ pub struct PipelineReport {
     pub commands_in: usize,
     /// Poses dropped because another pose had the same stamp.
     pub duplicate_stamps: usize,
-    /// Whether the input had to be sorted by stamp.
-    pub sorted: bool,
+    /// Poses skipped for a NaN or infinite value.
+    pub non_finite_poses: usize,
+    /// Poses skipped because their stamp goes back.
+    pub out_of_order_poses: usize,
+    /// Every skipped pose, in input order.
+    pub skipped: Vec<SkippedPose>,
+    /// Trajectory splits at skipped poses and stamp resets (a run of skipped poses splits once;
+    /// none at the start or end of the data).
+    pub splits_at_skipped: usize,
+    /// Stamps where the pose stamps went back and stayed back ([`STAMP_RESET_RUN`] poses in a
+    /// row behind the last kept pose, in order among themselves: a clock reset, or a pose stamped
+    /// in the future before them). Each starts a new trajectory; its poses are not skipped.
+    pub stamp_resets: Vec<i64>,
+    /// Commands skipped for a NaN or infinite value.
+    pub non_finite_commands: usize,
+    /// Notes about where the samples came from, set by the loader (pose source, a damaged bag's
+    /// recovery); empty from [`build_trajectories`].
+    pub source_notes: Vec<String>,
     /// The gap threshold used \[ns\].
     pub max_gap_ns: i64,
     /// Gaps that split trajectories.
@@ -259,19 +334,15 @@ fn median_i64(v: &mut [i64]) -> i64 {
     v[v.len() / 2]
 }
 
-fn check_finite(poses: &[PoseSample], commands: &[CommandSample]) -> Result<usize, DataError> {
-    for p in poses {
-        for (name, v) in [("pose.x", p.x), ("pose.y", p.y), ("pose.yaw", p.yaw)] {
-            if !v.is_finite() {
-                return Err(DataError::NonFinite {
-                    field: name.into(),
-                    t_ns: p.t_ns,
-                    value: v,
-                });
-            }
-        }
-    }
+/// The finite commands (all of one dimension, returned) — a non-finite one is an error when
+/// `strict`, otherwise skipped and counted.
+fn check_commands<'a>(
+    commands: &'a [CommandSample],
+    strict: bool,
+    rep: &mut PipelineReport,
+) -> Result<(usize, Vec<&'a CommandSample>), DataError> {
     let dim = commands.first().map(|c| c.u.len()).unwrap_or(0);
+    let mut kept = Vec::with_capacity(commands.len());
     for c in commands {
         if c.u.len() != dim {
             return Err(DataError::CommandDimension {
@@ -280,17 +351,123 @@ fn check_finite(poses: &[PoseSample], commands: &[CommandSample]) -> Result<usiz
                 got: c.u.len(),
             });
         }
-        for (i, v) in c.u.iter().enumerate() {
-            if !v.is_finite() {
+        match c.u.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+            Some((i, v)) if strict => {
                 return Err(DataError::NonFinite {
                     field: format!("command[{i}]"),
                     t_ns: c.t_ns,
                     value: *v,
                 });
             }
+            Some(_) => rep.non_finite_commands += 1,
+            None => kept.push(c),
         }
     }
-    Ok(dim)
+    Ok((dim, kept))
+}
+
+/// Poses in a row, in order among themselves but all behind the last pose kept, that count as a
+/// reset of the stamps (a new trajectory starts with them) rather than as poses to skip.
+pub const STAMP_RESET_RUN: usize = 5;
+
+/// The poses to use, in input order, each with whether the trajectory must split before it
+/// (a skipped pose came between it and the previous kept one). Non-finite poses and poses whose
+/// stamp goes back are skipped (errors when `strict`), repeated stamps dropped; a run of
+/// [`STAMP_RESET_RUN`] poses behind the last kept one starts a new trajectory instead.
+fn screen_poses(
+    poses: &[PoseSample],
+    strict: bool,
+    rep: &mut PipelineReport,
+) -> Result<(Vec<PoseSample>, Vec<bool>), DataError> {
+    let mut kept: Vec<PoseSample> = Vec::with_capacity(poses.len());
+    let mut split_before = Vec::with_capacity(poses.len());
+    let mut pending = false;
+    // poses behind the last kept one, in order among themselves
+    let mut behind: Vec<PoseSample> = Vec::new();
+    for p in poses {
+        let bad = [("pose.x", p.x), ("pose.y", p.y), ("pose.yaw", p.yaw)]
+            .into_iter()
+            .find(|(_, v)| !v.is_finite());
+        let reason = if let Some((field, value)) = bad {
+            if strict {
+                return Err(DataError::NonFinite {
+                    field: field.into(),
+                    t_ns: p.t_ns,
+                    value,
+                });
+            }
+            rep.non_finite_poses += 1;
+            Some(SkipReason::NonFinite)
+        } else if let Some(last) = kept.last()
+            && p.t_ns < last.t_ns
+        {
+            if strict {
+                return Err(DataError::OutOfOrder {
+                    t_ns: p.t_ns,
+                    previous_ns: last.t_ns,
+                });
+            }
+            match behind.last() {
+                Some(b) if b.t_ns == p.t_ns => {
+                    rep.duplicate_stamps += 1;
+                    continue;
+                }
+                Some(b) if b.t_ns < p.t_ns => behind.push(*p),
+                _ => {
+                    behind.clear();
+                    behind.push(*p);
+                }
+            }
+            rep.out_of_order_poses += 1;
+            Some(SkipReason::OutOfOrder)
+        } else {
+            None
+        };
+        if behind.len() == STAMP_RESET_RUN {
+            // The stamps went back and stay back (a clock reset, or one pose stamped in the
+            // future before): the run is not skipped but starts a new trajectory.
+            let run: Vec<i64> = behind.iter().map(|b| b.t_ns).collect();
+            rep.out_of_order_poses -= STAMP_RESET_RUN;
+            rep.skipped
+                .retain(|s| !(s.reason == SkipReason::OutOfOrder && run.contains(&s.t_ns)));
+            rep.stamp_resets.push(run[0]);
+            rep.splits_at_skipped += 1;
+            for (i, b) in behind.drain(..).enumerate() {
+                split_before.push(i == 0);
+                kept.push(b);
+            }
+            pending = false;
+            continue;
+        }
+        if let Some(reason) = reason {
+            rep.skipped.push(SkippedPose {
+                t_ns: p.t_ns,
+                reason,
+            });
+            pending = true;
+            continue;
+        }
+        if kept.last().is_some_and(|last| last.t_ns == p.t_ns) {
+            rep.duplicate_stamps += 1;
+            continue;
+        }
+        behind.clear();
+        let split = pending && !kept.is_empty();
+        if split {
+            rep.splits_at_skipped += 1;
+        }
+        split_before.push(split);
+        kept.push(*p);
+        pending = false;
+    }
+    if kept.is_empty() {
+        return Err(DataError::NoUsablePoses {
+            poses: poses.len(),
+            non_finite: rep.non_finite_poses,
+            out_of_order: rep.out_of_order_poses,
+        });
+    }
+    Ok((kept, split_before))
 }
 
 /// Index of the latest command with stamp `< t` (`strict`) or `≤ t`.
@@ -331,34 +508,36 @@ pub fn build_trajectories(
             hint: "must be positive (or unset for 5 × the median interval)",
         });
     }
-    let dim_u = check_finite(poses, commands)?;
     let mut rep = PipelineReport {
         poses_in: poses.len(),
         commands_in: commands.len(),
         ..Default::default()
     };
-    let mut ps: Vec<PoseSample> = poses.to_vec();
-    if ps.windows(2).any(|w| w[1].t_ns < w[0].t_ns) {
-        ps.sort_by_key(|p| p.t_ns);
-        rep.sorted = true;
+    let (dim_u, mut cs) = check_commands(commands, cfg.strict, &mut rep)?;
+    if cs.is_empty() {
+        return Err(DataError::NoCommands { poses: poses.len() });
     }
-    let before = ps.len();
-    ps.dedup_by_key(|p| p.t_ns);
-    rep.duplicate_stamps = before - ps.len();
-    let mut cs: Vec<&CommandSample> = commands.iter().collect();
+    let (ps, split_before) = screen_poses(poses, cfg.strict, &mut rep)?;
     cs.sort_by_key(|c| c.t_ns);
     let cmd_t: Vec<i64> = cs.iter().map(|c| c.t_ns).collect();
 
-    let mut dts: Vec<i64> = ps.windows(2).map(|w| w[1].t_ns - w[0].t_ns).collect();
+    let mut dts: Vec<i64> = ps
+        .windows(2)
+        .zip(&split_before[1..])
+        .filter(|(_, split)| !**split)
+        .map(|(w, _)| w[1].t_ns - w[0].t_ns)
+        .collect();
     let med = median_i64(&mut dts);
     rep.median_dt_s = med as f64 * 1e-9;
     let max_gap = cfg.max_gap_ns.unwrap_or((5 * med).max(1));
     rep.max_gap_ns = max_gap;
 
-    // split at gaps
+    // split at gaps and at skipped poses
     let mut pieces: Vec<Vec<PoseSample>> = vec![Vec::new()];
     for (i, p) in ps.iter().enumerate() {
-        if i > 0 && p.t_ns - ps[i - 1].t_ns > max_gap {
+        if split_before[i] {
+            pieces.push(Vec::new());
+        } else if i > 0 && p.t_ns - ps[i - 1].t_ns > max_gap {
             rep.gaps.push(Gap {
                 from_ns: ps[i - 1].t_ns,
                 to_ns: p.t_ns,

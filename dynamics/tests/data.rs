@@ -149,19 +149,19 @@ fn bad_input_gets_clear_errors() {
     let e = build_trajectories(&poses, &[], &PipelineConfig::default()).unwrap_err();
     assert_eq!(e, DataError::NoCommands { poses: 5 });
     assert!(e.to_string().contains("no commands"));
+    let strict = PipelineConfig {
+        strict: true,
+        ..Default::default()
+    };
     let mut bad = poses.clone();
     bad[3].yaw = f64::NAN;
-    let e = build_trajectories(&bad, &[cmd(0, &[0.0])], &PipelineConfig::default()).unwrap_err();
+    let e = build_trajectories(&bad, &[cmd(0, &[0.0])], &strict).unwrap_err();
     assert!(
         matches!(&e, DataError::NonFinite { field, t_ns, .. } if field == "pose.yaw" && *t_ns == 30 * MS),
         "{e}"
     );
-    let e = build_trajectories(
-        &poses,
-        &[cmd(0, &[0.0]), cmd(5, &[f64::INFINITY])],
-        &PipelineConfig::default(),
-    )
-    .unwrap_err();
+    let e = build_trajectories(&poses, &[cmd(0, &[0.0]), cmd(5, &[f64::INFINITY])], &strict)
+        .unwrap_err();
     assert!(
         e.to_string().contains("command[0] at t = 5000000 ns"),
         "{e}"
@@ -372,4 +372,178 @@ fn normalizer_guards_constant_dimensions_and_round_trips() {
         assert!((a - b).abs() < 1e-12);
     }
     assert!(Normalizer::fit(&[], 3, 1e-9).is_err());
+}
+
+/// 100 Hz poses of a body moving at 1 m/s in x; commands from t = 0.
+fn line(n: i64) -> Vec<PoseSample> {
+    (0..n)
+        .map(|i| pose(i * 10, i as f64 * 0.01, 0.0, 0.0))
+        .collect()
+}
+
+#[test]
+fn a_nan_pose_in_the_middle_is_skipped_counted_and_splits_the_trajectory() {
+    // a motion capture loses the body for one frame at t = 200 ms (x NaN) and for three frames
+    // at 500–520 ms (the whole pose NaN)
+    let mut poses = line(100);
+    poses[20].x = f64::NAN;
+    for p in &mut poses[50..53] {
+        *p = pose(p.t_ns / MS, f64::NAN, f64::NAN, f64::NAN);
+    }
+    let (trajs, rep) =
+        build_trajectories(&poses, &[cmd(0, &[0.5])], &PipelineConfig::default()).unwrap();
+    assert_eq!(rep.non_finite_poses, 4);
+    assert_eq!(rep.out_of_order_poses, 0);
+    assert_eq!(rep.splits_at_skipped, 2);
+    assert_eq!(
+        rep.skipped.iter().map(|s| s.t_ns / MS).collect::<Vec<_>>(),
+        [200, 500, 510, 520]
+    );
+    assert!(
+        rep.skipped
+            .iter()
+            .all(|s| s.reason == SkipReason::NonFinite)
+    );
+    // three pieces: 0–190 ms, 210–490 ms, 530–990 ms; no transition spans a skipped pose
+    let spans: Vec<(i64, i64, usize)> = trajs
+        .iter()
+        .map(|t| (t.t_ns[0] / MS, t.t_ns[t.len() - 1] / MS, t.len()))
+        .collect();
+    assert_eq!(spans, [(0, 190, 20), (210, 490, 29), (530, 990, 47)]);
+    assert!(
+        rep.gaps.is_empty(),
+        "a skipped pose is not a gap: {:?}",
+        rep.gaps
+    );
+    assert_eq!(rep.poses_out, 96);
+    assert!(
+        trajs
+            .iter()
+            .flat_map(|t| &t.pose)
+            .all(|p| p.iter().all(|v| v.is_finite()))
+    );
+    // strict: refused, naming the first bad field and stamp
+    let strict = PipelineConfig {
+        strict: true,
+        ..Default::default()
+    };
+    let e = build_trajectories(&poses, &[cmd(0, &[0.5])], &strict).unwrap_err();
+    assert!(
+        matches!(&e, DataError::NonFinite { field, t_ns, value } if field == "pose.x" && *t_ns == 200 * MS && value.is_nan()),
+        "{e}"
+    );
+    assert!(
+        e.to_string()
+            .starts_with("non-finite value in pose.x at t = 200000000 ns"),
+        "{e}"
+    );
+}
+
+#[test]
+fn a_pose_whose_stamp_goes_back_is_skipped_and_splits_the_trajectory() {
+    // pose 30 arrives with the stamp of pose 10 (a stale repeat), pose 60 with a stamp 5 ms
+    // before pose 59
+    let mut poses = line(100);
+    poses[30] = pose(100, 0.1, 0.0, 0.0);
+    poses[60].t_ns = 585 * MS;
+    let (trajs, rep) =
+        build_trajectories(&poses, &[cmd(0, &[0.5])], &PipelineConfig::default()).unwrap();
+    assert_eq!(rep.out_of_order_poses, 2);
+    assert_eq!(rep.non_finite_poses, 0);
+    assert_eq!(rep.splits_at_skipped, 2);
+    assert_eq!(
+        rep.skipped,
+        [
+            SkippedPose {
+                t_ns: 100 * MS,
+                reason: SkipReason::OutOfOrder
+            },
+            SkippedPose {
+                t_ns: 585 * MS,
+                reason: SkipReason::OutOfOrder
+            }
+        ]
+    );
+    let spans: Vec<(i64, i64)> = trajs
+        .iter()
+        .map(|t| (t.t_ns[0] / MS, t.t_ns[t.len() - 1] / MS))
+        .collect();
+    assert_eq!(spans, [(0, 290), (310, 590), (610, 990)]);
+    // every trajectory's stamps increase
+    assert!(trajs.iter().all(|t| t.t_ns.windows(2).all(|w| w[1] > w[0])));
+    // strict refuses, naming both stamps
+    let strict = PipelineConfig {
+        strict: true,
+        ..Default::default()
+    };
+    let e = build_trajectories(&poses, &[cmd(0, &[0.5])], &strict).unwrap_err();
+    assert_eq!(
+        e,
+        DataError::OutOfOrder {
+            t_ns: 100 * MS,
+            previous_ns: 290 * MS
+        }
+    );
+    assert!(e.to_string().contains("--strict"), "{e}");
+}
+
+#[test]
+fn nonfinite_commands_are_skipped_and_the_one_before_stays_held() {
+    let poses = line(10);
+    let cmds = [cmd(0, &[1.0]), cmd(45, &[f64::NAN]), cmd(70, &[3.0])];
+    let (trajs, rep) = build_trajectories(&poses, &cmds, &PipelineConfig::default()).unwrap();
+    assert_eq!(rep.non_finite_commands, 1);
+    assert_eq!(trajs.len(), 1);
+    assert_eq!(
+        trajs[0].u,
+        [1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 3.0, 3.0, 3.0]
+    );
+    // only NaN poses: a clear error
+    let nan: Vec<_> = (0..5).map(|i| pose(i * 10, f64::NAN, 0.0, 0.0)).collect();
+    let e = build_trajectories(&nan, &cmds, &PipelineConfig::default()).unwrap_err();
+    assert!(
+        e.to_string()
+            .contains("all 5 poses were skipped (5 with NaN or infinite values"),
+        "{e}"
+    );
+}
+
+#[test]
+fn stamps_that_go_back_and_stay_back_start_a_new_trajectory() {
+    // a clock reset: after pose 49 (490 ms) the stamps restart at 100 ms and go on
+    let mut poses = line(50);
+    poses.extend((0..30).map(|i| pose(100 + i * 10, 1.0 + i as f64 * 0.01, 0.0, 0.0)));
+    let (trajs, rep) =
+        build_trajectories(&poses, &[cmd(0, &[0.5])], &PipelineConfig::default()).unwrap();
+    assert_eq!(rep.stamp_resets, [100 * MS]);
+    assert_eq!(rep.out_of_order_poses, 0);
+    assert!(rep.skipped.is_empty(), "{:?}", rep.skipped);
+    assert_eq!(trajs.len(), 2);
+    assert_eq!((trajs[0].len(), trajs[1].len()), (50, 30));
+    assert_eq!(trajs[1].t_ns[0], 100 * MS);
+
+    // one pose stamped 100 s in the future: the poses after it start a new trajectory, the
+    // glitch is left alone (too short) instead of every later pose being skipped
+    let mut poses = line(60);
+    poses[30].t_ns = 100_000 * MS;
+    let (trajs, rep) =
+        build_trajectories(&poses, &[cmd(0, &[0.5])], &PipelineConfig::default()).unwrap();
+    assert_eq!(rep.stamp_resets, [310 * MS]);
+    assert_eq!(rep.out_of_order_poses, 0);
+    assert_eq!(rep.short_trajectories_dropped, 1);
+    let spans: Vec<(i64, i64)> = trajs
+        .iter()
+        .map(|t| (t.t_ns[0] / MS, t.t_ns[t.len() - 1] / MS))
+        .collect();
+    assert_eq!(spans, [(0, 290), (310, 590)]);
+
+    // fewer than STAMP_RESET_RUN poses behind: skipped, as before
+    let mut poses = line(60);
+    for (k, p) in poses[30..30 + STAMP_RESET_RUN - 1].iter_mut().enumerate() {
+        p.t_ns = (10 + k as i64) * MS;
+    }
+    let (_, rep) =
+        build_trajectories(&poses, &[cmd(0, &[0.5])], &PipelineConfig::default()).unwrap();
+    assert_eq!(rep.out_of_order_poses, STAMP_RESET_RUN - 1);
+    assert!(rep.stamp_resets.is_empty());
 }

@@ -1,16 +1,23 @@
 //! From bags (or raw samples) to model-state trajectories: the topic contract, world inference,
-//! the data pipeline of `dynlab-dynamics`, and the bag hashes a model file records.
+//! the pose source (a `PoseStamped` or `Odometry` topic, or a tf frame pair), the data pipeline of
+//! `dynlab-dynamics`, and the bag hashes a model file records.
+//!
+//! Real data as they come: poses with NaN or infinite values and poses whose stamp goes back are
+//! skipped and the trajectory split there (unless [`LoadOptions::strict`]); a damaged bag is read
+//! as far as the recovering reader gets, and what was recovered against what the bag declares is
+//! in the report's [`PipelineReport::source_notes`] (see [`data_warnings`]).
 
 use std::path::{Path, PathBuf};
 
 use dynlab_bag::Bag;
 use dynlab_dynamics::data::{
-    CommandHold, CommandSample, PipelineConfig, PipelineReport, PoseSample, SavGol,
+    CommandHold, CommandSample, PipelineConfig, PipelineReport, PoseSample, SavGol, SkipReason,
     StateTrajectory, Trajectory, build_trajectories,
 };
 use dynlab_msgs::ackermann_msgs::AckermannDriveStamped;
 use dynlab_msgs::dynlab_msgs::PushAction;
 use dynlab_msgs::geometry_msgs::PoseStamped;
+use dynlab_msgs::nav_msgs::Odometry;
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 
@@ -38,6 +45,77 @@ impl Topics {
         self.cmd
             .clone()
             .unwrap_or_else(|| world.default_cmd_topic().to_string())
+    }
+}
+
+/// A tf frame pair: the pose of `child` in `parent`, read from a bag's `/tf` and `/tf_static`
+/// (written `PARENT:CHILD` on the command line, e.g. `world:car`).
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct TfFrames {
+    /// The fixed frame the poses are expressed in (`world`, `table`, `map`, `odom`).
+    pub parent: String,
+    /// The moving body's frame (`car`, `block`, `base_link`).
+    pub child: String,
+}
+
+impl TfFrames {
+    /// Parses `PARENT:CHILD` (frame names without spaces; a leading `/` is dropped, as tf2 does).
+    pub fn parse(text: &str) -> Result<Self, LearnError> {
+        let bad = || {
+            LearnError::setting(
+                "pose-tf",
+                text,
+                "write the frame pair as PARENT:CHILD, e.g. world:car or table:block",
+            )
+        };
+        let (p, c) = text.split_once(':').ok_or_else(bad)?;
+        let clean = |f: &str| f.trim().trim_start_matches('/').to_string();
+        let (parent, child) = (clean(p), clean(c));
+        let ok = |f: &str| !f.is_empty() && !f.contains(char::is_whitespace) && !f.contains(':');
+        if !ok(&parent) || !ok(&child) || parent == child {
+            return Err(bad());
+        }
+        Ok(TfFrames { parent, child })
+    }
+}
+
+impl std::fmt::Display for TfFrames {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}:{}", self.parent, self.child)
+    }
+}
+
+/// How bags are read: topic names, where the poses come from, and how bad messages are handled.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct LoadOptions {
+    /// Pose and command topics. The pose topic may carry `geometry_msgs/msg/PoseStamped`,
+    /// `nav_msgs/msg/Odometry` or `geometry_msgs/msg/PoseWithCovarianceStamped` (their
+    /// `pose.pose`) or `geometry_msgs/msg/TransformStamped` (a motion-capture bridge's
+    /// `transform`); the type is read from the bag.
+    pub topics: Topics,
+    /// Read the poses from tf instead of a pose topic (default `None`).
+    pub pose_tf: Option<TfFrames>,
+    /// Refuse NaN or infinite values and pose stamps that go back instead of skipping them
+    /// (default `false`).
+    pub strict: bool,
+}
+
+impl From<&Topics> for LoadOptions {
+    fn from(topics: &Topics) -> Self {
+        LoadOptions {
+            topics: topics.clone(),
+            ..Default::default()
+        }
+    }
+}
+
+impl LoadOptions {
+    /// Where the poses come from, for messages: `/car/pose` or `tf world → car`.
+    pub fn pose_source(&self, world: World) -> String {
+        match &self.pose_tf {
+            Some(f) => format!("tf {} → {}", f.parent, f.child),
+            None => self.topics.pose_topic(world),
+        }
     }
 }
 
@@ -104,7 +182,8 @@ fn trajectories_of(
     commands: &[CommandSample],
     sg: &SavGol,
 ) -> Result<(Vec<StateTrajectory>, PipelineReport, f64), LearnError> {
-    trajectories_with_stamps(world, poses, commands, sg, None).map(|(s, r, dt, _)| (s, r, dt))
+    trajectories_with_stamps(world, poses, commands, sg, None, false)
+        .map(|(s, r, dt, _)| (s, r, dt))
 }
 
 #[allow(clippy::type_complexity)]
@@ -114,6 +193,7 @@ fn trajectories_with_stamps(
     commands: &[CommandSample],
     sg: &SavGol,
     step_ns: Option<i64>,
+    strict: bool,
 ) -> Result<(Vec<StateTrajectory>, PipelineReport, f64, Vec<Vec<i64>>), LearnError> {
     sg.validate()?;
     let cfg = match world {
@@ -121,6 +201,7 @@ fn trajectories_with_stamps(
         World::Push => PipelineConfig {
             hold: CommandHold::BeforeNextPose,
             resample: dynlab_dynamics::data::Resample::Off,
+            strict,
             ..Default::default()
         },
         World::Car => PipelineConfig {
@@ -130,6 +211,7 @@ fn trajectories_with_stamps(
                 Some(dt_ns) => dynlab_dynamics::data::Resample::Fixed { dt_ns },
                 None => PipelineConfig::default().resample,
             },
+            strict,
             ..Default::default()
         },
     };
@@ -209,11 +291,16 @@ fn median_interval_s(trajs: &[Trajectory]) -> Option<f64> {
     gaps.get(gaps.len() / 2).map(|&g| g as f64 * 1e-9)
 }
 
-/// Infers the world of a bag from its topics (`/push/block_pose` → push, `/car/pose` → car).
+/// Infers the world of a bag from its topics (`/push/block_pose` → push, `/car/pose` → car;
+/// without either, from the command topic: `/push/action` → push, `/car/cmd` → car).
 pub fn infer_world(bag: &Bag) -> Result<World, LearnError> {
     if bag.topic(World::Push.default_pose_topic()).is_some() {
         Ok(World::Push)
     } else if bag.topic(World::Car.default_pose_topic()).is_some() {
+        Ok(World::Car)
+    } else if bag.topic(World::Push.default_cmd_topic()).is_some() {
+        Ok(World::Push)
+    } else if bag.topic(World::Car.default_cmd_topic()).is_some() {
         Ok(World::Car)
     } else {
         Err(LearnError::UnknownWorld {
@@ -236,34 +323,163 @@ fn stamp_or_log(stamp_ns: i64, log_ns: u64) -> i64 {
     }
 }
 
-/// Reads poses and commands of `world` from one bag.
+/// Reads poses and commands of `world` from one bag (poses from the pose topic, any supported
+/// type).
 pub fn read_samples(
     bag: &Bag,
     world: World,
     topics: &Topics,
 ) -> Result<(Vec<PoseSample>, Vec<CommandSample>), LearnError> {
+    read_samples_with(bag, world, &LoadOptions::from(topics)).map(|(p, c, _)| (p, c))
+}
+
+fn planar_sample(
+    stamp_ns: i64,
+    log_ns: u64,
+    pose: &dynlab_msgs::geometry_msgs::Pose,
+) -> PoseSample {
+    let (x, y, yaw) = pose.planar_xy_yaw();
+    PoseSample {
+        t_ns: stamp_or_log(stamp_ns, log_ns),
+        x,
+        y,
+        yaw,
+    }
+}
+
+/// The poses of one bag from the source `opts` names, in recording order, with notes saying
+/// where they came from.
+fn read_poses(
+    bag: &Bag,
+    world: World,
+    opts: &LoadOptions,
+) -> Result<(Vec<PoseSample>, Vec<String>), LearnError> {
     let bag_err = |source| LearnError::Bag {
         path: bag.path().to_path_buf(),
         source,
     };
-    let pose_topic = topics.pose_topic(world);
-    let cmd_topic = topics.cmd_topic(world);
-    bag.require_topics(&[&pose_topic, &cmd_topic])
-        .map_err(bag_err)?;
-    let poses: Vec<PoseSample> = bag
-        .read::<PoseStamped>(&pose_topic)
-        .map_err(bag_err)?
-        .into_iter()
-        .map(|m| {
-            let (x, y, yaw) = m.msg.pose.planar_xy_yaw();
-            PoseSample {
-                t_ns: stamp_or_log(m.msg.header.stamp.to_nanos(), m.log_time_ns),
-                x,
-                y,
-                yaw,
-            }
-        })
-        .collect();
+    if let Some(frames) = &opts.pose_tf {
+        let series =
+            dynlab_bag::tf::lookup_series(bag, &frames.parent, &frames.child).map_err(|e| {
+                LearnError::setting(
+                    "pose-tf",
+                    frames,
+                    format!("in bag {}: {e}", bag.path().display()),
+                )
+            })?;
+        let mut notes = vec![format!(
+            "poses from tf {} → {} (chain {}; stamps of {}): {} transforms",
+            frames.parent,
+            frames.child,
+            series.chain.join(" → "),
+            series.driving_link,
+            series.samples.len()
+        )];
+        if series.skipped_before_chain > 0 {
+            notes.push(format!(
+                "{} transforms before every link of the chain was known skipped",
+                series.skipped_before_chain
+            ));
+        }
+        notes.extend(series.notes);
+        let poses = series
+            .samples
+            .iter()
+            .map(|s| planar_sample(s.t_ns, s.log_time_ns, &s.transform.as_pose()))
+            .collect();
+        return Ok((poses, notes));
+    }
+    let pose_topic = opts.topics.pose_topic(world);
+    bag.require_topics(&[&pose_topic]).map_err(bag_err)?;
+    let type_name = bag
+        .topic(&pose_topic)
+        .map(|t| t.type_name.clone())
+        .unwrap_or_default();
+    use dynlab_msgs::RosMessage;
+    use dynlab_msgs::geometry_msgs::{PoseWithCovarianceStamped, TransformStamped};
+    // Every supported type: its name, the field the pose is read from, and the reader.
+    type Reader = fn(&Bag, &str) -> Result<Vec<PoseSample>, dynlab_bag::BagError>;
+    fn poses_of<T: RosMessage>(
+        bag: &Bag,
+        topic: &str,
+        pose: impl Fn(&T) -> (i64, dynlab_msgs::geometry_msgs::Pose),
+    ) -> Result<Vec<PoseSample>, dynlab_bag::BagError> {
+        Ok(bag
+            .read::<T>(topic)?
+            .into_iter()
+            .map(|m| {
+                let (stamp, p) = pose(&m.msg);
+                planar_sample(stamp, m.log_time_ns, &p)
+            })
+            .collect())
+    }
+    let readers: [(&str, &str, Reader); 4] = [
+        (PoseStamped::TYPE_NAME, "pose", |b, t| {
+            poses_of::<PoseStamped>(b, t, |m| (m.header.stamp.to_nanos(), m.pose))
+        }),
+        (Odometry::TYPE_NAME, "pose.pose", |b, t| {
+            poses_of::<Odometry>(b, t, |m| (m.header.stamp.to_nanos(), m.pose.pose))
+        }),
+        (PoseWithCovarianceStamped::TYPE_NAME, "pose.pose", |b, t| {
+            poses_of::<PoseWithCovarianceStamped>(b, t, |m| {
+                (m.header.stamp.to_nanos(), m.pose.pose)
+            })
+        }),
+        (TransformStamped::TYPE_NAME, "transform", |b, t| {
+            poses_of::<TransformStamped>(b, t, |m| {
+                (m.header.stamp.to_nanos(), m.transform.as_pose())
+            })
+        }),
+    ];
+    let Some(&(name, field, read)) = readers.iter().find(|(n, _, _)| *n == type_name) else {
+        let names: Vec<&str> = readers.iter().map(|(n, _, _)| *n).collect();
+        return Err(LearnError::setting(
+            "pose-topic",
+            &pose_topic,
+            format!(
+                "in bag {} it carries {type_name}; poses are read from topics of type {}, or from \
+                 tf (--pose-tf PARENT:CHILD)",
+                bag.path().display(),
+                names.join(", ")
+            ),
+        ));
+    };
+    let poses = read(bag, &pose_topic).map_err(bag_err)?;
+    let notes = if name == PoseStamped::TYPE_NAME {
+        Vec::new()
+    } else {
+        vec![format!("poses from {pose_topic} ({name}: {field})")]
+    };
+    Ok((poses, notes))
+}
+
+/// Poses and commands read from one bag, with notes on where they came from.
+pub type SourcedSamples = (Vec<PoseSample>, Vec<CommandSample>, Vec<String>);
+
+/// Reads poses (from the source `opts` names) and commands of `world` from one bag, with notes
+/// on where the poses came from and, for a damaged bag, what was recovered.
+pub fn read_samples_with(
+    bag: &Bag,
+    world: World,
+    opts: &LoadOptions,
+) -> Result<SourcedSamples, LearnError> {
+    let bag_err = |source| LearnError::Bag {
+        path: bag.path().to_path_buf(),
+        source,
+    };
+    let cmd_topic = opts.topics.cmd_topic(world);
+    // the pose source first: a bag of the other robot is named by its missing pose topic
+    let (poses, mut notes) = read_poses(bag, world, opts)?;
+    bag.require_topics(&[&cmd_topic]).map_err(bag_err)?;
+    if let Some(r) = bag.recovery() {
+        notes.insert(
+            0,
+            format!(
+                "damaged bag: {}; the data were used as far as they were readable (`dynlab bag info` says where reading stopped, `dynlab bag repair` rewrites it)",
+                r.summary()
+            ),
+        );
+    }
     let commands: Vec<CommandSample> = match world {
         World::Push => bag
             .read::<PushAction>(&cmd_topic)
@@ -287,7 +503,7 @@ pub fn read_samples(
             })
             .collect(),
     };
-    Ok((poses, commands))
+    Ok((poses, commands, notes))
 }
 
 /// SHA-256 of a bag: over its `.mcap` files in name order (a bag directory) or of the file.
@@ -371,7 +587,7 @@ impl TimedDataset {
         sg: &SavGol,
     ) -> Result<Self, LearnError> {
         let (trajectories, report, dt, t_ns) =
-            trajectories_with_stamps(world, poses, commands, sg, None)?;
+            trajectories_with_stamps(world, poses, commands, sg, None, false)?;
         let n = t_ns.len();
         Ok(Self {
             data: Dataset {
@@ -411,6 +627,19 @@ pub fn load_bags_timed_at(
     sg: &SavGol,
     step_s: Option<f64>,
 ) -> Result<TimedDataset, LearnError> {
+    load_bags_with(paths, world, &LoadOptions::from(topics), sg, step_s)
+}
+
+/// [`load_bags_timed_at`] with every reading option: the pose source (a `PoseStamped` or
+/// `Odometry` topic, or a tf frame pair) and strictness.
+pub fn load_bags_with(
+    paths: &[PathBuf],
+    world: Option<World>,
+    opts: &LoadOptions,
+    sg: &SavGol,
+    step_s: Option<f64>,
+) -> Result<TimedDataset, LearnError> {
+    let topics = &opts.topics;
     let step_ns = match step_s {
         Some(s) if s.is_finite() && s > 0.0 => Some((s * 1e9).round() as i64),
         Some(s) => {
@@ -445,17 +674,19 @@ pub fn load_bags_timed_at(
                 w
             }
         };
-        let (poses, commands) = read_samples(&bag, w, topics)?;
-        let (trajs, report, dt, t_ns) = trajectories_with_stamps(w, &poses, &commands, sg, step_ns)
-            .map_err(|e| in_bag(e, path, &topics.pose_topic(w), &topics.cmd_topic(w)))?;
+        let (poses, commands, notes) = read_samples_with(&bag, w, opts)?;
+        let (trajs, mut report, dt, t_ns) =
+            trajectories_with_stamps(w, &poses, &commands, sg, step_ns, opts.strict)
+                .map_err(|e| in_bag(e, path, &opts.pose_source(w), &topics.cmd_topic(w)))?;
+        report.source_notes = notes;
         if trajs.is_empty() {
             return Err(LearnError::setting(
                 "bag",
                 path.display(),
                 format!(
-                    "too little data: no trajectory is long enough: {} poses on {} in {} pieces shorter than {} poses each; record longer uninterrupted runs",
+                    "too little data: no trajectory is long enough: {} poses from {} in {} pieces shorter than {} poses each; record longer uninterrupted runs",
                     report.poses_in,
-                    topics.pose_topic(w),
+                    opts.pose_source(w),
                     report.short_trajectories_dropped,
                     match w {
                         World::Car => sg.window,
@@ -512,7 +743,7 @@ fn in_bag(e: LearnError, path: &Path, pose_topic: &str, cmd_topic: &str) -> Lear
             "bag",
             path.display(),
             format!(
-                "no poses: topic {pose_topic} has no messages; record the robot's poses on it or name the pose topic (--pose-topic)"
+                "no poses: {pose_topic} has no messages; record the robot's poses on it or name the pose source (--pose-topic, --pose-tf)"
             ),
         ),
         LearnError::Data(DataError::NoCommands { poses }) => LearnError::setting(
@@ -529,7 +760,7 @@ fn in_bag(e: LearnError, path: &Path, pose_topic: &str, cmd_topic: &str) -> Lear
 /// What the data pipeline did to one bag, in sentences for a person: commands held at pose
 /// stamps, gaps that split trajectories, resampling, dropped poses.
 pub fn pipeline_notes(report: &PipelineReport) -> Vec<String> {
-    let mut notes = Vec::new();
+    let mut notes = report.source_notes.clone();
     let rate = if report.median_dt_s > 0.0 {
         1.0 / report.median_dt_s
     } else {
@@ -542,8 +773,48 @@ pub fn pipeline_notes(report: &PipelineReport) -> Vec<String> {
         rate,
         report.commands_in
     ));
-    if report.sorted {
-        notes.push("poses were not in stamp order and were sorted".into());
+    if !report.skipped.is_empty() {
+        let first = |reason| {
+            report
+                .skipped
+                .iter()
+                .find(|s| s.reason == reason)
+                .map(|s| format!(" (first at {:.3} s)", s.t_ns as f64 * 1e-9))
+                .unwrap_or_default()
+        };
+        let mut parts = Vec::new();
+        if report.non_finite_poses > 0 {
+            parts.push(format!(
+                "{} poses with NaN or infinite values{}",
+                report.non_finite_poses,
+                first(SkipReason::NonFinite)
+            ));
+        }
+        if report.out_of_order_poses > 0 {
+            parts.push(format!(
+                "{} poses whose stamp goes back{}",
+                report.out_of_order_poses,
+                first(SkipReason::OutOfOrder)
+            ));
+        }
+        notes.push(format!(
+            "skipped {}; the data are split there ({} split(s)); --strict refuses such data instead",
+            parts.join(" and "),
+            report.splits_at_skipped
+        ));
+    }
+    if !report.stamp_resets.is_empty() {
+        notes.push(format!(
+            "the pose stamps went back and stayed back {} time(s) (first at {:.3} s: a clock reset, or a pose stamped in the future before): a new trajectory starts at each",
+            report.stamp_resets.len(),
+            report.stamp_resets[0] as f64 * 1e-9
+        ));
+    }
+    if report.non_finite_commands > 0 {
+        notes.push(format!(
+            "{} commands with NaN or infinite values skipped (the command before stays held)",
+            report.non_finite_commands
+        ));
     }
     if report.duplicate_stamps > 0 {
         notes.push(format!(
@@ -597,6 +868,37 @@ pub fn pipeline_notes(report: &PipelineReport) -> Vec<String> {
         report.trajectories, report.poses_out
     ));
     notes
+}
+
+/// What a person must be told about how the data were read, one line per bag and issue, for the
+/// terminal: a damaged bag's recovery, skipped poses and commands. Empty for clean data.
+pub fn data_warnings(data: &Dataset) -> Vec<String> {
+    let mut out = Vec::new();
+    for (i, r) in data.reports.iter().enumerate() {
+        let bag = data
+            .sources
+            .get(i)
+            .map(|s| format!("{}: ", s.path))
+            .unwrap_or_default();
+        for n in &r.source_notes {
+            if n.starts_with("damaged bag") {
+                out.push(format!("{bag}{n}"));
+            }
+        }
+        if !r.skipped.is_empty() || r.non_finite_commands > 0 || !r.stamp_resets.is_empty() {
+            out.extend(
+                pipeline_notes(r)
+                    .into_iter()
+                    .filter(|n| {
+                        n.starts_with("skipped")
+                            || n.contains("commands with NaN")
+                            || n.starts_with("the pose stamps went back")
+                    })
+                    .map(|n| format!("{bag}{n}")),
+            );
+        }
+    }
+    out
 }
 
 /// Warnings about too little excitation: a command that never changes, or (car) a robot that
@@ -735,6 +1037,18 @@ mod tests {
                 .iter()
                 .any(|w| w.contains("delta is constant"))
         );
+    }
+
+    #[test]
+    fn tf_frame_pairs_parse_or_say_how_to_write_them() {
+        let f = TfFrames::parse("world:car").unwrap();
+        assert_eq!((f.parent.as_str(), f.child.as_str()), ("world", "car"));
+        let f = TfFrames::parse("/map:base_link").unwrap();
+        assert_eq!(f.to_string(), "map:base_link");
+        for bad in ["world", "world:", ":car", "car:car", "a:b:c", "wor ld:car"] {
+            let e = TfFrames::parse(bad).unwrap_err().to_string();
+            assert!(e.contains("PARENT:CHILD"), "{bad}: {e}");
+        }
     }
 
     #[test]

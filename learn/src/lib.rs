@@ -28,8 +28,9 @@ pub mod train;
 pub mod world;
 
 pub use dataset::{
-    BagSource, Dataset, Stamps, TimedDataset, Topics, excitation_warnings, load_bags,
-    load_bags_timed, load_bags_timed_at, pipeline_notes,
+    BagSource, Dataset, LoadOptions, Stamps, TfFrames, TimedDataset, Topics, data_warnings,
+    excitation_warnings, load_bags, load_bags_timed, load_bags_timed_at, load_bags_with,
+    pipeline_notes,
 };
 pub use dynlab_dynamics as dynamics;
 pub use error::LearnError;

@@ -145,6 +145,51 @@ pub struct TwistStamped {
     pub twist: Twist,
 }
 
+/// `geometry_msgs/msg/Transform`: the pose of a child frame in its parent frame, as tf2 stores it.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Transform {
+    /// The child frame's origin in the parent frame \[m\].
+    pub translation: Vector3,
+    /// The child frame's orientation in the parent frame.
+    pub rotation: Quaternion,
+}
+
+impl Transform {
+    /// The transform of a planar pose: translation `(x, y, 0)`, rotation `yaw` about z.
+    pub fn planar(x: f64, y: f64, yaw: f64) -> Self {
+        Transform {
+            translation: Vector3 { x, y, z: 0.0 },
+            rotation: Quaternion::from_yaw(yaw),
+        }
+    }
+
+    /// The same transform as a [`Pose`] (position = translation, orientation = rotation).
+    pub fn as_pose(&self) -> Pose {
+        Pose {
+            position: Point {
+                x: self.translation.x,
+                y: self.translation.y,
+                z: self.translation.z,
+            },
+            orientation: self.rotation,
+        }
+    }
+}
+
+/// `geometry_msgs/msg/TransformStamped`: the transform from `header.frame_id` (parent) to
+/// `child_frame_id` at `header.stamp`, one edge of the tf tree.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TransformStamped {
+    /// Stamp and parent frame.
+    pub header: Header,
+    /// The child frame.
+    pub child_frame_id: String,
+    /// The child frame's pose in the parent frame.
+    pub transform: Transform,
+}
+
 /// A row-major 6×6 covariance over (x, y, z, rotation about x, about y, about z).
 pub type Covariance6 = [f64; 36];
 
@@ -166,6 +211,17 @@ impl Default for PoseWithCovariance {
             covariance: [0.0; 36],
         }
     }
+}
+
+/// `geometry_msgs/msg/PoseWithCovarianceStamped`: a pose with its uncertainty and a header (what
+/// localisation such as AMCL publishes).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PoseWithCovarianceStamped {
+    /// Stamp and frame.
+    pub header: Header,
+    /// The pose and its covariance.
+    pub pose: PoseWithCovariance,
 }
 
 /// `geometry_msgs/msg/TwistWithCovariance`: a twist with its uncertainty.
@@ -260,6 +316,14 @@ Pose pose
 float64[36] covariance
 ";
 
+/// `PoseWithCovarianceStamped.msg` text.
+pub(crate) const POSE_WITH_COVARIANCE_STAMPED_MSG: &str = "\
+# A pose with its uncertainty, with a time stamp and the frame it is expressed in.
+
+std_msgs/Header header
+PoseWithCovariance pose
+";
+
 /// `TwistWithCovariance.msg` text.
 pub(crate) const TWIST_WITH_COVARIANCE_MSG: &str = "\
 # A twist with its uncertainty.
@@ -269,6 +333,29 @@ Twist twist
 # Row-major 6x6 covariance of (x, y, z, rotation about X, rotation about Y, rotation about Z);
 # the rotations are about fixed axes.
 float64[36] covariance
+";
+
+/// `Transform.msg` text.
+pub(crate) const TRANSFORM_MSG: &str = "\
+# The transform between two coordinate frames in free space: the pose of the child frame
+# in the parent frame.
+
+Vector3 translation
+Quaternion rotation
+";
+
+/// `TransformStamped.msg` text.
+pub(crate) const TRANSFORM_STAMPED_MSG: &str = "\
+# The transform from coordinate frame header.frame_id (the parent)
+# to coordinate frame child_frame_id at the time of header.stamp.
+# tf2 publishes these on /tf and /tf_static.
+
+std_msgs/Header header
+
+# The frame this transform gives the pose of.
+string child_frame_id
+
+Transform transform
 ";
 
 impl_ros_message!(Point, "geometry_msgs/msg/Point", POINT_MSG);
@@ -292,7 +379,18 @@ impl_ros_message!(
     POSE_WITH_COVARIANCE_MSG
 );
 impl_ros_message!(
+    PoseWithCovarianceStamped,
+    "geometry_msgs/msg/PoseWithCovarianceStamped",
+    POSE_WITH_COVARIANCE_STAMPED_MSG
+);
+impl_ros_message!(
     TwistWithCovariance,
     "geometry_msgs/msg/TwistWithCovariance",
     TWIST_WITH_COVARIANCE_MSG
+);
+impl_ros_message!(Transform, "geometry_msgs/msg/Transform", TRANSFORM_MSG);
+impl_ros_message!(
+    TransformStamped,
+    "geometry_msgs/msg/TransformStamped",
+    TRANSFORM_STAMPED_MSG
 );

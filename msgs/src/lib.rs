@@ -64,12 +64,16 @@ macro_rules! with_all_message_types {
             crate::geometry_msgs::Twist,
             crate::geometry_msgs::TwistStamped,
             crate::geometry_msgs::PoseWithCovariance,
+            crate::geometry_msgs::PoseWithCovarianceStamped,
             crate::geometry_msgs::TwistWithCovariance,
+            crate::geometry_msgs::Transform,
+            crate::geometry_msgs::TransformStamped,
             crate::nav_msgs::Odometry,
             crate::nav_msgs::Path,
             crate::ackermann_msgs::AckermannDrive,
             crate::ackermann_msgs::AckermannDriveStamped,
             crate::rosgraph_msgs::Clock,
+            crate::tf2_msgs::TFMessage,
             crate::dynlab_msgs::PushAction,
         )
     };
@@ -87,6 +91,7 @@ pub mod nav_msgs;
 pub mod registry;
 pub mod rosgraph_msgs;
 pub mod std_msgs;
+pub mod tf2_msgs;
 
 pub use finite::{NonFiniteError, NonFiniteField, check_finite, non_finite_fields};
 pub use json::{from_json, to_json};

@@ -218,3 +218,44 @@ fn invalid_utf8_in_a_string_is_an_error() {
         Err(CdrError::Decode { .. })
     ));
 }
+
+#[test]
+fn tf_message_layout_is_exact() {
+    use dynlab_msgs::geometry_msgs::{Transform, TransformStamped};
+    use dynlab_msgs::tf2_msgs::TFMessage;
+    let msg = TFMessage {
+        transforms: vec![TransformStamped {
+            header: Header::new(Time { sec: 3, nanosec: 7 }, "world"),
+            child_frame_id: "car".into(),
+            transform: Transform::planar(1.5, -2.0, 0.0),
+        }],
+    };
+    let bytes = to_cdr(&msg).unwrap();
+    // header 4 | count 4 | stamp 8 | "world\0" 4 + 6 | pad 2 | "car\0" 4 + 4 | 7 × f64 at 32
+    assert_eq!(bytes.len(), 4 + 32 + 56);
+    assert_eq!(&bytes[4..8], &1u32.to_le_bytes());
+    assert_eq!(&bytes[16..20], &6u32.to_le_bytes());
+    assert_eq!(&bytes[20..26], b"world\0");
+    assert_eq!(&bytes[28..32], &4u32.to_le_bytes());
+    assert_eq!(&bytes[32..36], b"car\0");
+    assert_eq!(&bytes[36..44], &1.5f64.to_le_bytes()); // translation.x
+    assert_eq!(&bytes[bytes.len() - 8..], &1.0f64.to_le_bytes()); // rotation.w
+    assert_eq!(from_cdr::<TFMessage>(&bytes).unwrap(), msg);
+    // the definition: TFMessage, then TransformStamped's tree, each type once
+    let def = TFMessage::definition();
+    let names: Vec<&str> = def
+        .lines()
+        .filter_map(|l| l.strip_prefix("MSG: "))
+        .collect();
+    assert_eq!(
+        names,
+        [
+            "geometry_msgs/TransformStamped",
+            "geometry_msgs/Transform",
+            "geometry_msgs/Quaternion",
+            "geometry_msgs/Vector3",
+            "std_msgs/Header",
+            "builtin_interfaces/Time"
+        ]
+    );
+}

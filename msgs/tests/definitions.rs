@@ -18,7 +18,7 @@ fn block_names(full: &str) -> Vec<String> {
 
 #[test]
 fn every_definition_is_well_formed() {
-    assert_eq!(all().len(), 18);
+    assert_eq!(all().len(), 22);
     for t in all() {
         check(t.definition, t.type_name).unwrap_or_else(|e| panic!("{}: {e}", t.type_name));
         let own = known_msg_text(t.type_name).unwrap();

@@ -160,6 +160,10 @@ fn registry_lists_every_type_once() {
         "ackermann_msgs/msg/AckermannDrive",
         "ackermann_msgs/msg/AckermannDriveStamped",
         "rosgraph_msgs/msg/Clock",
+        "geometry_msgs/msg/Transform",
+        "geometry_msgs/msg/TransformStamped",
+        "geometry_msgs/msg/PoseWithCovarianceStamped",
+        "tf2_msgs/msg/TFMessage",
         "dynlab_msgs/msg/PushAction",
     ] {
         assert!(names.contains(required), "{required} missing");

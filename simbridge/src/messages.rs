@@ -14,15 +14,23 @@
 //! | `/car/cmd` | `ackermann_msgs/msg/AckermannDriveStamped` | `car` | [`CarInput`] |
 //! | `/car/odom` | `nav_msgs/msg/Odometry` | `world` → `car` | [`CarState`] (ground truth, simulator only) |
 //! | `/clock` | `rosgraph_msgs/msg/Clock` | — | simulation time |
+//! | `/tf` | `tf2_msgs/msg/TFMessage` | `table` → `block`, `world` → `car` | [`Pose2`] (measured, as the pose topic) |
+//! | `/tf_static` | `tf2_msgs/msg/TFMessage` | `world` → `table`; `car` → `car/front_axle`, `car/rear_axle` | fixed frames, once, latched |
+//!
+//! `/tf` carries the same measured pose as `/push/block_pose` or `/car/pose`, at the same stamps,
+//! so a tool reading the frame pair `table:block` or `world:car` sees the same trajectory as one
+//! reading the pose topic. `sim_node` always publishes both; `dynlab collect` writes them with
+//! `--tf`.
 
 use dynlab_bag::{BagError, BagSummary, BagWriter, QosDuration, TopicId, WriterOptions};
 use dynlab_msgs::ackermann_msgs::{AckermannDrive, AckermannDriveStamped};
 use dynlab_msgs::builtin_interfaces::Time;
 use dynlab_msgs::dynlab_msgs::PushAction as PushActionMsg;
-use dynlab_msgs::geometry_msgs::{Pose, PoseStamped, Twist, Vector3};
+use dynlab_msgs::geometry_msgs::{Pose, PoseStamped, Transform, TransformStamped, Twist, Vector3};
 use dynlab_msgs::nav_msgs::Odometry;
 use dynlab_msgs::rosgraph_msgs::Clock;
 use dynlab_msgs::std_msgs::Header;
+use dynlab_msgs::tf2_msgs::TFMessage;
 use dynlab_sim::car::CarParams;
 use dynlab_sim::{CarInput, CarState, Pose2, PushAction, Record, Sample};
 
@@ -38,6 +46,10 @@ pub const CAR_CMD_TOPIC: &str = "/car/cmd";
 pub const CAR_ODOM_TOPIC: &str = "/car/odom";
 /// Simulation time.
 pub const CLOCK_TOPIC: &str = "/clock";
+/// Moving tf frames: the measured block or car pose.
+pub const TF_TOPIC: &str = "/tf";
+/// Fixed tf frames, published once and latched (transient local).
+pub const TF_STATIC_TOPIC: &str = "/tf_static";
 
 /// Frame of the pushing table (block poses and push actions).
 pub const TABLE_FRAME: &str = "table";
@@ -45,6 +57,12 @@ pub const TABLE_FRAME: &str = "table";
 pub const WORLD_FRAME: &str = "world";
 /// The car's body frame: odometry twists are expressed in it, commands are addressed to it.
 pub const CAR_FRAME: &str = "car";
+/// The block's body frame (tf child of `table`).
+pub const BLOCK_FRAME: &str = "block";
+/// The car's front axle centre (static tf child of `car`, `lf` ahead of the centre of mass).
+pub const CAR_FRONT_AXLE_FRAME: &str = "car/front_axle";
+/// The car's rear axle centre (static tf child of `car`, `lr` behind the centre of mass).
+pub const CAR_REAR_AXLE_FRAME: &str = "car/rear_axle";
 
 /// Which simulated robot.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -88,6 +106,15 @@ impl SimWorld {
             SimWorld::Car => CAR_CMD_TOPIC,
         }
     }
+
+    /// The tf frame pair `(parent, child)` of the measured pose: `table → block` or
+    /// `world → car`.
+    pub fn tf_frames(self) -> (&'static str, &'static str) {
+        match self {
+            SimWorld::Push => (TABLE_FRAME, BLOCK_FRAME),
+            SimWorld::Car => (WORLD_FRAME, CAR_FRAME),
+        }
+    }
 }
 
 /// The QoS class a topic is offered with by the simulator and the exploration driver.
@@ -99,6 +126,11 @@ pub enum OfferedQos {
     Reliable,
     /// `clock`: best effort, keep last 1.
     Clock,
+    /// `/tf` as tf2's broadcaster offers it: reliable, keep last 100, volatile.
+    Tf,
+    /// `/tf_static` as tf2's static broadcaster offers it: reliable, keep last 1, transient
+    /// local (latched).
+    TfStatic,
 }
 
 impl OfferedQos {
@@ -110,10 +142,15 @@ impl OfferedQos {
             history: dynlab_bag::History::Unknown,
             depth: 0,
             reliability: match self {
-                OfferedQos::Reliable => dynlab_bag::Reliability::Reliable,
+                OfferedQos::Reliable | OfferedQos::Tf | OfferedQos::TfStatic => {
+                    dynlab_bag::Reliability::Reliable
+                }
                 OfferedQos::SensorData | OfferedQos::Clock => dynlab_bag::Reliability::BestEffort,
             },
-            durability: dynlab_bag::Durability::Volatile,
+            durability: match self {
+                OfferedQos::TfStatic => dynlab_bag::Durability::TransientLocal,
+                _ => dynlab_bag::Durability::Volatile,
+            },
             deadline: QosDuration::INFINITE,
             lifespan: QosDuration::INFINITE,
             liveliness: dynlab_bag::Liveliness::Automatic,
@@ -176,6 +213,23 @@ pub fn sim_topics(world: SimWorld, clock: bool) -> Vec<SimTopic> {
         });
     }
     t
+}
+
+/// `/tf` and `/tf_static`, in the order they are added to a bag.
+pub fn tf_topics() -> [SimTopic; 2] {
+    use dynlab_msgs::RosMessage;
+    [
+        SimTopic {
+            name: TF_TOPIC,
+            type_name: TFMessage::TYPE_NAME,
+            qos: OfferedQos::Tf,
+        },
+        SimTopic {
+            name: TF_STATIC_TOPIC,
+            type_name: TFMessage::TYPE_NAME,
+            qos: OfferedQos::TfStatic,
+        },
+    ]
 }
 
 /// Simulation time `t_ns` as a ROS time (saturating after 68 years of simulated time).
@@ -251,6 +305,37 @@ pub fn car_odom_msg(t_ns: u64, s: &CarState) -> Odometry {
         },
     };
     odom
+}
+
+fn transform(t_ns: u64, parent: &str, child: &str, x: f64, y: f64, yaw: f64) -> TransformStamped {
+    TransformStamped {
+        header: header(t_ns, parent),
+        child_frame_id: child.to_string(),
+        transform: Transform::planar(x, y, yaw),
+    }
+}
+
+/// `/tf` with the measured pose: `table → block` (pushing) or `world → car`, the same values
+/// and stamp as the pose topic's message.
+pub fn tf_msg(world: SimWorld, t_ns: u64, pose: Pose2) -> TFMessage {
+    let (parent, child) = world.tf_frames();
+    TFMessage {
+        transforms: vec![transform(t_ns, parent, child, pose.x, pose.y, pose.theta)],
+    }
+}
+
+/// `/tf_static`, published once: pushing `world → table` (the identity: the table frame is the
+/// world frame); the car `car → car/front_axle` and `car → car/rear_axle` (`lf` ahead of and
+/// `lr` behind the centre of mass, from `car`).
+pub fn tf_static_msg(world: SimWorld, t_ns: u64, car: &CarParams) -> TFMessage {
+    let transforms = match world {
+        SimWorld::Push => vec![transform(t_ns, WORLD_FRAME, TABLE_FRAME, 0.0, 0.0, 0.0)],
+        SimWorld::Car => vec![
+            transform(t_ns, CAR_FRAME, CAR_FRONT_AXLE_FRAME, car.lf, 0.0, 0.0),
+            transform(t_ns, CAR_FRAME, CAR_REAR_AXLE_FRAME, -car.lr, 0.0, 0.0),
+        ],
+    };
+    TFMessage { transforms }
 }
 
 /// `/clock` at simulation time `t_ns`.
@@ -383,6 +468,14 @@ pub struct SimBagWriter {
     command: TopicId,
     odom: Option<TopicId>,
     clock: Option<TopicId>,
+    tf: Option<TfTopics>,
+}
+
+/// `/tf` and `/tf_static` of a [`SimBagWriter`], and the static transforms still to write.
+struct TfTopics {
+    tf: TopicId,
+    tf_static: TopicId,
+    pending_static: Option<CarParams>,
 }
 
 /// Problems writing simulated data.
@@ -430,7 +523,40 @@ impl SimBagWriter {
             command,
             odom,
             clock,
+            tf: None,
         })
+    }
+
+    /// Also writes `/tf` (the measured pose, at every pose) and `/tf_static` (once, at the first
+    /// pose), as `sim_node` publishes them; `car` gives the axle positions of the car's static
+    /// frames (ignored for pushing).
+    pub fn with_tf(mut self, car: &CarParams) -> Result<SimBagWriter, SimBagError> {
+        let [tf, tf_static] = tf_topics().map(|t| {
+            self.writer.add_topic(
+                t.name,
+                t.type_name,
+                <TFMessage as dynlab_msgs::RosMessage>::definition(),
+                &[t.qos.recorded_profile()],
+            )
+        });
+        self.tf = Some(TfTopics {
+            tf: tf?,
+            tf_static: tf_static?,
+            pending_static: Some(car.clone()),
+        });
+        Ok(self)
+    }
+
+    fn write_tf(&mut self, t: u64, pose: Pose2) -> Result<(), SimBagError> {
+        let world = self.world;
+        if let Some(tf) = &mut self.tf {
+            if let Some(car) = tf.pending_static.take() {
+                self.writer
+                    .write(tf.tf_static, t, &tf_static_msg(world, t, &car))?;
+            }
+            self.writer.write(tf.tf, t, &tf_msg(world, t, pose))?;
+        }
+        Ok(())
     }
 
     /// Writes one record at its simulation time (a pose also writes `/clock` when enabled).
@@ -444,6 +570,7 @@ impl SimBagWriter {
             (SimWorld::Push, Record::BlockPose(p)) => {
                 self.write_clock(t)?;
                 self.writer.write(self.pose, t, &block_pose_msg(t, p))?;
+                self.write_tf(t, p)?;
             }
             (SimWorld::Push, Record::PushAction(a)) => {
                 self.writer.write(self.command, t, &push_action_msg(t, a))?;
@@ -451,6 +578,7 @@ impl SimBagWriter {
             (SimWorld::Car, Record::CarPose(p)) => {
                 self.write_clock(t)?;
                 self.writer.write(self.pose, t, &car_pose_msg(t, p))?;
+                self.write_tf(t, p)?;
             }
             (SimWorld::Car, Record::CarCmd(u)) => {
                 self.writer.write(self.command, t, &car_cmd_msg(t, u))?;
@@ -524,6 +652,56 @@ mod tests {
         // the f32 command is what the simulator applies
         let (u, _) = car_input_from_msg(&car_cmd_msg(0, CarInput::new(0.1, 0.2)), &car).unwrap();
         assert_eq!(u.steering, f64::from(0.1f32));
+    }
+
+    #[test]
+    fn tf_carries_the_measured_pose_of_the_pose_topic_and_static_frames() {
+        let p = Pose2::new(0.4, -0.1, 2.5);
+        for world in [SimWorld::Push, SimWorld::Car] {
+            let t = 1_250_000_000;
+            let msg = tf_msg(world, t, p);
+            let pose = pose_msg(t, world.tf_frames().0, p);
+            assert_eq!(msg.transforms.len(), 1);
+            let tr = &msg.transforms[0];
+            assert_eq!(tr.header, pose.header);
+            assert_eq!(tr.child_frame_id, world.tf_frames().1);
+            assert_eq!(tr.transform.as_pose(), pose.pose);
+        }
+        assert_eq!(SimWorld::Car.tf_frames(), ("world", "car"));
+        assert_eq!(SimWorld::Push.tf_frames(), ("table", "block"));
+        let car = CarParams::default();
+        let s = tf_static_msg(SimWorld::Car, 0, &car);
+        let axles: Vec<(&str, &str, f64)> = s
+            .transforms
+            .iter()
+            .map(|t| {
+                (
+                    t.header.frame_id.as_str(),
+                    t.child_frame_id.as_str(),
+                    t.transform.translation.x,
+                )
+            })
+            .collect();
+        assert_eq!(
+            axles,
+            [
+                ("car", "car/front_axle", car.lf),
+                ("car", "car/rear_axle", -car.lr)
+            ]
+        );
+        let s = tf_static_msg(SimWorld::Push, 0, &car);
+        assert_eq!(s.transforms[0].header.frame_id, "world");
+        assert_eq!(s.transforms[0].child_frame_id, "table");
+        // /tf_static is latched in the bag's QoS as well
+        let [tf, tf_static] = tf_topics();
+        assert_eq!(
+            tf_static.qos.recorded_profile().durability,
+            dynlab_bag::Durability::TransientLocal
+        );
+        assert_eq!(
+            tf.qos.recorded_profile().reliability,
+            dynlab_bag::Reliability::Reliable
+        );
     }
 
     #[test]

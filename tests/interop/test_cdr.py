@@ -175,6 +175,8 @@ def all_type_names():
         "geometry_msgs/msg/TwistWithCovariance", "nav_msgs/msg/Odometry", "nav_msgs/msg/Path",
         "ackermann_msgs/msg/AckermannDrive", "ackermann_msgs/msg/AckermannDriveStamped",
         "rosgraph_msgs/msg/Clock", "dynlab_msgs/msg/PushAction",
+        "geometry_msgs/msg/Transform", "geometry_msgs/msg/TransformStamped", "tf2_msgs/msg/TFMessage",
+        "geometry_msgs/msg/PoseWithCovarianceStamped",
     ]
 
 

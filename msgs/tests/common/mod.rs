@@ -5,12 +5,13 @@ use dynlab_msgs::ackermann_msgs::{AckermannDrive, AckermannDriveStamped};
 use dynlab_msgs::builtin_interfaces::{Duration, Time};
 use dynlab_msgs::dynlab_msgs::PushAction;
 use dynlab_msgs::geometry_msgs::{
-    Point, Pose, PoseStamped, PoseWithCovariance, Quaternion, Twist, TwistStamped,
-    TwistWithCovariance, Vector3,
+    Point, Pose, PoseStamped, PoseWithCovariance, PoseWithCovarianceStamped, Quaternion, Transform,
+    TransformStamped, Twist, TwistStamped, TwistWithCovariance, Vector3,
 };
 use dynlab_msgs::nav_msgs::{Odometry, Path};
 use dynlab_msgs::rosgraph_msgs::Clock;
 use dynlab_msgs::std_msgs::Header;
+use dynlab_msgs::tf2_msgs::TFMessage;
 
 /// SplitMix64: a tiny seeded generator, the same stream on every platform.
 pub struct Rng(u64);
@@ -205,6 +206,15 @@ impl Sample for PoseWithCovariance {
     }
 }
 
+impl Sample for PoseWithCovarianceStamped {
+    fn sample(rng: &mut Rng) -> Self {
+        PoseWithCovarianceStamped {
+            header: Header::sample(rng),
+            pose: PoseWithCovariance::sample(rng),
+        }
+    }
+}
+
 impl Sample for TwistWithCovariance {
     fn sample(rng: &mut Rng) -> Self {
         TwistWithCovariance {
@@ -231,6 +241,34 @@ impl Sample for Path {
         Path {
             header: Header::sample(rng),
             poses: (0..n).map(|_| PoseStamped::sample(rng)).collect(),
+        }
+    }
+}
+
+impl Sample for Transform {
+    fn sample(rng: &mut Rng) -> Self {
+        Transform {
+            translation: Vector3::sample(rng),
+            rotation: Quaternion::sample(rng),
+        }
+    }
+}
+
+impl Sample for TransformStamped {
+    fn sample(rng: &mut Rng) -> Self {
+        TransformStamped {
+            header: Header::sample(rng),
+            child_frame_id: rng.string(),
+            transform: Transform::sample(rng),
+        }
+    }
+}
+
+impl Sample for TFMessage {
+    fn sample(rng: &mut Rng) -> Self {
+        let n = [0, 1, 2, 5][rng.below(4) as usize];
+        TFMessage {
+            transforms: (0..n).map(|_| TransformStamped::sample(rng)).collect(),
         }
     }
 }
@@ -290,12 +328,16 @@ macro_rules! for_every_type {
         $body!(dynlab_msgs::geometry_msgs::Twist);
         $body!(dynlab_msgs::geometry_msgs::TwistStamped);
         $body!(dynlab_msgs::geometry_msgs::PoseWithCovariance);
+        $body!(dynlab_msgs::geometry_msgs::PoseWithCovarianceStamped);
         $body!(dynlab_msgs::geometry_msgs::TwistWithCovariance);
+        $body!(dynlab_msgs::geometry_msgs::Transform);
+        $body!(dynlab_msgs::geometry_msgs::TransformStamped);
         $body!(dynlab_msgs::nav_msgs::Odometry);
         $body!(dynlab_msgs::nav_msgs::Path);
         $body!(dynlab_msgs::ackermann_msgs::AckermannDrive);
         $body!(dynlab_msgs::ackermann_msgs::AckermannDriveStamped);
         $body!(dynlab_msgs::rosgraph_msgs::Clock);
+        $body!(dynlab_msgs::tf2_msgs::TFMessage);
         $body!(dynlab_msgs::dynlab_msgs::PushAction);
     };
 }

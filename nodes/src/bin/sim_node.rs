@@ -4,7 +4,10 @@
 //! Publishes `/push/block_pose` or `/car/pose` (`geometry_msgs/PoseStamped`, frame `table` /
 //! `world`, measured: with the scenario's mocap-like noise), `/car/odom` (`nav_msgs/Odometry`,
 //! ground-truth pose and body-frame velocities — simulator only, a real car has no such topic)
-//! and `/clock` (simulation time, from 0, at every pose); takes `/push/action`
+//! `/clock` (simulation time, from 0, at every pose), `/tf` (`tf2_msgs/TFMessage`: the measured
+//! pose as `table` → `block` or `world` → `car`, at every pose, reliable like tf2's broadcaster)
+//! and `/tf_static` (once, latched: `world` → `table`, or `car` → `car/front_axle` and
+//! `car/rear_axle`; see `dynlab_simbridge::messages`); takes `/push/action`
 //! (`dynlab_msgs/PushAction`) or `/car/cmd` (`ackermann_msgs/AckermannDriveStamped`:
 //! `steering_angle` = δ, `acceleration` = throttle). Every topic can be remapped
 //! (`-r /car/pose:=/mocap/car/pose`).
@@ -34,6 +37,7 @@ use dynlab_msgs::dynlab_msgs::PushAction as PushActionMsg;
 use dynlab_msgs::geometry_msgs::PoseStamped;
 use dynlab_msgs::nav_msgs::Odometry;
 use dynlab_msgs::rosgraph_msgs::Clock as ClockMsg;
+use dynlab_msgs::tf2_msgs::TFMessage;
 use dynlab_nodes::{Started, start_node};
 use dynlab_ros::qos::{self, History, QosProfile};
 use dynlab_ros::{Publisher, Subscription, WaitSet};
@@ -68,6 +72,7 @@ struct Publishers {
     pose: Publisher<PoseStamped>,
     odom: Option<Publisher<Odometry>>,
     clock: Publisher<ClockMsg>,
+    tf: Publisher<TFMessage>,
 }
 
 impl Publishers {
@@ -80,6 +85,7 @@ impl Publishers {
                         SimWorld::Push => m::block_pose_msg(t_ns, pose),
                         SimWorld::Car => m::car_pose_msg(t_ns, pose),
                     })?;
+                    self.tf.publish(m::tf_msg(self.world, t_ns, pose))?;
                 }
                 Emit::Odom { t_ns, state } => {
                     if let Some(o) = &self.odom {
@@ -232,7 +238,19 @@ fn main() -> anyhow::Result<()> {
             SimWorld::Push => None,
         },
         clock: node.create_publisher(m::CLOCK_TOPIC, qos::clock())?,
+        // tf2's broadcaster QoS: reliable, keep last 100
+        tf: node.create_publisher(
+            m::TF_TOPIC,
+            QosProfile {
+                history: History::KeepLast { depth: 100 },
+                ..qos::default_profile()
+            },
+        )?,
     };
+    // Fixed frames, once: latched (transient local), so late subscribers get them as well.
+    let tf_static = node.create_publisher::<TFMessage>(m::TF_STATIC_TOPIC, qos::latched())?;
+    let car_params = engine.car_params().cloned().unwrap_or_default();
+    tf_static.publish(m::tf_static_msg(world, engine.time_ns(), &car_params))?;
     // Commands: reliable with a deep queue, so a burst of actions is not lost (a best-effort
     // publisher still matches).
     let cmd_qos = QosProfile {

@@ -1,0 +1,52 @@
+//! The options every offline tool that reads robot data shares: where the poses come from
+//! (a `PoseStamped` or `Odometry` topic, or a tf frame pair), the command topic, and `--strict`.
+
+use clap::Args;
+use dynlab_learn::{Dataset, LoadOptions, TfFrames, Topics, data_warnings};
+
+/// Pose source, command topic and strictness.
+#[derive(Debug, Clone, Args)]
+pub struct SourceArgs {
+    /// Pose topic: PoseStamped, Odometry, PoseWithCovarianceStamped or TransformStamped (the
+    /// type is read from the bag) (default /push/block_pose or /car/pose).
+    #[arg(long, conflicts_with = "pose_tf")]
+    pub pose_topic: Option<String>,
+    /// Poses from tf instead: the pose of CHILD in PARENT from /tf and /tf_static, composing
+    /// intermediate frames, e.g. world:car or table:block.
+    #[arg(long, value_name = "PARENT:CHILD")]
+    pub pose_tf: Option<String>,
+    /// Command topic (default /push/action or /car/cmd).
+    #[arg(long, alias = "action-topic")]
+    pub cmd_topic: Option<String>,
+    /// Refuse poses or commands with NaN or infinite values and pose stamps that go back (by
+    /// default they are skipped, counted, and the trajectory is split there).
+    #[arg(long)]
+    pub strict: bool,
+}
+
+impl SourceArgs {
+    /// The loader options these arguments ask for.
+    pub fn options(&self) -> anyhow::Result<LoadOptions> {
+        Ok(LoadOptions {
+            topics: Topics {
+                pose: self.pose_topic.clone(),
+                cmd: self.cmd_topic.clone(),
+            },
+            pose_tf: self.pose_tf.as_deref().map(TfFrames::parse).transpose()?,
+            strict: self.strict,
+        })
+    }
+
+    /// Whether the pose source was named (so the world's default pose topic is not expected).
+    pub fn names_pose_source(&self) -> bool {
+        self.pose_topic.is_some() || self.pose_tf.is_some()
+    }
+}
+
+/// Prints what must not go unnoticed about how the data were read — a damaged bag's recovery,
+/// skipped poses — as warnings on standard error.
+pub fn warn_about_data(data: &Dataset) {
+    for w in data_warnings(data) {
+        eprintln!("warning: {w}");
+    }
+}
