@@ -32,7 +32,7 @@ pub struct DiagnoseArgs {
     #[arg(long, value_delimiter = ',')]
     effects: Option<Vec<String>>,
     /// Smallest held-out error reduction that counts (fraction).
-    #[arg(long, default_value_t = 0.05)]
+    #[arg(long, default_value_t = 0.1)]
     min_reduction: f64,
     /// Hold the model's nominal parameters (pushing physics models otherwise refit `c`, `κ`
     /// with every candidate).
