@@ -549,7 +549,7 @@ impl PhysicsModel {
 
     /// Advances the effect states `e` over `dt` under the held input `u`, integrating only the
     /// effect states' own equations (they do not depend on the robot's state): classic RK4 with
-    /// substeps of at most half the shortest time constant.
+    /// substeps of at most a twentieth of the shortest time constant.
     pub fn advance_effect_states(&self, e: &mut [f64], u: &[f64], dt: f64) {
         self.advance_generic(&self.params, e, u, dt);
     }
@@ -567,7 +567,7 @@ impl PhysicsModel {
             .map(|sl| p[sl.p_off].value())
             .fold(f64::INFINITY, f64::min)
             .max(1e-6);
-        let substeps = (2.0 * dt / tau_min).ceil().clamp(1.0, 400.0) as usize;
+        let substeps = (20.0 * dt / tau_min).ceil().clamp(1.0, 1000.0) as usize;
         let h = dt / substeps as f64;
         let active = vec![true; self.slots.len()];
         let ur: Vec<R> = u.iter().map(|&x| R::cst(x)).collect();
