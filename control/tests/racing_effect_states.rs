@@ -120,10 +120,17 @@ fn the_augmented_linearization_matches_finite_differences() {
                 worst = worst.max((fd - ex).abs() / (1.0 + ex.abs()));
             }
         }
-        assert!(worst < 1e-6, "{effects:?}: worst relative Jacobian error {worst:e}");
+        assert!(
+            worst < 1e-6,
+            "{effects:?}: worst relative Jacobian error {worst:e}"
+        );
         // the throttle acts on the filtered throttle, not directly on the car
         let ie = 6; // first effect state: d_f
-        assert!(lin.b[k][ie * 2 + 1] > 0.0, "∂d_f/∂d = {}", lin.b[k][ie * 2 + 1]);
+        assert!(
+            lin.b[k][ie * 2 + 1] > 0.0,
+            "∂d_f/∂d = {}",
+            lin.b[k][ie * 2 + 1]
+        );
     }
 }
 

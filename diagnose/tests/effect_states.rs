@@ -73,15 +73,23 @@ fn motor_lag_trained_on_lagged_simulator_data_beats_the_model_without_it_and_com
     eprintln!("simulator τ 0.2, fitted {tau:.4}; held-out {k}-step vx RMSE {a:.3e} vs {b:.3e}");
     assert!((tau - 0.2).abs() < 0.05, "fitted τ = {tau}");
     // measured: 2.09e-2 vs 2.63e-2 (the explorer's smooth throttle excites the lag mildly)
-    assert!(a < 0.9 * b, "{k}-step vx RMSE with motor_lag {a:.3e}, without {b:.3e}");
+    assert!(
+        a < 0.9 * b,
+        "{k}-step vx RMSE with motor_lag {a:.3e}, without {b:.3e}"
+    );
     assert!(ev_with.loss < ev_without.loss);
     // compare with the baseline: the same numbers as evaluate, and the error falls
     let cfg = CompareConfig {
         steps: k,
         ..Default::default()
     };
-    let r = compare_with_baseline(("with", &with), Some(("without", &without)), &held_out, &cfg)
-        .unwrap();
+    let r = compare_with_baseline(
+        ("with", &with),
+        Some(("without", &without)),
+        &held_out,
+        &cfg,
+    )
+    .unwrap();
     let close = |x: f64, y: f64| (x - y).abs() <= 1e-9 * y.abs().max(1e-300);
     assert_eq!(r.model.eval.windows, ev_with.windows);
     for (x, y) in r.model.eval.k_step.iter().zip(&ev_with.k_step) {
@@ -156,6 +164,9 @@ fn the_live_predictor_keeps_the_effect_states_of_the_offline_pipeline() {
         }
     }
     eprintln!("{matched} predictions matched offline stamps; worst d_f difference {worst:e}");
-    assert!(matched > 1000, "only {matched} predictions at offline stamps");
+    assert!(
+        matched > 1000,
+        "only {matched} predictions at offline stamps"
+    );
     assert!(worst < 1e-9, "online d_f differs from offline by {worst:e}");
 }

@@ -44,9 +44,17 @@ fn steering_lag_is_a_rate_limited_first_order_servo_with_exact_jacobians() {
     assert!(f[..7].iter().zip(&g).all(|(a, b)| (a - b).abs() < 1e-12));
     // small errors: a first-order lag of τ_s; large ones: at most the rate
     let small = servo(0.05, 50.0, 0.0);
-    small.eval_one(&[0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.19], &[0.2, 0.0], &mut f);
+    small.eval_one(
+        &[0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.19],
+        &[0.2, 0.0],
+        &mut f,
+    );
     assert!((f[7] - 0.01 / 0.05).abs() < 1e-4, "{}", f[7]);
-    m.eval_one(&[0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, -0.4], &[0.4, 0.0], &mut f);
+    m.eval_one(
+        &[0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, -0.4],
+        &[0.4, 0.0],
+        &mut f,
+    );
     assert!(f[7] < 2.0 && f[7] > 1.99, "{}", f[7]);
     // Jacobians wrt state, input and parameters against central differences
     let (ds, du, np) = (m.dim_s(), m.dim_u(), m.n_params());
@@ -81,7 +89,10 @@ fn steering_lag_is_a_rate_limited_first_order_servo_with_exact_jacobians() {
     assert_eq!(t.d_params.len(), ds * 2);
     assert!((t.contribution[7] - want).abs() < 1e-14);
     let text = m.equations();
-    assert!(text.contains("δ̇_w = 2.000·tanh((δ + δ₀ − δ_w)/(2.000·0.05000))"), "{text}");
+    assert!(
+        text.contains("δ̇_w = 2.000·tanh((δ + δ₀ − δ_w)/(2.000·0.05000))"),
+        "{text}"
+    );
     assert!(text.contains("F_fy·sin δ_w"), "{text}");
 }
 
@@ -106,7 +117,12 @@ fn effect_states_along_commands_match_the_exact_lag_and_the_integrated_model() {
     let thr: Vec<f64> = (0..60).map(|i| u[i * 2 + 1]).collect();
     let exact = PhysicsModel::motor_lag_filter(&thr, dt, 0.08, thr[0]);
     for i in 0..60 {
-        assert!((e[i * 2] - exact[i]).abs() < 1e-7, "{i}: {} vs {}", e[i * 2], exact[i]);
+        assert!(
+            (e[i * 2] - exact[i]).abs() < 1e-7,
+            "{i}: {} vs {}",
+            e[i * 2],
+            exact[i]
+        );
     }
     // the same as integrating the whole model (the effect states ignore the car's state)
     let mut s: Vec<f64> = [0.0, 0.0, 0.3, 1.0, 0.1, 0.2].to_vec();
@@ -117,7 +133,10 @@ fn effect_states_along_commands_match_the_exact_lag_and_the_integrated_model() {
         integrate(&m, &solver, 1, &s, &u[i * 2..i * 2 + 2], dt, &mut next);
         for c in 0..2 {
             let (a, b) = (next[6 + c], e[(i + 1) * 2 + c]);
-            assert!((a - b).abs() < 1e-8, "step {i} state {c}: model {a} vs along {b}");
+            assert!(
+                (a - b).abs() < 1e-8,
+                "step {i} state {c}: model {a} vs along {b}"
+            );
         }
         s = next;
     }

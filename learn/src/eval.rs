@@ -148,7 +148,10 @@ pub fn segments_with_extra(
     let along: Vec<Vec<f64>> = if ne == 0 {
         vec![Vec::new(); trajs.len()]
     } else {
-        trajs.iter().map(|t| model.extra_states_along(&t.u)).collect()
+        trajs
+            .iter()
+            .map(|t| model.extra_states_along(&t.u))
+            .collect()
     };
     segment(trajs, seg_len)
         .into_iter()

@@ -499,9 +499,8 @@ pub(crate) fn fit_physics(
             s.extend_from_slice(&extra[w.trajectory][a0 * ne..(a0 + 1) * ne]);
             sens.iter_mut().for_each(|x| *x = 0.0);
             if with_j && ne > 0 {
-                sens[ds * np..].copy_from_slice(
-                    &extra_sens[w.trajectory][a0 * ne * np..(a0 + 1) * ne * np],
-                );
+                sens[ds * np..]
+                    .copy_from_slice(&extra_sens[w.trajectory][a0 * ne * np..(a0 + 1) * ne * np]);
             }
             let mut g: f64 = 1.0;
             for j in 0..k {

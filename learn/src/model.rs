@@ -315,7 +315,9 @@ impl Model {
     /// measured: they are rebuilt from the commands ([`Model::extra_states_along`]) and carried
     /// through rollouts ([`Model::rollout_with_extra`]).
     pub fn dim_extra(&self) -> usize {
-        self.physics.as_ref().map_or(0, PhysicsModel::dim_effect_states)
+        self.physics
+            .as_ref()
+            .map_or(0, PhysicsModel::dim_effect_states)
     }
 
     /// Names of the effect states (`d_f`, `delta_w`), in order.
@@ -416,7 +418,10 @@ impl Model {
     ) -> Result<OdeStatus, LearnError> {
         let n = self.check_batch(s, u)?;
         let ne = self.dim_extra();
-        for (what, v) in [("effect states", e.len()), ("effect states out", e_out.len())] {
+        for (what, v) in [
+            ("effect states", e.len()),
+            ("effect states out", e_out.len()),
+        ] {
             if v != n * ne {
                 return Err(LearnError::Shape {
                     what,

@@ -51,7 +51,12 @@ fn k_step_vx_rmse(model: &Model, data: &Dataset, k: usize) -> f64 {
 #[test]
 fn physics_and_hybrid_train_with_motor_lag_at_any_steps() {
     let tmp = tempfile::tempdir().unwrap();
-    let data = lagged_data(tmp.path(), &[Effect::MotorLag], &[("motor_lag.tau", 0.15)], 3);
+    let data = lagged_data(
+        tmp.path(),
+        &[Effect::MotorLag],
+        &[("motor_lag.tau", 0.15)],
+        3,
+    );
     for kind in [ModelKind::Physics, ModelKind::Hybrid] {
         for steps in [1, 6] {
             let out = train(&data, &cfg(kind, steps, &["motor_lag"]), &mut |_| {})
@@ -72,8 +77,18 @@ fn physics_and_hybrid_train_with_motor_lag_at_any_steps() {
 #[test]
 fn a_motor_lag_model_recovers_tau_and_beats_the_model_without_it_on_held_out_data() {
     let tmp = tempfile::tempdir().unwrap();
-    let fit_data = lagged_data(tmp.path(), &[Effect::MotorLag], &[("motor_lag.tau", 0.15)], 3);
-    let held_out = lagged_data(tmp.path(), &[Effect::MotorLag], &[("motor_lag.tau", 0.15)], 11);
+    let fit_data = lagged_data(
+        tmp.path(),
+        &[Effect::MotorLag],
+        &[("motor_lag.tau", 0.15)],
+        3,
+    );
+    let held_out = lagged_data(
+        tmp.path(),
+        &[Effect::MotorLag],
+        &[("motor_lag.tau", 0.15)],
+        11,
+    );
     let with = train(
         &fit_data,
         &cfg(ModelKind::Physics, 8, &["motor_lag"]),
@@ -92,7 +107,10 @@ fn a_motor_lag_model_recovers_tau_and_beats_the_model_without_it_on_held_out_dat
         k_step_vx_rmse(&without, &held_out, 20),
     );
     eprintln!("motor_lag: τ = {tau:.4}; 20-step vx RMSE with {a:.3e}, without {b:.3e}");
-    assert!(a < 0.5 * b, "20-step vx RMSE with motor_lag {a:.3e}, without {b:.3e}");
+    assert!(
+        a < 0.5 * b,
+        "20-step vx RMSE with motor_lag {a:.3e}, without {b:.3e}"
+    );
     // the model file keeps the effect state
     let dir = tmp.path().join("m");
     save_model(&with, &dir, None, Default::default()).unwrap();
@@ -124,7 +142,10 @@ fn a_steering_lag_model_beats_the_model_without_it_on_held_out_data() {
     let err = |m: &Model| evaluate(m, &held_out, 20, 1.0).unwrap().k_step[5].rmse;
     let (a, b) = (err(&with), err(&without));
     eprintln!("steering_lag: τ_s = {tau:.4}; 20-step ω RMSE with {a:.3e}, without {b:.3e}");
-    assert!(a < 0.5 * b, "20-step ω RMSE with steering_lag {a:.3e}, without {b:.3e}");
+    assert!(
+        a < 0.5 * b,
+        "20-step ω RMSE with steering_lag {a:.3e}, without {b:.3e}"
+    );
 }
 
 fn physics(effects: &[&str], values: &[(&str, f64)]) -> Model {
@@ -148,22 +169,41 @@ fn physics(effects: &[&str], values: &[(&str, f64)]) -> Model {
 #[test]
 fn windows_start_from_the_effect_states_of_their_command_history() {
     let tmp = tempfile::tempdir().unwrap();
-    let data = lagged_data(tmp.path(), &[Effect::MotorLag], &[("motor_lag.tau", 0.15)], 3);
+    let data = lagged_data(
+        tmp.path(),
+        &[Effect::MotorLag],
+        &[("motor_lag.tau", 0.15)],
+        3,
+    );
     let model = physics(&["motor_lag"], &[("motor_lag.tau", 0.15)]);
     let t = &data.trajectories[0];
     let ws = windows(&data.lengths(), 4).unwrap();
-    let some: Vec<_> = ws.iter().filter(|w| w.trajectory == 0).step_by(97).copied().collect();
+    let some: Vec<_> = ws
+        .iter()
+        .filter(|w| w.trajectory == 0)
+        .step_by(97)
+        .copied()
+        .collect();
     let e0 = window_extra_states(&model, &data.trajectories, &some);
     for (w, e) in some.iter().zip(&e0) {
         // the same recursion from the history before the window
         let hist = &t.u[..w.start * t.dim_u];
         let cur = &t.u[w.start * t.dim_u..(w.start + 1) * t.dim_u];
         let want = model.extra_from_history(hist, cur);
-        assert!((e - want[0]).abs() < 1e-12, "window at {}: {e} vs {}", w.start, want[0]);
+        assert!(
+            (e - want[0]).abs() < 1e-12,
+            "window at {}: {e} vs {}",
+            w.start,
+            want[0]
+        );
         // and the filtered throttle of the exact first-order lag
         let thr: Vec<f64> = (0..=w.start).map(|i| t.u[i * 2 + 1]).collect();
         let exact = PhysicsModel::motor_lag_filter(&thr, t.dt, 0.15, thr[0]);
-        assert!((e - exact[w.start]).abs() < 1e-6, "{e} vs exact {}", exact[w.start]);
+        assert!(
+            (e - exact[w.start]).abs() < 1e-6,
+            "{e} vs exact {}",
+            exact[w.start]
+        );
     }
     // the rollout with the rebuilt states predicts the lagged data better than one that starts
     // every window settled at its first command
@@ -193,7 +233,10 @@ fn windows_start_from_the_effect_states_of_their_command_history() {
 
 #[test]
 fn rollouts_carry_the_effect_states() {
-    let model = physics(&["motor_lag", "steering_lag"], &[("steering_lag.rate", 2.0)]);
+    let model = physics(
+        &["motor_lag", "steering_lag"],
+        &[("steering_lag.rate", 2.0)],
+    );
     assert_eq!(model.dim_extra(), 2);
     let s0 = [0.0, 0.0, 0.1, 1.0, 0.0, 0.2];
     let e0 = [0.1, -0.05];
@@ -283,7 +326,11 @@ fn check_augmented_jacobians(model: &Model, x0: (&[f64], &[f64]), u: &[f64], h: 
             worst = worst.max((fd - ex).abs() / (1.0 + ex.abs()));
         }
     }
-    assert!(worst < tol, "{}: worst relative error {worst:e}", model.kind());
+    assert!(
+        worst < tol,
+        "{}: worst relative error {worst:e}",
+        model.kind()
+    );
 }
 
 #[test]
@@ -308,7 +355,10 @@ fn augmented_jacobians_match_finite_differences() {
         for r in 0..6 {
             let fd = (fp[r] - fm[r]) / (2.0 * h);
             let ex = j.du[r * 2 + c];
-            assert!((fd - ex).abs() < 1e-6 * (1.0 + ex.abs()), "∂s⁺{r}/∂u{c}: {ex} vs {fd}");
+            assert!(
+                (fd - ex).abs() < 1e-6 * (1.0 + ex.abs()),
+                "∂s⁺{r}/∂u{c}: {ex} vs {fd}"
+            );
         }
     }
 }
@@ -316,7 +366,12 @@ fn augmented_jacobians_match_finite_differences() {
 #[test]
 fn a_hybrid_with_effect_states_has_exact_augmented_jacobians() {
     let tmp = tempfile::tempdir().unwrap();
-    let data = lagged_data(tmp.path(), &[Effect::MotorLag], &[("motor_lag.tau", 0.15)], 3);
+    let data = lagged_data(
+        tmp.path(),
+        &[Effect::MotorLag],
+        &[("motor_lag.tau", 0.15)],
+        3,
+    );
     let out = train(
         &data,
         &cfg(ModelKind::Hybrid, 2, &["motor_lag", "steering_lag"]),

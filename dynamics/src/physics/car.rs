@@ -308,12 +308,7 @@ pub(crate) fn effect_state_rates<R: Real>(
 
 /// The effect states of a car model at rest under a held input (every lag settled):
 /// `d_f = d`, `δ_w = δ (+ δ₀)`.
-pub(crate) fn settled_effect_states<R: Real>(
-    p: &[R],
-    slots: &[Slot],
-    u: &[R],
-    out: &mut [R],
-) {
+pub(crate) fn settled_effect_states<R: Real>(p: &[R], slots: &[Slot], u: &[R], out: &mut [R]) {
     let active = vec![true; slots.len()];
     for sl in slots {
         match sl.effect {

@@ -346,7 +346,9 @@ impl Effect {
             Effect::AeroDrag => "aerodynamic drag, quadratic in speed",
             Effect::MotorLag => "first-order lag between throttle command and drive force",
             Effect::SteeringOffset => "constant steering offset (miscalibrated servo trim)",
-            Effect::SteeringLag => "steering servo lag and rate limit (wheel angle behind the command)",
+            Effect::SteeringLag => {
+                "steering servo lag and rate limit (wheel angle behind the command)"
+            }
             Effect::GripPatch => "floor patch with different tire grip",
             Effect::ComOffset => "centre of mass away from the geometric centre",
             Effect::TableTilt => "tilted table: downhill drift while sliding",

@@ -526,7 +526,11 @@ impl PhysicsModel {
     /// row-major): how a padded effect state moves with the input it settles to.
     pub fn settled_effect_states_jacobian(&self, u: &[f64]) -> Vec<f64> {
         let (ne, du) = (self.dim_effect_states(), self.dim_input());
-        let ud: Vec<Dual<DIRS>> = u.iter().enumerate().map(|(i, &x)| Dual::var(x, i)).collect();
+        let ud: Vec<Dual<DIRS>> = u
+            .iter()
+            .enumerate()
+            .map(|(i, &x)| Dual::var(x, i))
+            .collect();
         let pd: Vec<Dual<DIRS>> = self.params.iter().map(|&x| Dual::cst(x)).collect();
         let e = self.settled_generic(&pd, &ud);
         let mut j = vec![0.0; ne * du];
@@ -638,7 +642,12 @@ impl PhysicsModel {
     /// The effect states after a command history (`history`, `m × dim_input`, each held for
     /// `dt`), started settled at its first command: the state in which the next command is
     /// applied. With an empty history, the states settled at `current`.
-    pub fn effect_states_from_history(&self, history: &[f64], current: &[f64], dt: f64) -> Vec<f64> {
+    pub fn effect_states_from_history(
+        &self,
+        history: &[f64],
+        current: &[f64],
+        dt: f64,
+    ) -> Vec<f64> {
         let du = self.dim_input();
         if history.len() < du {
             return self.settled_effect_states(current);
