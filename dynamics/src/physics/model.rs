@@ -561,7 +561,7 @@ impl PhysicsModel {
     fn advance_generic<R: Real>(&self, p: &[R], e: &mut [R], u: &[f64], dt: f64) {
         let off = self.effect_state_offset();
         let ne = self.dim_s - off;
-        if ne == 0 || self.robot != Robot::Car || !(dt > 0.0) {
+        if ne == 0 || self.robot != Robot::Car || dt.is_nan() || dt <= 0.0 {
             return;
         }
         let tau_min = self
