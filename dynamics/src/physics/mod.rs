@@ -151,10 +151,11 @@ static STEERING_LAG: [ParamSpec; 2] = [
         "tau",
         "τ_s",
         "s",
-        1e-3,
+        0.01,
         1.0,
         0.05,
-        "time constant of the steering servo (wheel angle lag behind the command)",
+        "time constant of the steering servo (≥ 10 ms: a faster servo is not identifiable at \
+         100 Hz, and the model step's RK4 stays stable)",
     ),
     ps(
         "rate",
