@@ -1218,17 +1218,26 @@ impl Model {
         actions: &[f32],
         out: &mut [f32],
     ) -> Result<(), LearnError> {
-        let (ds, du) = (self.dim_s(), self.dim_u());
+        let (ds, du, ne) = (self.dim_s(), self.dim_u(), self.dim_extra());
         let mut cur: Vec<f64> = s0.iter().map(|&x| f64::from(x)).collect();
         let mut next = vec![0.0; n * ds];
         let mut u = vec![0.0; n * du];
+        // effect states, as Model::rollout: settled at each sample's first action, then carried
+        let mut e: Vec<f64> = Vec::with_capacity(n * ne);
+        let mut e_next = vec![0.0; n * ne];
         for t in 0..horizon {
             for i in 0..n {
                 for d in 0..du {
                     u[i * du + d] = f64::from(actions[(i * horizon + t) * du + d]);
                 }
             }
-            self.step(&cur, &u, &mut next)?;
+            if t == 0 {
+                for i in 0..n {
+                    e.extend(self.settled_extra(&u[i * du..(i + 1) * du]));
+                }
+            }
+            self.step_with_extra(&cur, &e, &u, &mut next, &mut e_next)?;
+            std::mem::swap(&mut e, &mut e_next);
             for i in 0..n {
                 for d in 0..ds {
                     out[(i * horizon + t) * ds + d] = next[i * ds + d] as f32;
