@@ -391,7 +391,9 @@ impl Model {
     }
 
     /// One step for a batch: `out = f(s, u)` (`n × dim_s`). Returns the worst solver status
-    /// (a NeuralODE or physics integration that failed leaves its last finite state).
+    /// (a NeuralODE or physics integration that failed leaves its last finite state). A model
+    /// with effect states has no history here: they start settled at the command (use
+    /// [`Model::step_with_extra`] to give them).
     pub fn step(&self, s: &[f64], u: &[f64], out: &mut [f64]) -> Result<OdeStatus, LearnError> {
         let n = self.check_batch(s, u)?;
         if out.len() != s.len() {
@@ -563,6 +565,8 @@ impl Model {
 
     /// Open-loop rollout of `k` steps for `n` samples: `s0` is `n × dim_s`, `actions` is
     /// step-major `k × n × dim_u`, `out` receives `k × n × dim_s` (state after each step).
+    /// Effect states start settled at each sample's first action and are carried through the
+    /// rollout; with a command history use [`Model::rollout_with_extra`].
     pub fn rollout(
         &self,
         s0: &[f64],

@@ -764,15 +764,8 @@ impl Ctx<'_> {
             for d in 0..dz {
                 st.sfull[i * dp + lr.start + d] = f64::from(st.z[j][i * dz + d]);
             }
-            if j == 0 {
-                st.sfull[i * dp + ds..(i + 1) * dp]
-                    .copy_from_slice(&st.extra[i * ne..(i + 1) * ne]);
-            } else {
-                // the effect states carried from the previous physics step
-                for c in ds..dp {
-                    st.sfull[i * dp + c] = st.extra[i * ne + c - ds];
-                }
-            }
+            // the window's initial effect states at j = 0, then those of the previous step
+            st.sfull[i * dp + ds..(i + 1) * dp].copy_from_slice(&st.extra[i * ne..(i + 1) * ne]);
         }
         for (a, b) in st.u64.iter_mut().zip(&st.u[j]) {
             *a = f64::from(*b);
