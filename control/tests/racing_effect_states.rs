@@ -198,7 +198,8 @@ fn a_racer_with_a_motor_lag_model_keeps_the_effect_states_of_its_own_commands() 
         let mut e_true = first.clone();
         for _ in 0..15 {
             let e_before = racer.extra_states();
-            assert!((e_before[0] - e_true[0]).abs() < 1e-12, "{optimizer:?}");
+            // equal up to the model step's RK4 error (advance_extra takes finer substeps)
+            assert!((e_before[0] - e_true[0]).abs() < 1e-6, "{optimizer:?}");
             let step = racer.step(s).unwrap();
             assert!(step.cost.is_finite(), "{optimizer:?}: {:?}", step.status);
             let plant = Plant::new(&model, hold)
