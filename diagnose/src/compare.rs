@@ -30,10 +30,10 @@ pub mod online;
 pub mod stats;
 
 use dynlab_learn::dynamics::conventions::{tve, wrap_angle};
-use dynlab_learn::dynamics::data::{gather, windows};
+use dynlab_learn::dynamics::data::windows;
 use dynlab_learn::dynamics::ode::OdeStatus;
 use dynlab_learn::eval::{DimError, EvalReport, TveReport};
-use dynlab_learn::train::{Loss, segment};
+use dynlab_learn::train::Loss;
 use dynlab_learn::{LearnError, Model, TimedDataset, World};
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
@@ -380,10 +380,11 @@ fn batch_errors(
     let ds = world.state_dim();
     let lr = world.learned_dims();
     let loss = Loss::default_for(world);
-    let b = gather(&data.data.trajectories, ws, k);
+    // effect states (motor_lag's d_f) rebuilt from the commands before each window
+    let (b, out, status) =
+        dynlab_learn::eval::rollout_windows(model, &data.data.trajectories, ws, k)?;
     let m = b.n;
-    let mut out = vec![0.0; k * m * ds];
-    let ok = model.rollout(&b.s0, &b.u, &mut out)? == OdeStatus::Success;
+    let ok = status == OdeStatus::Success;
     let mut e = vec![0.0; ds];
     for i in 0..m {
         let mut g = 1.0;
@@ -513,10 +514,12 @@ fn eval_report(
     };
     let tve_report = if world == World::Car {
         let seg_len = (cfg.segment_s / data.data.pose_dt_s).round().max(1.0) as usize + 1;
-        let segs: Vec<_> = segment(&data.data.trajectories, seg_len)
-            .into_iter()
-            .filter(|s| s.len() == seg_len)
-            .collect();
+        let (segs, e0): (Vec<_>, Vec<_>) =
+            dynlab_learn::eval::segments_with_extra(model, &data.data.trajectories, seg_len)
+                .into_iter()
+                .filter(|(s, _)| s.len() == seg_len)
+                .unzip();
+        let e0: Vec<f64> = e0.concat();
         let steps = seg_len - 1;
         let m = segs.len();
         let mut finals = Vec::with_capacity(m);
@@ -531,7 +534,7 @@ fn eval_report(
                 }
             }
             let mut out = vec![0.0; steps * m * ds];
-            model.rollout(&s0, &u, &mut out)?;
+            model.rollout_with_extra(&s0, &e0, &u, &mut out, None)?;
             for (i, sg) in segs.iter().enumerate() {
                 let p = &out[((steps - 1) * m + i) * ds..((steps - 1) * m + i + 1) * ds];
                 let q = &sg.s[steps * ds..(steps + 1) * ds];

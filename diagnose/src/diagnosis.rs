@@ -605,6 +605,7 @@ fn starts(e: Effect, trajs: &[StateTrajectory]) -> Vec<Vec<(&'static str, f64)>>
             .into_iter()
             .map(|t| vec![("tau", t)])
             .collect(),
+        Effect::SteeringLag => [0.02, 0.05, 0.1, 0.2].map(|t| vec![("tau", t)]).to_vec(),
         Effect::SteeringOffset => [-0.05, -0.01, 0.0, 0.01, 0.05]
             .into_iter()
             .map(|d| vec![("delta0", d)])

@@ -566,9 +566,32 @@ pub fn integrate<T: Scalar, F: VectorField<T> + ?Sized>(
     dt: f64,
     out: &mut [T],
 ) -> OdeReport {
+    check_batch_shapes("integrate", field, n, s0, u, out);
     out.copy_from_slice(s0);
     let mut sys = Plain { field, n, u };
     run(&mut sys, solver, out, dt)
+}
+
+/// The shape contract of the integrators: `s0` and `out` are `n × dim_s`, `u` is `n × dim_u`.
+/// A violation is a bug in the caller (for instance the state of a physics model with effect
+/// states given without them), reported with the shapes instead of a slice-length panic deep
+/// inside a solver stage.
+fn check_batch_shapes<T: Scalar, F: VectorField<T> + ?Sized>(
+    what: &str,
+    field: &F,
+    n: usize,
+    s0: &[T],
+    u: &[T],
+    out: &[T],
+) {
+    let (ds, du) = (field.dim_s(), field.dim_u());
+    assert!(
+        s0.len() == n * ds && out.len() == n * ds && u.len() == n * du,
+        "{what}: a batch of {n} needs states and out of n × dim_s = {n} × {ds} and inputs of          n × dim_u = {n} × {du}; got {} states, {} out, {} inputs (a physics model with effect          states takes them appended to each state: PhysicsModel::dim_state)",
+        s0.len(),
+        out.len(),
+        u.len()
+    );
 }
 
 /// One accepted step kept on a [`SolverTape`].
@@ -677,6 +700,7 @@ pub fn integrate_taped<T: Scalar, F: VectorField<T> + ?Sized>(
     out: &mut [T],
     tape: &mut SolverTape<T, F::Tape>,
 ) -> OdeReport {
+    check_batch_shapes("integrate_taped", field, n, s0, u, out);
     let tab = solver.tableau();
     let stages = tab.b.len();
     tape.n = n;

@@ -5,11 +5,11 @@
 use std::ops::Range;
 
 use dynlab_dynamics::conventions::{l_rel, tve, wrap_angle};
-use dynlab_dynamics::data::{Window, gather, windows};
+use dynlab_dynamics::data::{StateTrajectory, Window, WindowBatch, gather, windows};
 use dynlab_dynamics::ode::OdeStatus;
 use serde::{Deserialize, Serialize};
 
-use crate::train::{Loss, segment};
+use crate::train::{Loss, segment, segment_origins};
 use crate::{Dataset, LearnError, Model, World};
 
 /// Errors of one state dimension.
@@ -96,6 +96,70 @@ pub fn dim_errors(world: World, sq: &[f64], abs: &[f64], n: usize) -> Vec<DimErr
         .collect()
 }
 
+/// The initial effect states of windows (`ws.len() × dim_extra`, row-major), each rebuilt from
+/// the commands of its trajectory before its start ([`Model::extra_states_along`]). Empty for
+/// a model without effect states.
+pub fn window_extra_states(model: &Model, trajs: &[StateTrajectory], ws: &[Window]) -> Vec<f64> {
+    let ne = model.dim_extra();
+    if ne == 0 {
+        return Vec::new();
+    }
+    let mut last = std::collections::BTreeMap::<usize, usize>::new();
+    for w in ws {
+        let e = last.entry(w.trajectory).or_insert(0);
+        *e = (*e).max(w.start);
+    }
+    let along: std::collections::BTreeMap<usize, Vec<f64>> = last
+        .into_iter()
+        .map(|(ti, a)| {
+            let t = &trajs[ti];
+            (ti, model.extra_states_along(&t.u[..(a + 1) * t.dim_u]))
+        })
+        .collect();
+    ws.iter()
+        .flat_map(|w| along[&w.trajectory][w.start * ne..(w.start + 1) * ne].to_vec())
+        .collect()
+}
+
+/// Rolls every window open loop from its measured first state, the effect states rebuilt from
+/// the commands before it ([`window_extra_states`]): the gathered batch (with the targets) and
+/// the predictions (`k × n × dim_s`, step-major), with the worst solver status.
+pub fn rollout_windows(
+    model: &Model,
+    trajs: &[StateTrajectory],
+    ws: &[Window],
+    k: usize,
+) -> Result<(WindowBatch, Vec<f64>, OdeStatus), LearnError> {
+    let b = gather(trajs, ws, k);
+    let e0 = window_extra_states(model, trajs, ws);
+    let mut out = vec![0.0; k * b.n * model.dim_s()];
+    let status = model.rollout_with_extra(&b.s0, &e0, &b.u, &mut out, None)?;
+    Ok((b, out, status))
+}
+
+/// The segments of [`segment`]`(trajs, seg_len)`, each with its initial effect states rebuilt
+/// from the commands of its trajectory before it (empty without effect states).
+pub fn segments_with_extra(
+    model: &Model,
+    trajs: &[StateTrajectory],
+    seg_len: usize,
+) -> Vec<(StateTrajectory, Vec<f64>)> {
+    let ne = model.dim_extra();
+    let along: Vec<Vec<f64>> = if ne == 0 {
+        vec![Vec::new(); trajs.len()]
+    } else {
+        trajs
+            .iter()
+            .map(|t| model.extra_states_along(&t.u))
+            .collect()
+    };
+    segment(trajs, seg_len)
+        .into_iter()
+        .zip(segment_origins(trajs, seg_len))
+        .map(|(sg, (ti, a, _))| (sg, along[ti][a * ne..(a + 1) * ne].to_vec()))
+        .collect()
+}
+
 /// Evaluates `model` on every k-step window of `data` (and, for the car, TVE over segments of
 /// `segment_s` seconds).
 pub fn evaluate(
@@ -127,10 +191,9 @@ pub fn evaluate(
     let mut failed = 0;
     let lr = world.learned_dims();
     for ws in all.chunks(2048) {
-        let b = gather(&data.trajectories, ws, k);
+        let (b, out, status) = rollout_windows(model, &data.trajectories, ws, k)?;
         let n = b.n;
-        let mut out = vec![0.0; k * n * ds];
-        if model.rollout(&b.s0, &b.u, &mut out)? != OdeStatus::Success {
+        if status != OdeStatus::Success {
             failed += 1;
         }
         for i in 0..n {
@@ -168,12 +231,18 @@ pub fn evaluate(
     let n = all.len();
     let tve_report = if world == World::Car {
         let seg_len = (segment_s / data.pose_dt_s).round().max(1.0) as usize + 1;
-        let segs = segment(&data.trajectories, seg_len);
+        let segs = segments_with_extra(model, &data.trajectories, seg_len);
         let mut finals = Vec::new();
-        for sgm in segs.iter().filter(|s| s.len() == seg_len) {
+        for (sgm, e0) in segs.iter().filter(|(s, _)| s.len() == seg_len) {
             let steps = sgm.len() - 1;
             let mut out = vec![0.0; steps * ds];
-            model.rollout(&sgm.s[..ds], &sgm.u[..steps * sgm.dim_u], &mut out)?;
+            model.rollout_with_extra(
+                &sgm.s[..ds],
+                e0,
+                &sgm.u[..steps * sgm.dim_u],
+                &mut out,
+                None,
+            )?;
             let p = &out[(steps - 1) * ds..steps * ds];
             let m = &sgm.s[steps * ds..(steps + 1) * ds];
             finals.push(([p[0], p[1], p[2]], [m[0], m[1], m[2]]));

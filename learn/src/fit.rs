@@ -16,9 +16,10 @@ use clarabel::solver::{
 use dynlab_dynamics::conventions::wrap_angle;
 use dynlab_dynamics::data::{SplitMix64, StateTrajectory, Window};
 use dynlab_dynamics::ode::{OdeStatus, Solver};
-use dynlab_dynamics::physics::{Effect, PhysicsModel, StepTape};
+use dynlab_dynamics::physics::{PhysicsModel, StepTape};
+use dynlab_dynamics::real::Dual;
 
-use crate::train::{Loss, PhysicsFit, TrainConfig};
+use crate::train::{CommandHistory, Loss, PhysicsFit, TrainConfig};
 use crate::{LearnError, World};
 
 /// Residuals and Jacobian of a least-squares problem at `θ`: `eval(θ, with_jacobian)` returns
@@ -326,25 +327,72 @@ pub(crate) fn solve(a: &[f64], b: &[f64], n: usize) -> Option<Vec<f64>> {
     x.iter().all(|v| v.is_finite()).then_some(x)
 }
 
-/// The model state at state index `a` of trajectory `t`: the measured state with the effects'
-/// extra states reconstructed from the command history (`motor_lag`: the filtered throttle
-/// from [`PhysicsModel::motor_lag_filter`] started settled at the first command).
+/// The model state at state index `a` of trajectory `t`: the measured state with the effect
+/// states (`motor_lag`'s `d_f`, `steering_lag`'s `δ_w`) rebuilt from the trajectory's commands
+/// before `a` by [`PhysicsModel::effect_states_along`] (started settled at the first command).
 pub fn initial_state(p: &PhysicsModel, t: &StateTrajectory, a: usize) -> Vec<f64> {
     let ds = t.dim_s;
     let mut s = t.s[a * ds..(a + 1) * ds].to_vec();
-    for e in p.effects() {
-        if e == Effect::MotorLag {
-            let tau = p
-                .effect_param_range(e)
-                .map(|r| p.params()[r.start])
-                .unwrap_or(0.05);
-            let du = t.dim_u;
-            let thr: Vec<f64> = (0..=a).map(|i| t.u[i * du + du - 1]).collect();
-            let df = PhysicsModel::motor_lag_filter(&thr, t.dt, tau, thr[0]);
-            s.push(df[a]);
-        }
+    let ne = p.dim_effect_states();
+    if ne > 0 {
+        let e = p.effect_states_along(&t.u[..(a + 1) * t.dim_u], t.dt);
+        s.extend_from_slice(&e[a * ne..(a + 1) * ne]);
     }
     s
+}
+
+/// Effect states at every sample of every trajectory of `history` (as
+/// [`CommandHistory::effect_states`]) and their derivatives wrt all parameters of `p`
+/// (`len × dim_effect_states × n_params` per trajectory), by dual numbers through the same
+/// recursion: the fit's Jacobian includes how the initial effect state of each window moves
+/// with `τ`.
+fn effect_states_with_sens(
+    p: &PhysicsModel,
+    history: &CommandHistory,
+    dt: f64,
+    lens: &[usize],
+) -> (Vec<Vec<f64>>, Vec<Vec<f64>>) {
+    const N: usize = 8;
+    let ne = p.dim_effect_states();
+    let np = p.params().len();
+    let nt = history.origin.len();
+    if ne == 0 {
+        return (vec![Vec::new(); nt], vec![Vec::new(); nt]);
+    }
+    let mut vals: Vec<Vec<f64>> = Vec::new();
+    let mut sens: Vec<Vec<f64>> = history
+        .sources
+        .iter()
+        .map(|u| vec![0.0; u.len() / p.dim_input().max(1) * ne * np])
+        .collect();
+    let mut base = 0;
+    while base < np {
+        let pd: Vec<Dual<N>> = p
+            .params()
+            .iter()
+            .enumerate()
+            .map(|(i, &v)| Dual::var(v, i.wrapping_sub(base)))
+            .collect();
+        for (si, u) in history.sources.iter().enumerate() {
+            let e = p.effect_states_along_generic(&pd, u, dt);
+            if base == 0 {
+                vals.push(e.iter().map(|x| x.v).collect());
+            }
+            for (r, x) in e.iter().enumerate() {
+                for d in 0..N.min(np - base) {
+                    sens[si][r * np + base + d] = x.d[d];
+                }
+            }
+        }
+        base += N;
+    }
+    let mut v_out = Vec::with_capacity(nt);
+    let mut s_out = Vec::with_capacity(nt);
+    for (&(src, off), &len) in history.origin.iter().zip(lens) {
+        v_out.push(vals[src][off * ne..(off + len) * ne].to_vec());
+        s_out.push(sens[src][off * ne * np..(off + len) * ne * np].to_vec());
+    }
+    (v_out, s_out)
 }
 
 /// Which parameters the fit frees: `cfg.physics_free` names the nominal ones when set (effect
@@ -382,6 +430,7 @@ pub(crate) fn fit_physics(
     world: World,
     dt: f64,
     trajs: &[StateTrajectory],
+    history: &CommandHistory,
     train_w: &[Window],
     k: usize,
     cfg: &TrainConfig,
@@ -417,6 +466,7 @@ pub(crate) fn fit_physics(
     let lower: Vec<f64> = specs.iter().map(|(_, s)| s.lower).collect();
     let upper: Vec<f64> = specs.iter().map(|(_, s)| s.upper).collect();
     let base = p.clone();
+    let lens: Vec<usize> = trajs.iter().map(StateTrajectory::len).collect();
     let mut eval = |theta: &[f64], with_j: bool| -> (Vec<f64>, Vec<f64>) {
         let mut p = base.clone();
         if p.set_params(theta).is_err() {
@@ -434,10 +484,24 @@ pub(crate) fn fit_physics(
         let du = world.action_dim();
         let mut ubar = vec![0.0; du];
         let mut pbar = vec![0.0; np];
+        // initial effect states of every window from the commands before it, with ∂/∂θ
+        let (extra, extra_sens) = if with_j {
+            effect_states_with_sens(&p, history, t_phys, &lens)
+        } else {
+            let e = history.effect_states(&p, t_phys, &lens);
+            (e, vec![Vec::new(); lens.len()])
+        };
+        let ne = dp - ds;
         for w in &ws {
             let t = &trajs[w.trajectory];
-            let mut s = initial_state(&p, t, w.start);
+            let a0 = w.start;
+            let mut s = t.s[a0 * ds..(a0 + 1) * ds].to_vec();
+            s.extend_from_slice(&extra[w.trajectory][a0 * ne..(a0 + 1) * ne]);
             sens.iter_mut().for_each(|x| *x = 0.0);
+            if with_j && ne > 0 {
+                sens[ds * np..]
+                    .copy_from_slice(&extra_sens[w.trajectory][a0 * ne * np..(a0 + 1) * ne * np]);
+            }
             let mut g: f64 = 1.0;
             for j in 0..k {
                 let a = w.start + j;

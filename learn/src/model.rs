@@ -240,15 +240,14 @@ impl Model {
                     hint: "use the physics model of the same robot".into(),
                 });
             }
-            if p.dim_state() != world.state_dim() && kind != ModelKind::Physics {
+            if p.effect_state_offset() != world.state_dim() {
                 return Err(LearnError::setting(
-                    "effects",
-                    p.effects()
-                        .iter()
-                        .map(|e| e.name())
-                        .collect::<Vec<_>>()
-                        .join(","),
-                    "effects that add states (motor_lag) are supported by physics models only, not by hybrid ones; use --kind physics or leave the effect out",
+                    "physics",
+                    format!("{} states", p.effect_state_offset()),
+                    format!(
+                        "a {world} physics model has {} states before its effect states",
+                        world.state_dim()
+                    ),
                 ));
             }
         }
@@ -311,6 +310,62 @@ impl Model {
         }
     }
 
+    /// Number of effect states the model carries beside the world state (`d_f` of
+    /// `motor_lag`, `delta_w` of `steering_lag`; 0 without such effects). They are not
+    /// measured: they are rebuilt from the commands ([`Model::extra_states_along`]) and carried
+    /// through rollouts ([`Model::rollout_with_extra`]).
+    pub fn dim_extra(&self) -> usize {
+        self.physics
+            .as_ref()
+            .map_or(0, PhysicsModel::dim_effect_states)
+    }
+
+    /// Names of the effect states (`d_f`, `delta_w`), in order.
+    pub fn extra_state_names(&self) -> Vec<&'static str> {
+        self.physics
+            .as_ref()
+            .map_or_else(Vec::new, PhysicsModel::effect_state_names)
+    }
+
+    /// The effect states at every sample of a command sequence (`u`: `len × dim_u`, one command
+    /// per model step; result `len × dim_extra`), started settled at the first command: entry
+    /// `a` is the initial effect state of a window starting at sample `a`. The one
+    /// implementation of "the initial effect states of a window from the commands before it"
+    /// ([`PhysicsModel::effect_states_along`]); empty for models without effect states.
+    pub fn extra_states_along(&self, u: &[f64]) -> Vec<f64> {
+        match &self.physics {
+            Some(p) if p.dim_effect_states() > 0 => p.effect_states_along(u, self.physics_time()),
+            _ => Vec::new(),
+        }
+    }
+
+    /// The effect states after a command history (`history`: `m × dim_u`, oldest first, one per
+    /// model step), in which `current` is applied next; settled at `current` when the history is
+    /// empty. The same recursion as [`Model::extra_states_along`].
+    pub fn extra_from_history(&self, history: &[f64], current: &[f64]) -> Vec<f64> {
+        match &self.physics {
+            Some(p) if p.dim_effect_states() > 0 => {
+                p.effect_states_from_history(history, current, self.physics_time())
+            }
+            _ => Vec::new(),
+        }
+    }
+
+    /// Advances effect states `e` (`dim_extra`) by one model step under the command `u`.
+    pub fn advance_extra(&self, e: &mut [f64], u: &[f64]) {
+        if let Some(p) = &self.physics {
+            p.advance_effect_states(e, u, self.physics_time());
+        }
+    }
+
+    /// The effect states settled under the held command `u` (what a single [`Model::step`]
+    /// assumes, having no history).
+    pub fn settled_extra(&self, u: &[f64]) -> Vec<f64> {
+        self.physics
+            .as_ref()
+            .map_or_else(Vec::new, |p| p.settled_effect_states(u))
+    }
+
     fn check_batch(&self, s: &[f64], u: &[f64]) -> Result<usize, LearnError> {
         let (ds, du) = (self.dim_s(), self.dim_u());
         if !s.len().is_multiple_of(ds) {
@@ -336,7 +391,9 @@ impl Model {
     }
 
     /// One step for a batch: `out = f(s, u)` (`n × dim_s`). Returns the worst solver status
-    /// (a NeuralODE or physics integration that failed leaves its last finite state).
+    /// (a NeuralODE or physics integration that failed leaves its last finite state). A model
+    /// with effect states has no history here: they start settled at the command (use
+    /// [`Model::step_with_extra`] to give them).
     pub fn step(&self, s: &[f64], u: &[f64], out: &mut [f64]) -> Result<OdeStatus, LearnError> {
         let n = self.check_batch(s, u)?;
         if out.len() != s.len() {
@@ -350,12 +407,64 @@ impl Model {
         Ok(self.step_unchecked(n, s, u, out))
     }
 
+    /// One step for a batch carrying the effect states: `s` (`n × dim_s`) and `e`
+    /// (`n × dim_extra`) at the step's start, `out` and `e_out` after it. Models without
+    /// effect states take empty `e` and `e_out` and step as [`Model::step`].
+    pub fn step_with_extra(
+        &self,
+        s: &[f64],
+        e: &[f64],
+        u: &[f64],
+        out: &mut [f64],
+        e_out: &mut [f64],
+    ) -> Result<OdeStatus, LearnError> {
+        let n = self.check_batch(s, u)?;
+        let ne = self.dim_extra();
+        for (what, v) in [
+            ("effect states", e.len()),
+            ("effect states out", e_out.len()),
+        ] {
+            if v != n * ne {
+                return Err(LearnError::Shape {
+                    what,
+                    expected: n * ne,
+                    got: v,
+                    hint: "n × dim_extra, row-major (Model::extra_states_along gives them)",
+                });
+            }
+        }
+        check_finite("effect states", e)?;
+        if out.len() != s.len() {
+            return Err(LearnError::Shape {
+                what: "out",
+                expected: s.len(),
+                got: out.len(),
+                hint: "n × dim_s",
+            });
+        }
+        Ok(self.step_core(n, s, Some(e), u, out, Some(e_out)))
+    }
+
     pub(crate) fn step_unchecked(
         &self,
         n: usize,
         s: &[f64],
         u: &[f64],
         out: &mut [f64],
+    ) -> OdeStatus {
+        self.step_core(n, s, None, u, out, None)
+    }
+
+    /// The step: effect states from `e` when given, else settled at the command
+    /// ([`pad_effect_states`]); their next values to `e_out` when given.
+    fn step_core(
+        &self,
+        n: usize,
+        s: &[f64],
+        e: Option<&[f64]>,
+        u: &[f64],
+        out: &mut [f64],
+        e_out: Option<&mut [f64]>,
     ) -> OdeStatus {
         let ds = self.dim_s();
         let lr = self.world.learned_dims();
@@ -367,7 +476,10 @@ impl Model {
                 p.integrate_step(&self.physics_solver, n, s, u, self.physics_time(), out)
             } else {
                 let dp = p.dim_state();
-                let sp = pad_effect_states(p, n, s, u);
+                let sp = match e {
+                    Some(e) => join_effect_states(n, ds, dp, s, e),
+                    None => pad_effect_states(p, n, s, u),
+                };
                 let mut op = vec![0.0; n * dp];
                 let rep = p.integrate_step(
                     &self.physics_solver,
@@ -379,6 +491,12 @@ impl Model {
                 );
                 for i in 0..n {
                     out[i * ds..(i + 1) * ds].copy_from_slice(&op[i * dp..i * dp + ds]);
+                }
+                if let Some(eo) = e_out {
+                    let ne = dp - ds;
+                    for i in 0..n {
+                        eo[i * ne..(i + 1) * ne].copy_from_slice(&op[i * dp + ds..(i + 1) * dp]);
+                    }
                 }
                 rep
             };
@@ -447,6 +565,8 @@ impl Model {
 
     /// Open-loop rollout of `k` steps for `n` samples: `s0` is `n × dim_s`, `actions` is
     /// step-major `k × n × dim_u`, `out` receives `k × n × dim_s` (state after each step).
+    /// Effect states start settled at each sample's first action and are carried through the
+    /// rollout; with a command history use [`Model::rollout_with_extra`].
     pub fn rollout(
         &self,
         s0: &[f64],
@@ -482,6 +602,14 @@ impl Model {
         }
         check_finite("s0", s0)?;
         check_finite("actions", actions)?;
+        let ne = self.dim_extra();
+        if ne > 0 {
+            // no history: the effect states start settled at each sample's first command
+            let e0: Vec<f64> = (0..n)
+                .flat_map(|i| self.settled_extra(&actions[i * du..(i + 1) * du]))
+                .collect();
+            return self.rollout_with_extra(s0, &e0, actions, out, None);
+        }
         let mut status = OdeStatus::Success;
         let mut cur = s0.to_vec();
         for j in 0..k {
@@ -495,12 +623,170 @@ impl Model {
         Ok(status)
     }
 
+    /// Open-loop rollout carrying the effect states: as [`Model::rollout`] from the states `s0`
+    /// (`n × dim_s`) and the effect states `e0` (`n × dim_extra`, from the commands before the
+    /// rollout: [`Model::extra_states_along`], [`Model::extra_from_history`]). `extra_out`, if
+    /// given, receives the effect states after each step (`k × n × dim_extra`). For a model
+    /// without effect states `e0` is empty and this is [`Model::rollout`].
+    pub fn rollout_with_extra(
+        &self,
+        s0: &[f64],
+        e0: &[f64],
+        actions: &[f64],
+        out: &mut [f64],
+        mut extra_out: Option<&mut [f64]>,
+    ) -> Result<OdeStatus, LearnError> {
+        let (ds, du, ne) = (self.dim_s(), self.dim_u(), self.dim_extra());
+        if !s0.len().is_multiple_of(ds) || s0.is_empty() {
+            return Err(LearnError::Shape {
+                what: "s0",
+                expected: ds,
+                got: s0.len(),
+                hint: "n × dim_s",
+            });
+        }
+        let n = s0.len() / ds;
+        if e0.len() != n * ne {
+            return Err(LearnError::Shape {
+                what: "e0",
+                expected: n * ne,
+                got: e0.len(),
+                hint: "n × dim_extra effect states (Model::extra_states_along gives them)",
+            });
+        }
+        if !actions.len().is_multiple_of(n * du) {
+            return Err(LearnError::Shape {
+                what: "actions",
+                expected: n * du,
+                got: actions.len(),
+                hint: "k × n × dim_u, step-major",
+            });
+        }
+        let k = actions.len() / (n * du);
+        if out.len() != k * n * ds {
+            return Err(LearnError::Shape {
+                what: "out",
+                expected: k * n * ds,
+                got: out.len(),
+                hint: "k × n × dim_s, step-major",
+            });
+        }
+        if let Some(eo) = &extra_out
+            && eo.len() != k * n * ne
+        {
+            return Err(LearnError::Shape {
+                what: "extra_out",
+                expected: k * n * ne,
+                got: eo.len(),
+                hint: "k × n × dim_extra, step-major",
+            });
+        }
+        check_finite("s0", s0)?;
+        check_finite("e0", e0)?;
+        check_finite("actions", actions)?;
+        let mut status = OdeStatus::Success;
+        let mut cur = s0.to_vec();
+        let mut cur_e = e0.to_vec();
+        let mut next_e = vec![0.0; n * ne];
+        for j in 0..k {
+            let dst = &mut out[j * n * ds..(j + 1) * n * ds];
+            let st = self.step_core(
+                n,
+                &cur,
+                Some(&cur_e),
+                &actions[j * n * du..(j + 1) * n * du],
+                dst,
+                Some(&mut next_e),
+            );
+            if st != OdeStatus::Success {
+                status = st;
+            }
+            cur.copy_from_slice(dst);
+            std::mem::swap(&mut cur_e, &mut next_e);
+            if let Some(eo) = extra_out.as_deref_mut() {
+                eo[j * n * ne..(j + 1) * n * ne].copy_from_slice(&cur_e);
+            }
+        }
+        Ok(status)
+    }
+
     /// Exact input Jacobians of one step for a batch: `∂s⁺/∂s` and `∂s⁺/∂u` (forward mode
     /// through the solver's steps for NeuralODEs and physics, reverse/forward mode of the network
     /// otherwise; the car pose kinematics by the chain rule).
+    /// For a model with effect states, a single step has no history: they are taken settled at
+    /// the command ([`pad_effect_states`]) and their columns fold into `∂s⁺/∂u`.
     pub fn jacobians(&self, s: &[f64], u: &[f64]) -> Result<StepJacobians, LearnError> {
         let n = self.check_batch(s, u)?;
+        Ok(self.jacobians_core(n, s, None, u).0)
+    }
+
+    /// Exact Jacobians of one step over the augmented state `x = [s, e]` (world state and
+    /// effect states, `nx = dim_s + dim_extra`): `next` is `n × nx`, `ds` = `∂x⁺/∂x`
+    /// (`n × nx × nx`), `du` = `∂x⁺/∂u` (`n × nx × dim_u`). With no effect states this is
+    /// [`Model::jacobians`].
+    pub fn jacobians_with_extra(
+        &self,
+        s: &[f64],
+        e: &[f64],
+        u: &[f64],
+    ) -> Result<StepJacobians, LearnError> {
+        let n = self.check_batch(s, u)?;
+        let (ds, du, ne) = (self.dim_s(), self.dim_u(), self.dim_extra());
+        if e.len() != n * ne {
+            return Err(LearnError::Shape {
+                what: "effect states",
+                expected: n * ne,
+                got: e.len(),
+                hint: "n × dim_extra, row-major",
+            });
+        }
+        check_finite("effect states", e)?;
+        let (j, phys) = self.jacobians_core(n, s, Some(e), u);
+        let Some((np_, jsp, jup)) = phys else {
+            return Ok(j);
+        };
+        let nx = ds + ne;
+        let mut out = StepJacobians {
+            next: vec![0.0; n * nx],
+            ds: vec![0.0; n * nx * nx],
+            du: vec![0.0; n * nx * du],
+        };
+        for b in 0..n {
+            out.next[b * nx..b * nx + ds].copy_from_slice(&j.next[b * ds..(b + 1) * ds]);
+            out.next[b * nx + ds..(b + 1) * nx].copy_from_slice(&np_[b * nx + ds..(b + 1) * nx]);
+            for r in 0..nx {
+                for c in 0..nx {
+                    out.ds[b * nx * nx + r * nx + c] = if r < ds && c < ds {
+                        j.ds[b * ds * ds + r * ds + c]
+                    } else {
+                        // the network reads no effect state: these are the physics' own
+                        jsp[b * nx * nx + r * nx + c]
+                    };
+                }
+                for c in 0..du {
+                    out.du[b * nx * du + r * du + c] = if r < ds {
+                        j.du[b * ds * du + r * du + c]
+                    } else {
+                        jup[b * nx * du + r * du + c]
+                    };
+                }
+            }
+        }
+        Ok(out)
+    }
+
+    /// The Jacobians over the world state, and for a physics part with effect states its full
+    /// step `(next, ∂/∂x, ∂/∂u)` over the augmented state. Effect states from `e`, else settled.
+    #[allow(clippy::type_complexity)]
+    fn jacobians_core(
+        &self,
+        n: usize,
+        s: &[f64],
+        e: Option<&[f64]>,
+        u: &[f64],
+    ) -> (StepJacobians, Option<(Vec<f64>, Vec<f64>, Vec<f64>)>) {
         let (ds, du) = (self.dim_s(), self.dim_u());
+        let mut phys_full = None;
         let lr = self.world.learned_dims();
         let dz = lr.len();
         let mut next = vec![0.0; n * ds];
@@ -522,7 +808,10 @@ impl Model {
                 // padded effect states are functions of the input (see `pad_effect_states`):
                 // their columns fold into ∂/∂u by the chain rule
                 let dp = p.dim_state();
-                let sp = pad_effect_states(p, n, s, u);
+                let sp = match e {
+                    Some(e) => join_effect_states(n, ds, dp, s, e),
+                    None => pad_effect_states(p, n, s, u),
+                };
                 let mut np_ = vec![0.0; n * dp];
                 let mut jsp = vec![0.0; n * dp * dp];
                 let mut jup = vec![0.0; n * dp * du];
@@ -538,27 +827,38 @@ impl Model {
                 );
                 for b in 0..n {
                     next[b * ds..(b + 1) * ds].copy_from_slice(&np_[b * dp..b * dp + ds]);
+                    // ∂e_settled/∂u when the effect states are padded
+                    let pe = match e {
+                        Some(_) => None,
+                        None => Some(p.settled_effect_states_jacobian(&u[b * du..(b + 1) * du])),
+                    };
                     for r in 0..ds {
                         for c in 0..ds {
                             js[b * ds * ds + r * ds + c] = jsp[b * dp * dp + r * dp + c];
                         }
                         for c in 0..du {
-                            ju[b * ds * du + r * du + c] = jup[b * dp * du + r * du + c];
-                        }
-                        // d_f = d (throttle, input 1)
-                        for e in ds..dp {
-                            ju[b * ds * du + r * du + 1] += jsp[b * dp * dp + r * dp + e];
+                            let mut v = jup[b * dp * du + r * du + c];
+                            if let Some(pe) = &pe {
+                                for q in ds..dp {
+                                    v += jsp[b * dp * dp + r * dp + q] * pe[(q - ds) * du + c];
+                                }
+                            }
+                            ju[b * ds * du + r * du + c] = v;
                         }
                     }
                 }
+                phys_full = Some((np_, jsp, jup));
             }
         }
         let Some(net) = &self.net else {
-            return Ok(StepJacobians {
-                next,
-                ds: js,
-                du: ju,
-            });
+            return (
+                StepJacobians {
+                    next,
+                    ds: js,
+                    du: ju,
+                },
+                phys_full,
+            );
         };
         let z: Vec<f32> = learned_part_f32(s, n, ds, lr.clone());
         let uf: Vec<f32> = u.iter().map(|&x| x as f32).collect();
@@ -613,7 +913,10 @@ impl Model {
                 }
             }
         }
-        Ok(self.finish_jacobians(n, s, &zn, &jz, &jzu, next, js, ju))
+        (
+            self.finish_jacobians(n, s, &zn, &jz, &jzu, next, js, ju),
+            phys_full,
+        )
     }
 
     /// Completes [`Model::jacobians`] from the learned core `z⁺` (`zn`, or the residual for
@@ -919,17 +1222,26 @@ impl Model {
         actions: &[f32],
         out: &mut [f32],
     ) -> Result<(), LearnError> {
-        let (ds, du) = (self.dim_s(), self.dim_u());
+        let (ds, du, ne) = (self.dim_s(), self.dim_u(), self.dim_extra());
         let mut cur: Vec<f64> = s0.iter().map(|&x| f64::from(x)).collect();
         let mut next = vec![0.0; n * ds];
         let mut u = vec![0.0; n * du];
+        // effect states, as Model::rollout: settled at each sample's first action, then carried
+        let mut e: Vec<f64> = Vec::with_capacity(n * ne);
+        let mut e_next = vec![0.0; n * ne];
         for t in 0..horizon {
             for i in 0..n {
                 for d in 0..du {
                     u[i * du + d] = f64::from(actions[(i * horizon + t) * du + d]);
                 }
             }
-            self.step(&cur, &u, &mut next)?;
+            if t == 0 {
+                for i in 0..n {
+                    e.extend(self.settled_extra(&u[i * du..(i + 1) * du]));
+                }
+            }
+            self.step_with_extra(&cur, &e, &u, &mut next, &mut e_next)?;
+            std::mem::swap(&mut e, &mut e_next);
             for i in 0..n {
                 for d in 0..ds {
                     out[(i * horizon + t) * ds + d] = next[i * ds + d] as f32;
@@ -1126,11 +1438,12 @@ impl BlockBuffers {
     }
 }
 
-/// The physics state of a batch with the effects' extra states appended. A single step sees only
-/// the measured state, not the command history, so the filtered throttle `d_f` of `motor_lag`
-/// starts settled at the command (`d_f = d`): within one step the lag then acts only through the
-/// throttle change of the step. Fits and the diagnosis, which have the command history,
-/// reconstruct `d_f` with [`PhysicsModel::motor_lag_filter`] instead.
+/// The physics state of a batch with the effect states appended, settled at each sample's
+/// command ([`PhysicsModel::settled_effect_states`]: `d_f = d`, `δ_w = δ + δ₀`). A single step
+/// sees only the measured state, not the command history, so this is all it can assume; within
+/// the step the lags then act only through the command change. Everything that has the history
+/// (training, the fit, evaluation, comparison, the diagnosis, the live predictor, the racer)
+/// rebuilds the effect states with [`PhysicsModel::effect_states_along`] instead.
 pub fn pad_effect_states(p: &PhysicsModel, n: usize, s: &[f64], u: &[f64]) -> Vec<f64> {
     let dp = p.dim_state();
     let ds = s.len() / n.max(1);
@@ -1138,10 +1451,19 @@ pub fn pad_effect_states(p: &PhysicsModel, n: usize, s: &[f64], u: &[f64]) -> Ve
     let mut out = Vec::with_capacity(n * dp);
     for i in 0..n {
         out.extend_from_slice(&s[i * ds..(i + 1) * ds]);
-        for _ in ds..dp {
-            // motor_lag is the only effect with a state: the filtered throttle
-            out.push(u[i * du + du.min(2) - 1]);
-        }
+        out.extend(p.settled_effect_states(&u[i * du..(i + 1) * du]));
+    }
+    out
+}
+
+/// `[s_i, e_i]` per sample: world states `s` (`n × ds`) with effect states `e`
+/// (`n × (dp − ds)`).
+fn join_effect_states(n: usize, ds: usize, dp: usize, s: &[f64], e: &[f64]) -> Vec<f64> {
+    let ne = dp - ds;
+    let mut out = Vec::with_capacity(n * dp);
+    for i in 0..n {
+        out.extend_from_slice(&s[i * ds..(i + 1) * ds]);
+        out.extend_from_slice(&e[i * ne..(i + 1) * ne]);
     }
     out
 }

@@ -297,33 +297,110 @@ pub struct PhysicsFit {
 /// Cuts trajectories longer than `max_len` states into contiguous segments sharing their
 /// boundary state (no transition is lost).
 pub fn segment(trajs: &[StateTrajectory], max_len: usize) -> Vec<StateTrajectory> {
-    let max_len = max_len.max(2);
-    let mut out = Vec::new();
-    for t in trajs {
-        let n = t.len();
-        if n <= max_len {
-            out.push(t.clone());
-            continue;
-        }
-        let mut a = 0;
-        while a + 1 < n {
-            let b = (a + max_len - 1).min(n - 1);
-            out.push(StateTrajectory {
+    segment_origins(trajs, max_len)
+        .into_iter()
+        .map(|(i, a, b)| {
+            let t = &trajs[i];
+            StateTrajectory {
                 s: t.s[a * t.dim_s..(b + 1) * t.dim_s].to_vec(),
                 u: t.u[a * t.dim_u..(b + 1) * t.dim_u].to_vec(),
                 dim_s: t.dim_s,
                 dim_u: t.dim_u,
                 dt: t.dt,
-            });
+            }
+        })
+        .collect()
+}
+
+/// Where the segments of [`segment`] come from, in the same order: `(trajectory, first sample,
+/// last sample)` (inclusive) in `trajs`. The effect states of a segment (`motor_lag`'s `d_f`)
+/// are rebuilt over its trajectory's commands from the start, not from the segment's.
+pub fn segment_origins(trajs: &[StateTrajectory], max_len: usize) -> Vec<(usize, usize, usize)> {
+    let max_len = max_len.max(2);
+    let mut out = Vec::new();
+    for (i, t) in trajs.iter().enumerate() {
+        let n = t.len();
+        if n <= max_len {
+            out.push((i, 0, n.saturating_sub(1)));
+            continue;
+        }
+        let mut a = 0;
+        while a + 1 < n {
+            let b = (a + max_len - 1).min(n - 1);
+            out.push((i, a, b));
             a = b;
         }
     }
     out
 }
 
+/// The command history of training trajectories: each one's source trajectory (its commands
+/// from the start) and offset there, so that the initial effect states of every window are
+/// rebuilt from all the commands before it ([`PhysicsModel::effect_states_along`]) even when
+/// the trajectory is a segment of a longer recording.
+#[derive(Clone, Debug, Default)]
+pub struct CommandHistory {
+    /// Commands of each source trajectory, `len × dim_u`.
+    pub sources: Vec<Vec<f64>>,
+    /// Per trajectory: `(source, offset of its first sample in the source)`.
+    pub origin: Vec<(usize, usize)>,
+}
+
+impl CommandHistory {
+    /// Each trajectory its own source (no history before its first sample).
+    pub fn own(trajs: &[StateTrajectory]) -> Self {
+        Self {
+            sources: trajs.iter().map(|t| t.u.clone()).collect(),
+            origin: (0..trajs.len()).map(|i| (i, 0)).collect(),
+        }
+    }
+
+    /// The segments of [`segment`]`(trajs, max_len)` with their sources in `trajs`.
+    pub fn segments(trajs: &[StateTrajectory], max_len: usize) -> Self {
+        Self {
+            sources: trajs.iter().map(|t| t.u.clone()).collect(),
+            origin: segment_origins(trajs, max_len)
+                .into_iter()
+                .map(|(i, a, _)| (i, a))
+                .collect(),
+        }
+    }
+
+    /// Adds trajectories that are their own source (augmented copies).
+    pub fn extend_own(&mut self, trajs: &[StateTrajectory]) {
+        for t in trajs {
+            self.origin.push((self.sources.len(), 0));
+            self.sources.push(t.u.clone());
+        }
+    }
+
+    /// The effect states of physics model `p` at every sample of every trajectory
+    /// (`len_t × dim_effect_states` each; `lens` the trajectories' lengths), with commands
+    /// held for `dt`. Empty vectors when `p` has no effect states.
+    pub fn effect_states(&self, p: &PhysicsModel, dt: f64, lens: &[usize]) -> Vec<Vec<f64>> {
+        let ne = p.dim_effect_states();
+        if ne == 0 {
+            return vec![Vec::new(); self.origin.len()];
+        }
+        let along: Vec<Vec<f64>> = self
+            .sources
+            .iter()
+            .map(|u| p.effect_states_along(u, dt))
+            .collect();
+        self.origin
+            .iter()
+            .zip(lens)
+            .map(|(&(src, off), &len)| along[src][off * ne..(off + len) * ne].to_vec())
+            .collect()
+    }
+}
+
 /// Training data of one run, in the layouts the gradient code reads.
 struct Data {
     trajs: Vec<StateTrajectory>,
+    /// Effect states of the physics model at every sample (`len × dim_extra` per trajectory;
+    /// empty without effect states).
+    extra: Vec<Vec<f64>>,
     /// Learned dims per trajectory in f32 (`len × dz`).
     z: Vec<Vec<f32>>,
     /// Commands in f32 (`len × du`).
@@ -349,7 +426,12 @@ impl Data {
             .iter()
             .map(|t| t.u.iter().map(|&x| x as f32).collect())
             .collect();
-        Self { trajs, z, u }
+        Self {
+            extra: vec![Vec::new(); trajs.len()],
+            trajs,
+            z,
+            u,
+        }
     }
 }
 
@@ -367,6 +449,8 @@ struct ChunkState {
     phys_tapes: Vec<SolverTape<f64, InputTape<f64>>>,
     sfull: Vec<f64>,
     sfull_next: Vec<f64>,
+    /// Effect states of the physics part at the current rollout step (`n × dim_extra`).
+    extra: Vec<f64>,
     u64: Vec<f64>,
     zbar: Vec<f32>,
     zbar_prev: Vec<f32>,
@@ -442,6 +526,13 @@ impl Ctx<'_> {
         if hybrid {
             resize(&mut st.pose, k, n * 3);
         }
+        let ne = model.dim_extra();
+        st.extra.clear();
+        for w in ws {
+            let e = &self.data.extra[w.trajectory];
+            st.extra
+                .extend_from_slice(&e[w.start * ne..(w.start + 1) * ne]);
+        }
         for (i, w) in ws.iter().enumerate() {
             let zt = &self.data.z[w.trajectory];
             let ut = &self.data.u[w.trajectory];
@@ -492,9 +583,10 @@ impl Ctx<'_> {
                 ModelKind::Hybrid | ModelKind::Physics => {
                     self.phys_forward(n, j, st);
                     let zn = &mut st.z[j + 1];
+                    let dp = ds + ne;
                     for i in 0..n {
                         for d in 0..dz {
-                            zn[i * dz + d] = st.sfull_next[i * ds + lr.start + d] as f32;
+                            zn[i * dz + d] = st.sfull_next[i * dp + lr.start + d] as f32;
                         }
                     }
                     if let Some(f) = &field {
@@ -672,21 +764,28 @@ impl Ctx<'_> {
 
     /// Physics step of the hybrid model at rollout step `j` (full state from the learned dims and,
     /// for the car, the measured pose), recorded for the reverse pass.
+    /// The physics state is `[pose, z, e]` with the effect states `e` carried from the window's
+    /// start (rebuilt from the commands before it) through the rollout, and stored at `ds..` of
+    /// each row of `sfull_next`: `sfull`/`sfull_next` rows have the physics dimension.
     fn phys_forward(&self, n: usize, j: usize, st: &mut ChunkState) {
         let model = self.model;
         let world = model.world();
         let lr = world.learned_dims();
         let (dz, ds, du) = (lr.len(), world.state_dim(), world.action_dim());
-        st.sfull.resize(n * ds, 0.0);
-        st.sfull_next.resize(n * ds, 0.0);
+        let ne = model.dim_extra();
+        let dp = ds + ne;
+        st.sfull.resize(n * dp, 0.0);
+        st.sfull_next.resize(n * dp, 0.0);
         st.u64.resize(n * du, 0.0);
         for i in 0..n {
             if world == World::Car {
-                st.sfull[i * ds..i * ds + 3].copy_from_slice(&st.pose[j][i * 3..i * 3 + 3]);
+                st.sfull[i * dp..i * dp + 3].copy_from_slice(&st.pose[j][i * 3..i * 3 + 3]);
             }
             for d in 0..dz {
-                st.sfull[i * ds + lr.start + d] = f64::from(st.z[j][i * dz + d]);
+                st.sfull[i * dp + lr.start + d] = f64::from(st.z[j][i * dz + d]);
             }
+            // the window's initial effect states at j = 0, then those of the previous step
+            st.sfull[i * dp + ds..(i + 1) * dp].copy_from_slice(&st.extra[i * ne..(i + 1) * ne]);
         }
         for (a, b) in st.u64.iter_mut().zip(&st.u[j]) {
             *a = f64::from(*b);
@@ -703,14 +802,22 @@ impl Ctx<'_> {
                 &mut st.phys_tapes[j],
             );
         }
+        for i in 0..n {
+            for c in ds..dp {
+                st.extra[i * ne + c - ds] = st.sfull_next[i * dp + c];
+            }
+        }
     }
 
     /// `zbar_prev = (∂Φ_z/∂z)ᵀ zbar` through the recorded physics step `j`.
+    /// The effect states do not depend on the network (they follow the commands only), so
+    /// their adjoints are zero and only the learned dimensions' are passed back.
     fn phys_backward(&self, n: usize, j: usize, st: &mut ChunkState) {
         let model = self.model;
         let world = model.world();
         let lr = world.learned_dims();
-        let (dz, ds, du) = (lr.len(), world.state_dim(), world.action_dim());
+        let (dz, du) = (lr.len(), world.action_dim());
+        let ds = world.state_dim() + model.dim_extra();
         st.sbar_full.clear();
         st.sbar_full.resize(n * ds, 0.0);
         st.sbar0_full.resize(n * ds, 0.0);
@@ -1101,12 +1208,16 @@ pub fn train(
         ));
     }
     // split
-    let mut trajs = match (world, cfg.split) {
-        (World::Car, _) => segment(
-            &data.trajectories,
-            (cfg.segment_s / dt).round().max(2.0) as usize + 1,
+    let seg_len = (cfg.segment_s / dt).round().max(2.0) as usize + 1;
+    let (mut trajs, mut history) = match (world, cfg.split) {
+        (World::Car, _) => (
+            segment(&data.trajectories, seg_len),
+            CommandHistory::segments(&data.trajectories, seg_len),
         ),
-        _ => data.trajectories.clone(),
+        _ => (
+            data.trajectories.clone(),
+            CommandHistory::own(&data.trajectories),
+        ),
     };
     let lengths: Vec<usize> = trajs.iter().map(|t| t.len()).collect();
     let all = windows(&lengths, k)?;
@@ -1154,9 +1265,10 @@ pub fn train(
             trajectory: first + w.trajectory,
             start: w.start,
         }));
+        history.extend_own(&copies);
         trajs.extend(copies);
     }
-    let data_f = Data::new(trajs, world);
+    let mut data_f = Data::new(trajs, world);
     let loss = cfg.loss_for(world);
     if let Loss::PoseMse { weights } = &loss
         && weights.len() != world.learned_dims().len()
@@ -1182,12 +1294,16 @@ pub fn train(
             world,
             dt,
             &data_f.trajs,
+            &history,
             &train_w,
             k,
             cfg,
             &loss,
         )?;
         physics_fit = Some(fit);
+        let t_phys = if world == World::Push { 1.0 } else { dt };
+        let lens: Vec<usize> = data_f.trajs.iter().map(StateTrajectory::len).collect();
+        data_f.extra = history.effect_states(&p, t_phys, &lens);
         Some(p)
     } else {
         None
@@ -1215,6 +1331,7 @@ pub fn train(
             &phys_solver,
             dt,
             &data_f.trajs,
+            &data_f.extra,
             &train_w,
         )?;
         Some(Network::new(mlp, norm))
@@ -1444,6 +1561,7 @@ fn normalization(
     solver: &Solver,
     dt: f64,
     trajs: &[StateTrajectory],
+    extra: &[Vec<f64>],
     train_w: &[Window],
 ) -> Result<Normalization, LearnError> {
     let lr = world.learned_dims();
@@ -1452,7 +1570,10 @@ fn normalization(
     let mut outputs = Vec::new();
     let mut seen = std::collections::HashSet::new();
     let t_phys = if world == World::Push { 1.0 } else { dt };
-    let mut pn = vec![0.0; ds];
+    let dp = physics.map_or(ds, PhysicsModel::dim_state);
+    let ne = dp - ds;
+    let mut pn = vec![0.0; dp];
+    let mut sp = vec![0.0; dp];
     for w in train_w {
         if !seen.insert((w.trajectory, w.start)) {
             continue;
@@ -1466,7 +1587,10 @@ fn normalization(
         inputs.extend_from_slice(u);
         match physics {
             Some(p) => {
-                p.integrate_step(solver, 1, s0, u, t_phys, &mut pn);
+                // the physics state with the effect states rebuilt from the commands before
+                sp[..ds].copy_from_slice(s0);
+                sp[ds..].copy_from_slice(&extra[w.trajectory][a * ne..(a + 1) * ne]);
+                p.integrate_step(solver, 1, &sp, u, t_phys, &mut pn);
                 for d in lr.clone() {
                     outputs.push(s1[d] - pn[d]);
                 }

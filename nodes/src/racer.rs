@@ -143,7 +143,10 @@ impl<'a> RaceClock<'a> {
         let inputs: Vec<Input> = (0..self.delay_steps)
             .map(|j| self.input_at(t + j as f64 * self.dt))
             .collect();
-        let states = self.one.rollout(&s, &inputs)?;
+        // a model with effect states (motor lag, steering servo) starts from the racer's, kept
+        // from the commands it sent
+        let plant = self.one.with_extra(&self.racer.extra_states())?;
+        let states = plant.rollout(&s, &inputs)?;
         let end = states.last().copied().unwrap_or(s);
         // a model that diverged over a few steps is worse than the delay: use the measurement
         Ok(if end.iter().all(|v| v.is_finite()) {

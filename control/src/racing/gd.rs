@@ -64,7 +64,11 @@ pub(crate) fn gradient_from(
     for k in 0..n {
         grad[k] = [gu[2 * k], gu[2 * k + 1]];
     }
-    let mut lambda = [0.0; 6];
+    // λ over the augmented state [s, e]: the cost reads the car states only, but the effect
+    // states carry how earlier inputs act later
+    let nx = lin.nx;
+    let mut lambda = vec![0.0; nx];
+    let mut next = vec![0.0; nx];
     for k in (1..=n).rev() {
         let loc = if locs.is_empty() {
             None
@@ -79,13 +83,12 @@ pub(crate) fn gradient_from(
         // λ now is dℓ/dx_k; pass it through B_{k-1} and A_{k-1}
         let (a, b) = (&lin.a[k - 1], &lin.b[k - 1]);
         for c in 0..2 {
-            grad[k - 1][c] += (0..6).map(|r| b[r * 2 + c] * lambda[r]).sum::<f64>();
+            grad[k - 1][c] += (0..nx).map(|r| b[r * 2 + c] * lambda[r]).sum::<f64>();
         }
-        let mut next = [0.0; 6];
-        for (c, nx) in next.iter_mut().enumerate() {
-            *nx = (0..6).map(|r| a[r * 6 + c] * lambda[r]).sum();
+        for (c, v) in next.iter_mut().enumerate() {
+            *v = (0..nx).map(|r| a[r * nx + c] * lambda[r]).sum();
         }
-        lambda = next;
+        std::mem::swap(&mut lambda, &mut next);
     }
     (cost, grad)
 }

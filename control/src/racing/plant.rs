@@ -27,6 +27,42 @@ pub trait CarDynamics: std::fmt::Debug + Sync {
     fn rollout(&self, s0: &[f64], actions: &[f64], out: &mut [f64]) -> Result<(), RacingError>;
     /// Next states and step Jacobians for a batch, as [`Model::jacobians`].
     fn jacobians(&self, s: &[f64], u: &[f64]) -> Result<StepJacobians, RacingError>;
+    /// Number of effect states the model carries beside the 6 car states (`d_f` of
+    /// `motor_lag`, `delta_w` of `steering_lag`; default 0), see [`Model::dim_extra`].
+    fn dim_extra(&self) -> usize {
+        0
+    }
+    /// The effect states settled under a held input (default: none).
+    fn settled_extra(&self, _u: &[f64]) -> Vec<f64> {
+        Vec::new()
+    }
+    /// Advances effect states by one model step under `u` (default: nothing to advance).
+    fn advance_extra(&self, _e: &mut [f64], _u: &[f64]) {}
+    /// Rollout from states `s0` (`m × 6`) and effect states `e0` (`m × dim_extra`); `out`
+    /// receives the car states and, if given, `extra_out` the effect states after each step
+    /// (`k × m × dim_extra`), as [`Model::rollout_with_extra`]. The default (no effect states)
+    /// is [`CarDynamics::rollout`].
+    fn rollout_with_extra(
+        &self,
+        s0: &[f64],
+        _e0: &[f64],
+        actions: &[f64],
+        out: &mut [f64],
+        _extra_out: Option<&mut [f64]>,
+    ) -> Result<(), RacingError> {
+        self.rollout(s0, actions, out)
+    }
+    /// Step Jacobians over the augmented state `[s, e]` (`nx = 6 + dim_extra`), as
+    /// [`Model::jacobians_with_extra`]. The default (no effect states) is
+    /// [`CarDynamics::jacobians`].
+    fn jacobians_with_extra(
+        &self,
+        s: &[f64],
+        _e: &[f64],
+        u: &[f64],
+    ) -> Result<StepJacobians, RacingError> {
+        self.jacobians(s, u)
+    }
 }
 
 impl CarDynamics for Model {
@@ -50,7 +86,44 @@ impl CarDynamics for Model {
     fn jacobians(&self, s: &[f64], u: &[f64]) -> Result<StepJacobians, RacingError> {
         Ok(Model::jacobians_stagewise(self, s, u)?)
     }
+    fn dim_extra(&self) -> usize {
+        Model::dim_extra(self)
+    }
+    fn settled_extra(&self, u: &[f64]) -> Vec<f64> {
+        Model::settled_extra(self, u)
+    }
+    fn advance_extra(&self, e: &mut [f64], u: &[f64]) {
+        Model::advance_extra(self, e, u);
+    }
+    fn rollout_with_extra(
+        &self,
+        s0: &[f64],
+        e0: &[f64],
+        actions: &[f64],
+        out: &mut [f64],
+        extra_out: Option<&mut [f64]>,
+    ) -> Result<(), RacingError> {
+        if Model::dim_extra(self) == 0 {
+            return CarDynamics::rollout(self, s0, actions, out);
+        }
+        Model::rollout_with_extra(self, s0, e0, actions, out, extra_out)?;
+        Ok(())
+    }
+    fn jacobians_with_extra(
+        &self,
+        s: &[f64],
+        e: &[f64],
+        u: &[f64],
+    ) -> Result<StepJacobians, RacingError> {
+        if Model::dim_extra(self) == 0 {
+            return CarDynamics::jacobians(self, s, u);
+        }
+        Ok(Model::jacobians_with_extra(self, s, e, u)?)
+    }
 }
+
+/// Most effect states a [`Plant`] carries (the library's car effects add at most 2).
+pub const MAX_EXTRA: usize = 4;
 
 /// [`Model::rollout`] for car models whose step is the network alone (residual, NeuralODE
 /// Euler/RK4): the same arithmetic (bit for bit: tested), but one network field — and so one
@@ -120,21 +193,31 @@ fn rollout_one_field(model: &Model, s0: &[f64], actions: &[f64], out: &mut [f64]
 }
 
 /// A car model whose input is held for `hold` model steps: one control step is `hold · dt`.
+///
+/// A model with effect states (`motor_lag`'s filtered throttle, `steering_lag`'s wheel angle)
+/// carries them through every rollout from the plant's initial effect states
+/// ([`Plant::with_extra`]; default 0: every lag at rest), and its linearisation is over the
+/// augmented state `[x, e]`, so gradients see how an input moves the later effect states.
 #[derive(Debug, Clone, Copy)]
 pub struct Plant<'a> {
     model: &'a dyn CarDynamics,
     hold: usize,
+    ne: usize,
+    extra0: [f64; MAX_EXTRA],
 }
 
-/// The trajectory and its exact linearisation about it: `δx_{k+1} = A_k δx_k + B_k δu_k`.
+/// The trajectory and its exact linearisation about it: `δx_{k+1} = A_k δx_k + B_k δu_k` over
+/// the augmented state `x = [s, e]` (`nx = 6 + dim_extra`; the cost reads the first 6).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Linearization {
-    /// States `x₀ … x_n`.
+    /// Car states `s₀ … s_n`.
     pub states: Vec<State>,
-    /// `A_k = ∂x_{k+1}/∂x_k` (6 × 6 row-major), `n` of them.
-    pub a: Vec<[f64; 36]>,
-    /// `B_k = ∂x_{k+1}/∂u_k` (6 × 2 row-major), `n` of them.
-    pub b: Vec<[f64; 12]>,
+    /// Augmented state dimension `nx` (6 without effect states).
+    pub nx: usize,
+    /// `A_k = ∂x_{k+1}/∂x_k` (`nx × nx` row-major), `n` of them.
+    pub a: Vec<Vec<f64>>,
+    /// `B_k = ∂x_{k+1}/∂u_k` (`nx × 2` row-major), `n` of them.
+    pub b: Vec<Vec<f64>>,
 }
 
 impl<'a> Plant<'a> {
@@ -148,7 +231,48 @@ impl<'a> Plant<'a> {
                 "hold each input for at least one model step",
             ));
         }
-        Ok(Self { model, hold })
+        let ne = model.dim_extra();
+        if ne > MAX_EXTRA {
+            return Err(RacingError::setting(
+                "effects",
+                format!("{ne} effect states"),
+                format!("the racing plant carries at most {MAX_EXTRA}; use fewer stateful effects"),
+            ));
+        }
+        Ok(Self {
+            model,
+            hold,
+            ne,
+            extra0: [0.0; MAX_EXTRA],
+        })
+    }
+
+    /// The plant with initial effect states `e0` (`dim_extra` values, from the command history:
+    /// [`Model::extra_states_along`], or [`CarDynamics::advance_extra`] over the inputs applied).
+    pub fn with_extra(mut self, e0: &[f64]) -> Result<Self, RacingError> {
+        if e0.len() != self.ne || e0.iter().any(|v| !v.is_finite()) {
+            return Err(RacingError::setting(
+                "effect states",
+                format!("{e0:?}"),
+                format!(
+                    "give the model's {} effect states, finite (Model::extra_state_names)",
+                    self.ne
+                ),
+            ));
+        }
+        self.extra0 = [0.0; MAX_EXTRA];
+        self.extra0[..self.ne].copy_from_slice(e0);
+        Ok(self)
+    }
+
+    /// The initial effect states (empty without them).
+    pub fn extra(&self) -> &[f64] {
+        &self.extra0[..self.ne]
+    }
+
+    /// Augmented state dimension `6 + dim_extra`.
+    pub fn nx(&self) -> usize {
+        6 + self.ne
     }
 
     /// The model.
@@ -202,8 +326,10 @@ impl<'a> Plant<'a> {
             }
         }
         let s0s: Vec<f64> = (0..m).flat_map(|_| s0.iter().copied()).collect();
+        let e0s: Vec<f64> = (0..m).flat_map(|_| self.extra().iter().copied()).collect();
         let mut out = vec![0.0; steps * m * 6];
-        self.model.rollout(&s0s, &actions, &mut out)?;
+        self.model
+            .rollout_with_extra(&s0s, &e0s, &actions, &mut out, None)?;
         Ok((0..m)
             .map(|c| {
                 let mut v = Vec::with_capacity(n + 1);
@@ -219,24 +345,35 @@ impl<'a> Plant<'a> {
             .collect())
     }
 
-    /// Every model step's state `x₀, x_{0,1}, …` under `inputs` held for `hold` steps
-    /// (`(n · hold + 1) × 6`, flat): what [`Plant::linearize_fine`] needs.
+    /// Every model step's augmented state `[s, e]` (car and effect states), `x₀, x_{0,1}, …`,
+    /// under `inputs` held for `hold` steps (`(n · hold + 1) × nx`, flat): what
+    /// [`Plant::linearize_fine`] needs.
     pub fn rollout_fine(&self, s0: &State, inputs: &[Input]) -> Result<Vec<f64>, RacingError> {
         let h = self.hold;
+        let (ne, nx) = (self.ne, self.nx());
         let steps = inputs.len() * h;
-        let mut fine = vec![0.0; (steps + 1) * 6];
+        let mut fine = vec![0.0; (steps + 1) * nx];
         fine[..6].copy_from_slice(s0);
+        fine[6..nx].copy_from_slice(self.extra());
         if steps > 0 {
             let u_fine = self.fine_inputs(inputs);
-            let (head, tail) = fine.split_at_mut(6);
-            self.model.rollout(head, &u_fine, tail)?;
+            let mut out = vec![0.0; steps * 6];
+            let mut eo = vec![0.0; steps * ne];
+            self.model
+                .rollout_with_extra(s0, self.extra(), &u_fine, &mut out, Some(&mut eo))?;
+            for j in 0..steps {
+                let row = &mut fine[(j + 1) * nx..(j + 2) * nx];
+                row[..6].copy_from_slice(&out[j * 6..(j + 1) * 6]);
+                row[6..].copy_from_slice(&eo[j * ne..(j + 1) * ne]);
+            }
         }
         Ok(fine)
     }
 
-    /// The control-step states `x₀ … x_n` of a fine trajectory from [`Plant::rollout_fine`].
+    /// The control-step car states `s₀ … s_n` of a fine trajectory from
+    /// [`Plant::rollout_fine`].
     pub fn coarse(&self, fine: &[f64]) -> Vec<State> {
-        fine.chunks_exact(6)
+        fine.chunks_exact(self.nx())
             .step_by(self.hold)
             .map(|c| [c[0], c[1], c[2], c[3], c[4], c[5]])
             .collect()
@@ -267,8 +404,9 @@ impl<'a> Plant<'a> {
     ) -> Result<Linearization, RacingError> {
         let n = inputs.len();
         let h = self.hold;
+        let (ne, nx) = (self.ne, self.nx());
         let steps = n * h;
-        if fine.len() != (steps + 1) * 6 {
+        if fine.len() != (steps + 1) * nx {
             return Err(RacingError::setting(
                 "fine trajectory",
                 fine.len(),
@@ -276,49 +414,51 @@ impl<'a> Plant<'a> {
             ));
         }
         let u_fine = self.fine_inputs(inputs);
-        let jac = self.model.jacobians(&fine[..steps * 6], &u_fine)?;
-        let mut states = Vec::with_capacity(n + 1);
+        let mut s_fine = Vec::with_capacity(steps * 6);
+        let mut e_fine = Vec::with_capacity(steps * ne);
+        for row in fine[..steps * nx].chunks_exact(nx) {
+            s_fine.extend_from_slice(&row[..6]);
+            e_fine.extend_from_slice(&row[6..]);
+        }
+        let jac = self.model.jacobians_with_extra(&s_fine, &e_fine, &u_fine)?;
+        let states = self.coarse(fine);
         let mut a = Vec::with_capacity(n);
         let mut b = Vec::with_capacity(n);
-        for k in 0..=n {
-            let mut s = [0.0; 6];
-            s.copy_from_slice(&fine[k * h * 6..k * h * 6 + 6]);
-            states.push(s);
-        }
+        let (nn, nu) = (nx * nx, nx * 2);
         for k in 0..n {
-            let mut ak = [0.0; 36];
-            for i in 0..6 {
-                ak[i * 6 + i] = 1.0;
+            let mut ak = vec![0.0; nn];
+            for i in 0..nx {
+                ak[i * nx + i] = 1.0;
             }
-            let mut bk = [0.0; 12];
+            let mut bk = vec![0.0; nu];
+            let mut na = vec![0.0; nn];
+            let mut nb = vec![0.0; nu];
             for j in 0..h {
                 let idx = k * h + j;
-                let js = &jac.ds[idx * 36..idx * 36 + 36];
-                let ju = &jac.du[idx * 12..idx * 12 + 12];
-                let mut na = [0.0; 36];
-                let mut nb = [0.0; 12];
-                for r in 0..6 {
-                    for c in 0..6 {
+                let js = &jac.ds[idx * nn..(idx + 1) * nn];
+                let ju = &jac.du[idx * nu..(idx + 1) * nu];
+                for r in 0..nx {
+                    for c in 0..nx {
                         let mut acc = 0.0;
-                        for m in 0..6 {
-                            acc += js[r * 6 + m] * ak[m * 6 + c];
+                        for m in 0..nx {
+                            acc += js[r * nx + m] * ak[m * nx + c];
                         }
-                        na[r * 6 + c] = acc;
+                        na[r * nx + c] = acc;
                     }
                     for c in 0..2 {
                         let mut acc = ju[r * 2 + c];
-                        for m in 0..6 {
-                            acc += js[r * 6 + m] * bk[m * 2 + c];
+                        for m in 0..nx {
+                            acc += js[r * nx + m] * bk[m * 2 + c];
                         }
                         nb[r * 2 + c] = acc;
                     }
                 }
-                ak = na;
-                bk = nb;
+                std::mem::swap(&mut ak, &mut na);
+                std::mem::swap(&mut bk, &mut nb);
             }
             a.push(ak);
             b.push(bk);
         }
-        Ok(Linearization { states, a, b })
+        Ok(Linearization { states, nx, a, b })
     }
 }

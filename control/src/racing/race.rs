@@ -168,6 +168,9 @@ pub struct Racer<'a> {
     segment: Option<usize>,
     profile: SpeedProfile,
     stalled: bool,
+    /// Effect states of the model (`d_f`, `delta_w`) after the inputs this racer applied:
+    /// its own command history, advanced by every applied input over the control period.
+    extra: Option<Vec<f64>>,
 }
 
 impl<'a> Racer<'a> {
@@ -239,6 +242,7 @@ impl<'a> Racer<'a> {
             last: None,
             segment: None,
             stalled: false,
+            extra: None,
         })
     }
 
@@ -263,6 +267,17 @@ impl<'a> Racer<'a> {
         self.last = None;
         self.segment = None;
         self.stalled = false;
+        self.extra = None;
+    }
+
+    /// The model's effect states at the next step (`d_f`, `delta_w`; empty without them): from
+    /// the inputs this racer applied, settled at the warm start's first input before the first
+    /// step.
+    pub fn extra_states(&self) -> Vec<f64> {
+        match &self.extra {
+            Some(e) => e.clone(),
+            None => self.plant.model().settled_extra(&self.warm[0]),
+        }
     }
 
     /// One control cycle from the measured state `s`: solve from the shifted previous solution
@@ -282,8 +297,10 @@ impl<'a> Racer<'a> {
         let reference = self
             .profile
             .progress_from_speed(here.arc, v0, self.plant.dt(), st.horizon);
+        // the model's effect states from the racer's own command history
+        let extra = self.extra_states();
         let problem = Problem {
-            plant: self.plant,
+            plant: self.plant.with_extra(&extra)?,
             s0: s,
             objective: Objective {
                 targets: Vec::new(),
@@ -332,6 +349,14 @@ impl<'a> Racer<'a> {
         self.warm = warm;
         self.last = Some(input);
         self.segment = Some(here.segment);
+        if !extra.is_empty() {
+            // the applied input is held for the control period: hold model steps
+            let mut e = extra;
+            for _ in 0..self.plant.hold() {
+                self.plant.model().advance_extra(&mut e, &input);
+            }
+            self.extra = Some(e);
+        }
         Ok(RaceStep {
             input,
             status: sol.status,

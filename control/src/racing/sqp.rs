@@ -92,14 +92,16 @@ fn solve_qp(
     let m = 2 * n;
     let obj = &problem.objective;
     let locs = obj.locate(&lin.states);
-    // sensitivities G_k = ∂x_k/∂u (6 × m) for k = 1..n
-    let mut G = vec![vec![0.0; 6 * m]; n + 1];
+    // sensitivities G_k = ∂x_k/∂u (nx × m, the augmented state [s, e]) for k = 1..n; the cost
+    // terms below read the car states' rows
+    let nx = lin.nx;
+    let mut G = vec![vec![0.0; nx * m]; n + 1];
     for k in 0..n {
         let (a, b) = (&lin.a[k], &lin.b[k]);
-        let mut next = vec![0.0; 6 * m];
-        for r in 0..6 {
+        let mut next = vec![0.0; nx * m];
+        for r in 0..nx {
             for c in 0..2 * k {
-                next[r * m + c] = (0..6).map(|q| a[r * 6 + q] * G[k][q * m + c]).sum();
+                next[r * m + c] = (0..nx).map(|q| a[r * nx + q] * G[k][q * m + c]).sum();
             }
             next[r * m + 2 * k] = b[r * 2];
             next[r * m + 2 * k + 1] = b[r * 2 + 1];

@@ -11,9 +11,16 @@
 //! - when a pose arrives at the stamp of an earlier prediction (within half a step), the error
 //!   `measured − predicted` per state dimension, angle wrapped (`/model/error`).
 //!
+//! **Effect states.** A model with stateful effects (`motor_lag`'s filtered throttle `d_f`,
+//! `steering_lag`'s wheel angle `δ_w`) needs them, and nothing measures them: the predictor keeps
+//! them from the command stream it receives, exactly as the offline pipeline rebuilds them from a
+//! bag ([`Model::extra_states_along`]): settled at the command held at the first pose that has
+//! one, then advanced one model step per pose under the command held at the pose before. The
+//! rollouts start from them ([`Prediction::extra`]).
+//!
 //! Stale input (a pose not newer than the last one, a command older than `max_command_age_s`),
 //! NaN and infinite values are skipped with a warning; a gap longer than `max_gap_steps` model
-//! steps restarts the state estimate. Nothing here panics on input.
+//! steps restarts the state estimate (and the effect states). Nothing here panics on input.
 
 use std::collections::VecDeque;
 
@@ -58,6 +65,10 @@ pub struct Prediction {
     pub command: Vec<f64>,
     /// Stamp of the one-step prediction: `from_ns + dt` \[ns\].
     pub t_ns: i64,
+    /// The model's effect states at that pose, kept from the command stream (empty for models
+    /// without them; names: [`Model::extra_state_names`]).
+    #[serde(default)]
+    pub extra: Vec<f64>,
     /// The predicted state one step ahead.
     pub next: Vec<f64>,
     /// The k-step path: states after 1…k steps (the first is `next`), at `from_ns + j·dt`.
@@ -93,6 +104,8 @@ pub struct OnlinePredictor {
     commands: VecDeque<(i64, Vec<f64>)>,
     pending: VecDeque<(i64, Vec<f64>)>,
     dt_ns: i64,
+    /// Effect states at the newest pose and the command held there (advanced at the next pose).
+    extra: Option<(Vec<f64>, Vec<f64>)>,
 }
 
 impl OnlinePredictor {
@@ -121,7 +134,29 @@ impl OnlinePredictor {
             commands: VecDeque::new(),
             pending: VecDeque::new(),
             dt_ns: dt_ns.max(1),
+            extra: None,
         })
+    }
+
+    /// The model's effect states at the newest pose (empty for models without them; `None`
+    /// before the first pose with a command).
+    pub fn extra_states(&self) -> Option<&[f64]> {
+        self.extra.as_ref().map(|(e, _)| e.as_slice())
+    }
+
+    /// Advances the effect states to a new pose: one model step under the command held at the
+    /// previous pose, or settled at the command held now when there is no earlier one (the
+    /// recursion of [`Model::extra_states_along`]).
+    fn track_extra(&mut self, t_ns: i64) {
+        let now = self.command_at(t_ns).map(|(_, u)| u.clone());
+        self.extra = match (self.extra.take(), now) {
+            (Some((mut e, held)), Some(u)) => {
+                self.model.advance_extra(&mut e, &held);
+                Some((e, u))
+            }
+            (None, Some(u)) => Some((self.model.settled_extra(&u), u)),
+            (prev, None) => prev,
+        };
     }
 
     /// The model.
@@ -222,9 +257,11 @@ impl OnlinePredictor {
                 ));
                 self.poses.clear();
                 self.pending.clear();
+                self.extra = None;
             }
         }
         self.poses.push_back((t_ns, [x, y, yaw]));
+        self.track_extra(t_ns);
         let keep = match self.model.world() {
             World::Car => self.cfg.savgol.window,
             World::Push => 1,
@@ -287,7 +324,14 @@ impl OnlinePredictor {
         let ds = self.model.dim_s();
         let actions: Vec<f64> = (0..k).flat_map(|_| u.iter().copied()).collect();
         let mut path = vec![0.0; k * ds];
-        match self.model.rollout(&state, &actions, &mut path) {
+        let extra = match &self.extra {
+            Some((e, _)) => e.clone(),
+            None => self.model.settled_extra(&u),
+        };
+        match self
+            .model
+            .rollout_with_extra(&state, &extra, &actions, &mut path, None)
+        {
             Ok(_) if path.iter().all(|v| v.is_finite()) => {}
             Ok(_) => {
                 out.warning = Some(format!("the model diverged from the state at {t_ns} ns"));
@@ -305,6 +349,7 @@ impl OnlinePredictor {
             from_ns: t_ns,
             state,
             command: u,
+            extra,
             t_ns: t_next,
             next: path[0].clone(),
             path,

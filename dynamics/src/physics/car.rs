@@ -39,6 +39,9 @@ use crate::real::Real;
 /// Name of the extra state added by [`Effect::MotorLag`]: the filtered throttle `d_f`.
 pub const MOTOR_LAG_STATE: &str = "d_f";
 
+/// Name of the extra state added by [`Effect::SteeringLag`]: the wheel angle `δ_w` \[rad\].
+pub const STEERING_LAG_STATE: &str = "delta_w";
+
 /// Nominal car parameters, defaults from the ORCA 1:43 car (Liniger et al., MPCC project).
 pub static CAR_NOMINAL_PARAMS: [ParamSpec; 15] = [
     ps("m", "m", "kg", 0.01, 10.0, 0.041, "mass (ORCA 1:43)"),
@@ -202,7 +205,7 @@ pub(crate) fn rhs<R: Real>(
         vreg,
     ] = [0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14].map(|i| p[i]);
     let (x, y, psi, vx, vy, om) = (s[0], s[1], s[2], s[3], s[4], s[5]);
-    let mut delta = u[0];
+    let mut delta = steering_target(p, slots, active, u);
     let mut d = u[1];
     let mut grip = R::cst(1.0);
     for (sl, &on) in slots.iter().zip(active) {
@@ -211,7 +214,7 @@ pub(crate) fn rhs<R: Real>(
         }
         let q = &p[sl.p_off..];
         match sl.effect {
-            Effect::SteeringOffset => delta = delta + q[0],
+            Effect::SteeringLag => delta = s[sl.s_off],
             Effect::MotorLag => d = s[sl.s_off],
             Effect::GripPatch => {
                 let sig = disc(x, y, q[0], q[1], q[2], q[3]);
@@ -247,6 +250,41 @@ pub(crate) fn rhs<R: Real>(
     out[3] = (frx - ffy * sd) / m + vy * om;
     out[4] = (fry + ffy * cd) / m - vx * om;
     out[5] = (ffy * lf * cd - fry * lr) / iz;
+    for (sl, &on) in slots.iter().zip(active) {
+        if on && sl.effect == Effect::AeroDrag {
+            // F = −c·|v|·v on the body velocity vector (as the simulator), over the mass
+            let c = p[sl.p_off];
+            let speed = (vx * vx + vy * vy + 1e-12).sqrt();
+            out[3] = out[3] - c * speed * vx / m;
+            out[4] = out[4] - c * speed * vy / m;
+        }
+    }
+    effect_state_rates(p, slots, active, s, u, out);
+}
+
+/// The commanded front wheel angle: `δ`, plus `δ₀` with an active `steering_offset`.
+fn steering_target<R: Real>(p: &[R], slots: &[Slot], active: &[bool], u: &[R]) -> R {
+    let mut delta = u[0];
+    for (sl, &on) in slots.iter().zip(active) {
+        if on && sl.effect == Effect::SteeringOffset {
+            delta = delta + p[sl.p_off];
+        }
+    }
+    delta
+}
+
+/// The rates of the effect states (rows `6..` of `out`; 0 for inactive effects). They read only
+/// the effect states of `s` (rows `6..`), the input and the parameters — never the car's state —
+/// which is what lets [`PhysicsModel::effect_states_along`](super::PhysicsModel::effect_states_along)
+/// rebuild them from the command history alone.
+pub(crate) fn effect_state_rates<R: Real>(
+    p: &[R],
+    slots: &[Slot],
+    active: &[bool],
+    s: &[R],
+    u: &[R],
+    out: &mut [R],
+) {
     for o in out.iter_mut().skip(6) {
         *o = R::cst(0.0);
     }
@@ -256,13 +294,26 @@ pub(crate) fn rhs<R: Real>(
         }
         let q = &p[sl.p_off..];
         match sl.effect {
-            Effect::AeroDrag => {
-                // F = −c·|v|·v on the body velocity vector (as the simulator), over the mass
-                let speed = (vx * vx + vy * vy + 1e-12).sqrt();
-                out[3] = out[3] - q[0] * speed * vx / m;
-                out[4] = out[4] - q[0] * speed * vy / m;
-            }
             Effect::MotorLag => out[sl.s_off] = (u[1] - s[sl.s_off]) / q[0],
+            Effect::SteeringLag => {
+                // δ̇_w = r·tanh((δ − δ_w)/(r·τ_s)): slope 1/τ_s at 0, |δ̇_w| < r
+                let target = steering_target(p, slots, active, u);
+                let rate = q[1];
+                out[sl.s_off] = rate * ((target - s[sl.s_off]) / (rate * q[0])).tanh();
+            }
+            _ => {}
+        }
+    }
+}
+
+/// The effect states of a car model at rest under a held input (every lag settled):
+/// `d_f = d`, `δ_w = δ (+ δ₀)`.
+pub(crate) fn settled_effect_states<R: Real>(p: &[R], slots: &[Slot], u: &[R], out: &mut [R]) {
+    let active = vec![true; slots.len()];
+    for sl in slots {
+        match sl.effect {
+            Effect::MotorLag => out[sl.s_off] = u[1],
+            Effect::SteeringLag => out[sl.s_off] = steering_target(p, slots, &active, u),
             _ => {}
         }
     }

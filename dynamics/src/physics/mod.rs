@@ -32,7 +32,7 @@ mod model;
 mod push;
 mod step;
 
-pub use car::{CAR_FITTED_PARAMS, CAR_NOMINAL_PARAMS, MOTOR_LAG_STATE};
+pub use car::{CAR_FITTED_PARAMS, CAR_NOMINAL_PARAMS, MOTOR_LAG_STATE, STEERING_LAG_STATE};
 pub use custom::{CustomEffect, CustomError, CustomTerm, Target};
 pub use features::{Feature, FeatureError};
 pub use fit::{ResidualJacobian, Transition, residuals, residuals_and_jacobian};
@@ -104,6 +104,13 @@ pub enum Effect {
     SteeringOffset,
     /// Car: a circular patch of the floor where both tire peak forces are scaled by `k`.
     GripPatch,
+    /// Car: the steering servo: the wheels turn to the wheel angle `δ_w`, an extra state (see
+    /// [`STEERING_LAG_STATE`]) that follows the commanded angle (plus `δ₀` with
+    /// `steering_offset`) as a first-order lag with a smooth rate limit,
+    /// `δ̇_w = r·tanh((δ − δ_w)/(r·τ_s))`: a lag of time constant `τ_s` for small steps, the
+    /// rate `r` at most for large ones (differentiable everywhere; `r` at its upper bound is a
+    /// plain first-order lag).
+    SteeringLag,
     /// Pushing: the block's centre of mass (centre of friction) is offset from its geometric
     /// centre by `(o_x, o_y)` in the block frame.
     ComOffset,
@@ -147,6 +154,27 @@ static STEERING_OFFSET: [ParamSpec; 1] = [ps(
     0.0,
     "constant offset added to the commanded front wheel angle",
 )];
+static STEERING_LAG: [ParamSpec; 2] = [
+    ps(
+        "tau",
+        "τ_s",
+        "s",
+        0.01,
+        1.0,
+        0.05,
+        "time constant of the steering servo (≥ 10 ms: a faster servo is not identifiable at \
+         100 Hz, and the model step's RK4 stays stable)",
+    ),
+    ps(
+        "rate",
+        "r",
+        "rad/s",
+        0.05,
+        50.0,
+        50.0,
+        "largest wheel-angle rate of the servo (default: the upper bound, no effective limit)",
+    ),
+];
 static GRIP_PATCH: [ParamSpec; 5] = [
     ps(
         "cx",
@@ -277,11 +305,12 @@ static PUSHER_FRICTION: [ParamSpec; 1] = [ps(
 
 impl Effect {
     /// Every effect in the library.
-    pub const ALL: [Effect; 8] = [
+    pub const ALL: [Effect; 9] = [
         Effect::AeroDrag,
         Effect::MotorLag,
         Effect::SteeringOffset,
         Effect::GripPatch,
+        Effect::SteeringLag,
         Effect::ComOffset,
         Effect::TableTilt,
         Effect::FrictionPatch,
@@ -294,6 +323,7 @@ impl Effect {
             Effect::AeroDrag => "aero_drag",
             Effect::MotorLag => "motor_lag",
             Effect::SteeringOffset => "steering_offset",
+            Effect::SteeringLag => "steering_lag",
             Effect::GripPatch => "grip_patch",
             Effect::ComOffset => "com_offset",
             Effect::TableTilt => "table_tilt",
@@ -310,9 +340,11 @@ impl Effect {
     /// The robot the effect applies to.
     pub fn robot(self) -> Robot {
         match self {
-            Effect::AeroDrag | Effect::MotorLag | Effect::SteeringOffset | Effect::GripPatch => {
-                Robot::Car
-            }
+            Effect::AeroDrag
+            | Effect::MotorLag
+            | Effect::SteeringOffset
+            | Effect::SteeringLag
+            | Effect::GripPatch => Robot::Car,
             _ => Robot::Pushing,
         }
     }
@@ -323,6 +355,9 @@ impl Effect {
             Effect::AeroDrag => "aerodynamic drag, quadratic in speed",
             Effect::MotorLag => "first-order lag between throttle command and drive force",
             Effect::SteeringOffset => "constant steering offset (miscalibrated servo trim)",
+            Effect::SteeringLag => {
+                "steering servo lag and rate limit (wheel angle behind the command)"
+            }
             Effect::GripPatch => "floor patch with different tire grip",
             Effect::ComOffset => "centre of mass away from the geometric centre",
             Effect::TableTilt => "tilted table: downhill drift while sliding",
@@ -337,6 +372,7 @@ impl Effect {
             Effect::AeroDrag => &AERO_DRAG,
             Effect::MotorLag => &MOTOR_LAG,
             Effect::SteeringOffset => &STEERING_OFFSET,
+            Effect::SteeringLag => &STEERING_LAG,
             Effect::GripPatch => &GRIP_PATCH,
             Effect::ComOffset => &COM_OFFSET,
             Effect::TableTilt => &TABLE_TILT,
@@ -354,9 +390,13 @@ impl Effect {
     }
 
     /// Names of the states the effect adds to the model state (appended in effect order).
+    /// An effect state's rate depends only on the effect states, the input and the parameters,
+    /// never on the robot's state, so it can be rebuilt from the command history alone
+    /// ([`PhysicsModel::effect_states_along`]).
     pub fn extra_states(self) -> &'static [&'static str] {
         match self {
             Effect::MotorLag => &[MOTOR_LAG_STATE],
+            Effect::SteeringLag => &[STEERING_LAG_STATE],
             _ => &[],
         }
     }

@@ -620,6 +620,169 @@ impl PhysicsModel {
         out
     }
 
+    /// Index of the first effect state in the model state: the robot's own state dimension
+    /// (car 6, pushing 3).
+    pub fn effect_state_offset(&self) -> usize {
+        match self.robot {
+            Robot::Car => 6,
+            Robot::Pushing => 3,
+        }
+    }
+
+    /// Number of effect states (`d_f` of `motor_lag`, `delta_w` of `steering_lag`).
+    pub fn dim_effect_states(&self) -> usize {
+        self.dim_s - self.effect_state_offset()
+    }
+
+    /// Names of the effect states, in state order.
+    pub fn effect_state_names(&self) -> Vec<&'static str> {
+        self.state_names()[self.effect_state_offset()..].to_vec()
+    }
+
+    /// The effect states settled under the held input `u` (`d_f = d`, `δ_w = δ + δ₀`): the
+    /// start of a command history.
+    pub fn settled_effect_states(&self, u: &[f64]) -> Vec<f64> {
+        let ur: Vec<f64> = u.to_vec();
+        self.settled_generic(&self.params, &ur)
+    }
+
+    /// `∂e/∂u` of [`PhysicsModel::settled_effect_states`] (`dim_effect_states × dim_input`,
+    /// row-major): how a padded effect state moves with the input it settles to.
+    pub fn settled_effect_states_jacobian(&self, u: &[f64]) -> Vec<f64> {
+        let (ne, du) = (self.dim_effect_states(), self.dim_input());
+        let ud: Vec<Dual<DIRS>> = u
+            .iter()
+            .enumerate()
+            .map(|(i, &x)| Dual::var(x, i))
+            .collect();
+        let pd: Vec<Dual<DIRS>> = self.params.iter().map(|&x| Dual::cst(x)).collect();
+        let e = self.settled_generic(&pd, &ud);
+        let mut j = vec![0.0; ne * du];
+        for r in 0..ne {
+            for c in 0..du.min(DIRS) {
+                j[r * du + c] = e[r].d[c];
+            }
+        }
+        j
+    }
+
+    fn settled_generic<R: Real>(&self, p: &[R], u: &[R]) -> Vec<R> {
+        let off = self.effect_state_offset();
+        let mut full = vec![R::cst(0.0); self.dim_s];
+        if self.robot == Robot::Car && self.dim_s > off {
+            car::settled_effect_states(p, &self.slots, u, &mut full);
+        }
+        full[off..].to_vec()
+    }
+
+    /// Advances the effect states `e` over `dt` under the held input `u`, integrating only the
+    /// effect states' own equations (they do not depend on the robot's state): classic RK4 with
+    /// substeps of at most a twentieth of the shortest time constant.
+    pub fn advance_effect_states(&self, e: &mut [f64], u: &[f64], dt: f64) {
+        self.advance_generic(&self.params, e, u, dt);
+    }
+
+    fn advance_generic<R: Real>(&self, p: &[R], e: &mut [R], u: &[f64], dt: f64) {
+        let off = self.effect_state_offset();
+        let ne = self.dim_s - off;
+        if ne == 0 || self.robot != Robot::Car || dt.is_nan() || dt <= 0.0 {
+            return;
+        }
+        let tau_min = self
+            .slots
+            .iter()
+            .filter(|sl| !sl.effect.extra_states().is_empty())
+            .map(|sl| p[sl.p_off].value())
+            .fold(f64::INFINITY, f64::min)
+            .max(1e-6);
+        let substeps = (20.0 * dt / tau_min).ceil().clamp(1.0, 1000.0) as usize;
+        let h = dt / substeps as f64;
+        let active = vec![true; self.slots.len()];
+        let ur: Vec<R> = u.iter().map(|&x| R::cst(x)).collect();
+        let mut s = vec![R::cst(0.0); self.dim_s];
+        let mut k = [
+            vec![R::cst(0.0); self.dim_s],
+            vec![R::cst(0.0); self.dim_s],
+            vec![R::cst(0.0); self.dim_s],
+            vec![R::cst(0.0); self.dim_s],
+        ];
+        let rates = |s: &[R], out: &mut [R]| {
+            car::effect_state_rates(p, &self.slots, &active, s, &ur, out);
+        };
+        for _ in 0..substeps {
+            let e0: Vec<R> = e.to_vec();
+            for (stage, c) in [0.0, 0.5, 0.5, 1.0].into_iter().enumerate() {
+                for i in 0..ne {
+                    s[off + i] = if stage == 0 {
+                        e0[i]
+                    } else {
+                        e0[i] + k[stage - 1][off + i] * (c * h)
+                    };
+                }
+                let (_, rest) = k.split_at_mut(stage);
+                rates(&s, &mut rest[0]);
+            }
+            for i in 0..ne {
+                e[i] = e0[i]
+                    + (k[0][off + i] + k[1][off + i] * 2.0 + k[2][off + i] * 2.0 + k[3][off + i])
+                        * (h / 6.0);
+            }
+        }
+    }
+
+    /// **The initial effect states of every sample of a command sequence**: `u` holds `len`
+    /// commands (`len × dim_input`, one per sample, each held for `dt` until the next sample)
+    /// and the result `len × dim_effect_states` the effect states at each sample, started
+    /// settled at the first command and advanced over the commands before each sample. Entry
+    /// `a` is the initial effect state of a window starting at sample `a`. This is the one
+    /// place that rebuilds effect states from commands: training, the physics fit, evaluation,
+    /// comparison, the diagnosis, the live predictor and the racer all use it (or
+    /// [`PhysicsModel::effect_states_from_history`], the same recursion).
+    pub fn effect_states_along(&self, u: &[f64], dt: f64) -> Vec<f64> {
+        self.effect_states_along_generic(&self.params, u, dt)
+    }
+
+    /// [`PhysicsModel::effect_states_along`] at parameters `p` over any [`Real`] (dual numbers
+    /// give the states' derivatives wrt the parameters).
+    pub fn effect_states_along_generic<R: Real>(&self, p: &[R], u: &[f64], dt: f64) -> Vec<R> {
+        let du = self.dim_input();
+        let ne = self.dim_effect_states();
+        let len = u.len() / du.max(1);
+        if ne == 0 || len == 0 {
+            return Vec::new();
+        }
+        let mut out = Vec::with_capacity(len * ne);
+        let u0: Vec<R> = u[..du].iter().map(|&x| R::cst(x)).collect();
+        let mut e = self.settled_generic(p, &u0);
+        for i in 0..len {
+            out.extend_from_slice(&e);
+            if i + 1 < len {
+                self.advance_generic(p, &mut e, &u[i * du..(i + 1) * du], dt);
+            }
+        }
+        out
+    }
+
+    /// The effect states after a command history (`history`, `m × dim_input`, each held for
+    /// `dt`), started settled at its first command: the state in which the next command is
+    /// applied. With an empty history, the states settled at `current`.
+    pub fn effect_states_from_history(
+        &self,
+        history: &[f64],
+        current: &[f64],
+        dt: f64,
+    ) -> Vec<f64> {
+        let du = self.dim_input();
+        if history.len() < du {
+            return self.settled_effect_states(current);
+        }
+        let mut e = self.settled_effect_states(&history[..du]);
+        for u in history.chunks_exact(du) {
+            self.advance_effect_states(&mut e, u, dt);
+        }
+        e
+    }
+
     fn fmt_param(&self, i: usize) -> String {
         let (_, spec) = self.param_specs()[i];
         let v = self.params[i];
@@ -655,13 +818,14 @@ impl PhysicsModel {
                 } else {
                     "d"
                 };
-                let delta = match has(Effect::SteeringOffset) {
-                    Some(_) => format!(
+                let delta = match (has(Effect::SteeringLag), has(Effect::SteeringOffset)) {
+                    (Some(_), _) => "δ_w".to_string(),
+                    (None, Some(_)) => format!(
                         "(δ {} {})",
                         sign(pv(Effect::SteeringOffset, 0)),
                         num(pv(Effect::SteeringOffset, 0).abs())
                     ),
-                    None => "δ".to_string(),
+                    (None, None) => "δ".to_string(),
                 };
                 let _ = writeln!(
                     o,
@@ -691,6 +855,21 @@ impl PhysicsModel {
                         "  ḋ_f = (d − d_f)/{}{}",
                         num(pv(Effect::MotorLag, 0)),
                         tag(Effect::MotorLag)
+                    );
+                }
+                if has(Effect::SteeringLag).is_some() {
+                    let target = if has(Effect::SteeringOffset).is_some() {
+                        "δ + δ₀"
+                    } else {
+                        "δ"
+                    };
+                    let _ = writeln!(
+                        o,
+                        "  δ̇_w = {}·tanh(({target} − δ_w)/({}·{})){}",
+                        num(pv(Effect::SteeringLag, 1)),
+                        num(pv(Effect::SteeringLag, 1)),
+                        num(pv(Effect::SteeringLag, 0)),
+                        tag(Effect::SteeringLag)
                     );
                 }
                 let g = if has(Effect::GripPatch).is_some() {

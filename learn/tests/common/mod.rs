@@ -78,8 +78,28 @@ pub fn push_bag(dir: &Path, trajs: usize, pushes: usize, seed: u64) -> PathBuf {
 /// Car data from the dynamic bicycle: `runs` runs of `seconds` at `rate_hz`, piecewise constant
 /// random commands changing every 0.4 s, runs 10 s apart (so they split into trajectories).
 pub fn car_bag(dir: &Path, runs: usize, seconds: f64, rate_hz: f64, seed: u64) -> PathBuf {
-    let path = dir.join(format!("car_{runs}_{seed}"));
-    let model = PhysicsModel::car(&[]).unwrap();
+    car_bag_from(
+        dir,
+        &PhysicsModel::car(&[]).unwrap(),
+        runs,
+        seconds,
+        rate_hz,
+        seed,
+    )
+}
+
+/// As [`car_bag`] from any car physics model; its effect states (`d_f`, `delta_w`) start settled
+/// at the first command of a run and are carried by the integration.
+pub fn car_bag_from(
+    dir: &Path,
+    model: &PhysicsModel,
+    runs: usize,
+    seconds: f64,
+    rate_hz: f64,
+    seed: u64,
+) -> PathBuf {
+    let names: Vec<&str> = model.effects().iter().map(|e| e.name()).collect();
+    let path = dir.join(format!("car_{runs}_{seed}_{}", names.join("_")));
     let mut w = BagWriter::create(&path, WriterOptions::default()).unwrap();
     let tp = w
         .add_typed_topic::<PoseStamped>("/car/pose", &[QosProfile::default_profile()])
@@ -93,12 +113,16 @@ pub fn car_bag(dir: &Path, runs: usize, seconds: f64, rate_hz: f64, seed: u64) -
     let solver = Solver::Rk4 { substeps: 4 };
     for run in 0..runs {
         let t0 = 1_000_000_000i64 + (run as f64 * (seconds + 10.0) * 1e9) as i64;
-        let mut s = [0.0, 0.0, uniform(&mut rng, -3.0, 3.0), 1.0, 0.0, 0.0];
+        let mut s = vec![0.0, 0.0, uniform(&mut rng, -3.0, 3.0), 1.0, 0.0, 0.0];
         let mut u = [0.0, 0.3];
         for i in 0..=steps {
             let t = t0 + (i as f64 * dt * 1e9) as i64;
             if i % ((0.4 * rate_hz) as usize).max(1) == 0 {
                 u = [uniform(&mut rng, -0.3, 0.3), uniform(&mut rng, 0.1, 0.6)];
+            }
+            if i == 0 {
+                let uf = [f64::from(u[0] as f32), f64::from(u[1] as f32)];
+                s.extend(model.settled_effect_states(&uf));
             }
             w.write(tp, t as u64, &pose_msg(t, "world", s[0], s[1], s[2]))
                 .unwrap();
@@ -113,8 +137,8 @@ pub fn car_bag(dir: &Path, runs: usize, seconds: f64, rate_hz: f64, seed: u64) -
             w.write(tc, t as u64, &cmd).unwrap();
             // commands go through f32 on the wire: integrate with the same values
             let uf = [f64::from(u[0] as f32), f64::from(u[1] as f32)];
-            let mut next = [0.0; 6];
-            integrate(&model, &solver, 1, &s, &uf, dt, &mut next);
+            let mut next = vec![0.0; s.len()];
+            integrate(model, &solver, 1, &s, &uf, dt, &mut next);
             s = next;
         }
     }

@@ -17,6 +17,11 @@
 //! estimated causally by the Savitzky–Golay fit of the offline pipeline over the last 15 poses.
 //! Stale or NaN input is skipped with a warning (rate-limited), never a crash.
 //!
+//! A model with effects that have a state (`motor_lag`'s filtered throttle `d_f`,
+//! `steering_lag`'s wheel angle `delta_w`) gets them from the command stream it receives, as
+//! the offline tools rebuild them from a bag: settled at the first command, then advanced one
+//! model step per pose under the command held; a pose gap restarts them.
+//!
 //! Parameters: `model` (model directory, required), `steps` (10), `max_command_age` (s, 0.5),
 //! `pose_qos` (`sensor_data` | `reliable`, default `sensor_data`: matches both kinds of
 //! publisher).
@@ -116,6 +121,13 @@ fn main() -> anyhow::Result<()> {
     let (model, _) = load_model(std::path::Path::new(&model_dir), None, None)
         .with_context(|| format!("parameter model: loading {model_dir}"))?;
     let world = model.world();
+    if model.dim_extra() > 0 {
+        tracing::info!(
+            "effect states {:?} kept from {}",
+            model.extra_state_names(),
+            world.default_cmd_topic()
+        );
+    }
     let mut predictor = OnlinePredictor::new(
         model,
         OnlineConfig {

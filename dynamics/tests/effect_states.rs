@@ -1,0 +1,181 @@
+//! Effect states of the car model (`motor_lag`'s `d_f`, `steering_lag`'s `δ_w`): the steering
+//! servo's field and its exact Jacobians, the rebuilt effect states against exact solutions,
+//! and the solvers' shape contract.
+
+use dynlab_dynamics::ode::{Solver, VectorField, integrate};
+use dynlab_dynamics::physics::*;
+
+fn servo(tau: f64, rate: f64, delta0: f64) -> PhysicsModel {
+    let mut m = PhysicsModel::car(&[
+        Effect::SteeringOffset,
+        Effect::MotorLag,
+        Effect::SteeringLag,
+    ])
+    .unwrap();
+    m.set_param("steering_offset.delta0", delta0).unwrap();
+    m.set_param("motor_lag.tau", 0.07).unwrap();
+    m.set_param("steering_lag.tau", tau).unwrap();
+    m.set_param("steering_lag.rate", rate).unwrap();
+    m
+}
+
+#[test]
+fn steering_lag_is_a_rate_limited_first_order_servo_with_exact_jacobians() {
+    let m = servo(0.05, 2.0, 0.03);
+    assert_eq!(m.state_names()[6..], ["d_f", "delta_w"]);
+    assert_eq!(m.effect_state_names(), vec!["d_f", "delta_w"]);
+    assert_eq!(m.dim_effect_states(), 2);
+    assert!(!Effect::SteeringLag.linear_in_params());
+    let specs = Effect::SteeringLag.params();
+    assert_eq!((specs[0].name, specs[0].unit), ("tau", "s"));
+    assert_eq!((specs[1].name, specs[1].unit), ("rate", "rad/s"));
+    let s = [0.9, 0.1, 0.4, 1.2, 0.15, 2.0, 0.3, 0.1];
+    let u = [0.2, 0.5];
+    let mut f = vec![0.0; 8];
+    m.eval_one(&s, &u, &mut f);
+    // δ̇_w = r·tanh((δ + δ₀ − δ_w)/(r·τ_s))
+    let want = 2.0 * ((0.2 + 0.03 - 0.1) / (2.0 * 0.05f64)).tanh();
+    assert!((f[7] - want).abs() < 1e-14, "{} vs {want}", f[7]);
+    // the wheels follow δ_w, not the command: the same car with the command at δ_w and no servo
+    let mut plain = PhysicsModel::car(&[Effect::MotorLag]).unwrap();
+    plain.set_param("motor_lag.tau", 0.07).unwrap();
+    let mut g = vec![0.0; 7];
+    plain.eval_one(&s[..7], &[0.1, 0.5], &mut g);
+    assert!(f[..7].iter().zip(&g).all(|(a, b)| (a - b).abs() < 1e-12));
+    // small errors: a first-order lag of τ_s; large ones: at most the rate
+    let small = servo(0.05, 50.0, 0.0);
+    small.eval_one(
+        &[0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.19],
+        &[0.2, 0.0],
+        &mut f,
+    );
+    assert!((f[7] - 0.01 / 0.05).abs() < 1e-4, "{}", f[7]);
+    m.eval_one(
+        &[0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, -0.4],
+        &[0.4, 0.0],
+        &mut f,
+    );
+    assert!(f[7] < 2.0 && f[7] > 1.99, "{}", f[7]);
+    // Jacobians wrt state, input and parameters against central differences
+    let (ds, du, np) = (m.dim_s(), m.dim_u(), m.n_params());
+    let nz = ds + du + np;
+    let mut j = vec![0.0; ds * nz];
+    m.jacobian_full(&s, &u, &[true; 3], true, &mut f, &mut j);
+    let z: Vec<f64> = s.iter().chain(&u).chain(m.params()).copied().collect();
+    let eval = |z: &[f64]| -> Vec<f64> {
+        let mut mm = m.clone();
+        mm.set_params(&z[ds + du..]).unwrap();
+        let mut out = vec![0.0; ds];
+        mm.eval_one(&z[..ds], &z[ds..ds + du], &mut out);
+        out
+    };
+    for c in 0..nz {
+        let h = 1e-6 * z[c].abs().max(1e-2);
+        let (mut p, mut q) = (z.clone(), z.clone());
+        p[c] += h;
+        q[c] -= h;
+        let (fp, fq) = (eval(&p), eval(&q));
+        for r in 0..ds {
+            let fd = (fp[r] - fq[r]) / (2.0 * h);
+            let ex = j[r * nz + c];
+            assert!(
+                (fd - ex).abs() < 1e-5 * fd.abs().max(1.0),
+                "∂f{r}/∂z{c}: exact {ex} vs FD {fd}"
+            );
+        }
+    }
+    // its contribution: what the servo changes, with exact Jacobians
+    let t = m.effect_term(Effect::SteeringLag, &s, &u).unwrap();
+    assert_eq!(t.d_params.len(), ds * 2);
+    assert!((t.contribution[7] - want).abs() < 1e-14);
+    let text = m.equations();
+    assert!(
+        text.contains("δ̇_w = 2.000·tanh((δ + δ₀ − δ_w)/(2.000·0.05000))"),
+        "{text}"
+    );
+    assert!(text.contains("F_fy·sin δ_w"), "{text}");
+}
+
+#[test]
+fn effect_states_along_commands_match_the_exact_lag_and_the_integrated_model() {
+    let mut m = PhysicsModel::car(&[Effect::MotorLag, Effect::SteeringLag]).unwrap();
+    m.set_param("motor_lag.tau", 0.08).unwrap();
+    m.set_param("steering_lag.tau", 0.04).unwrap();
+    m.set_param("steering_lag.rate", 1.5).unwrap();
+    let dt = 0.01;
+    let u: Vec<f64> = (0..60)
+        .flat_map(|i| {
+            let k = i / 15;
+            [0.3 * if k % 2 == 0 { 1.0 } else { -1.0 }, 0.2 * k as f64]
+        })
+        .collect();
+    let e = m.effect_states_along(&u, dt);
+    assert_eq!(e.len(), 60 * 2);
+    // settled at the first command
+    assert_eq!(&e[..2], &[0.0, 0.3]);
+    // d_f: the exact solution of the first-order lag under zero-order hold
+    let thr: Vec<f64> = (0..60).map(|i| u[i * 2 + 1]).collect();
+    let exact = PhysicsModel::motor_lag_filter(&thr, dt, 0.08, thr[0]);
+    for i in 0..60 {
+        assert!(
+            (e[i * 2] - exact[i]).abs() < 1e-7,
+            "{i}: {} vs {}",
+            e[i * 2],
+            exact[i]
+        );
+    }
+    // the same as integrating the whole model (the effect states ignore the car's state)
+    let mut s: Vec<f64> = [0.0, 0.0, 0.3, 1.0, 0.1, 0.2].to_vec();
+    s.extend_from_slice(&e[..2]);
+    let solver = Solver::Rk4 { substeps: 8 };
+    for i in 0..59 {
+        let mut next = vec![0.0; 8];
+        integrate(&m, &solver, 1, &s, &u[i * 2..i * 2 + 2], dt, &mut next);
+        for c in 0..2 {
+            let (a, b) = (next[6 + c], e[(i + 1) * 2 + c]);
+            assert!(
+                (a - b).abs() < 1e-8,
+                "step {i} state {c}: model {a} vs along {b}"
+            );
+        }
+        s = next;
+    }
+    // the wheel never turns faster than the rate limit
+    for i in 1..60 {
+        let rate = (e[i * 2 + 1] - e[(i - 1) * 2 + 1]) / dt;
+        assert!(rate.abs() <= 1.5 + 1e-12, "wheel rate {rate}");
+    }
+    // from a history: the last entry advanced by the last command
+    let hist = &u[..40 * 2];
+    let from = m.effect_states_from_history(hist, &u[80..82], dt);
+    for c in 0..2 {
+        assert!((from[c] - e[40 * 2 + c]).abs() < 1e-15);
+    }
+    assert_eq!(
+        m.effect_states_from_history(&[], &[0.1, 0.4], dt),
+        vec![0.4, 0.1]
+    );
+    // derivatives wrt τ by dual numbers through the same recursion
+    let j = m.settled_effect_states_jacobian(&[0.1, 0.4]);
+    assert_eq!(j, vec![0.0, 1.0, 1.0, 0.0]);
+    // a model without effect states has none
+    let plain = PhysicsModel::car(&[]).unwrap();
+    assert!(plain.effect_states_along(&u, dt).is_empty());
+    assert_eq!(plain.dim_effect_states(), 0);
+}
+
+#[test]
+#[should_panic(expected = "n × dim_s = 1 × 7")]
+fn a_state_without_its_effect_states_is_a_shape_error_not_a_slice_panic() {
+    let m = PhysicsModel::car(&[Effect::MotorLag]).unwrap();
+    let mut out = vec![0.0; 6];
+    integrate(
+        &m,
+        &Solver::rk4(),
+        1,
+        &[0.0, 0.0, 0.0, 1.0, 0.0, 0.0],
+        &[0.0, 0.5],
+        0.01,
+        &mut out,
+    );
+}
