@@ -271,7 +271,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         }
         if !beyond.is_empty() {
             let mut t: Vec<(String, usize)> = terms.into_iter().collect();
-            t.sort_by(|a, b| b.1.cmp(&a.1));
+            t.sort_by_key(|x| std::cmp::Reverse(x.1));
             fitted.push(format!(
                 "beyond the library in {}/{n}, {:.0} % more removed: {}",
                 beyond.len(),
