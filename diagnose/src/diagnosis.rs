@@ -174,8 +174,10 @@ pub struct DiagnoseConfig {
     /// tested (Bonferroni), so that the chance of *any* false candidate stays at
     /// `1 − confidence` (default true).
     pub correct_for_candidates: bool,
-    /// A window's error counts at most this much in the scores (normalised units; default 1:
-    /// the error of a model that predicts no motion). An open-loop rollout that has left the
+    /// A window's error counts at most this much in the scores (normalised units; default 4:
+    /// four times the error of a model that predicts no motion, far beyond any window a model
+    /// follows; 1 also capped ordinary windows of a model without its motor lag and hid part
+    /// of what the lag removes). An open-loop rollout that has left the
     /// data (a spin the model does not follow) would otherwise outweigh thousands of ordinary
     /// windows, and its segment would decide every score. The fits use the errors uncapped.
     pub window_error_cap: f64,
@@ -208,7 +210,7 @@ impl Default for DiagnoseConfig {
             refit_nominal: None,
             refit_params: None,
             correct_for_candidates: true,
-            window_error_cap: 1.0,
+            window_error_cap: 4.0,
             max_effects: 3,
             discover: true,
             discovery: DiscoveryConfig::default(),
