@@ -677,7 +677,8 @@ impl PhysicsModel {
 
     /// Advances the effect states `e` over `dt` under the held input `u`, integrating only the
     /// effect states' own equations (they do not depend on the robot's state): classic RK4 with
-    /// substeps of at most a twentieth of the shortest time constant.
+    /// substeps of at most a quarter of the smallest time constant the effects allow (their lower
+    /// bounds).
     pub fn advance_effect_states(&self, e: &mut [f64], u: &[f64], dt: f64) {
         self.advance_generic(&self.params, e, u, dt);
     }
@@ -688,14 +689,16 @@ impl PhysicsModel {
         if ne == 0 || self.robot != Robot::Car || dt.is_nan() || dt <= 0.0 {
             return;
         }
+        // the substeps follow from the time constants' lower bounds, not their values: the
+        // effect states then vary smoothly with the parameters (a fit differentiates them)
         let tau_min = self
             .slots
             .iter()
             .filter(|sl| !sl.effect.extra_states().is_empty())
-            .map(|sl| p[sl.p_off].value())
+            .map(|sl| sl.effect.params()[0].lower)
             .fold(f64::INFINITY, f64::min)
             .max(1e-6);
-        let substeps = (20.0 * dt / tau_min).ceil().clamp(1.0, 1000.0) as usize;
+        let substeps = (4.0 * dt / tau_min).ceil().clamp(1.0, 1000.0) as usize;
         let h = dt / substeps as f64;
         let active = vec![true; self.slots.len()];
         let ur: Vec<R> = u.iter().map(|&x| R::cst(x)).collect();
