@@ -917,7 +917,7 @@ impl Ctx<'_> {
             &cur.test,
             &f.test,
             self.cfg.bootstrap,
-            self.cfg.confidence_for(tested),
+            1.0 - self.cfg.confidence_for(tested),
             self.cfg.seed
                 ^ (e as u64 + 1).wrapping_mul(0x9E37_79B9_7F4A_7C15)
                 ^ (cur.effects().len() as u64).wrapping_mul(0xD1B5_4A32_D192_ED03),
@@ -1250,7 +1250,7 @@ pub fn diagnose(
             &baseline.test,
             &cur.test,
             cfg.bootstrap,
-            cfg.confidence,
+            1.0 - cfg.confidence,
             cfg.seed ^ 0x5851_F42D_4C95_7F2D,
         );
         let qualified = |i: usize| match f.owners[i] {
@@ -1398,13 +1398,14 @@ pub fn push_level_dataset(mut data: Dataset) -> Dataset {
     data
 }
 
-/// One-sided lower bootstrap bound of the error reduction, resampling held-out segments whole.
-fn bootstrap_lower(
+/// One-sided lower bootstrap bound (error probability `alpha`) of the error reduction
+/// `1 − Σafter/Σbefore`, resampling held-out segments whole (shared with the term search).
+pub(crate) fn bootstrap_lower(
     ws: &[Window],
     before: &[f64],
     after: &[f64],
     resamples: usize,
-    confidence: f64,
+    alpha: f64,
     seed: u64,
 ) -> f64 {
     let mut sb: BTreeMap<usize, (f64, f64)> = BTreeMap::new();
@@ -1429,7 +1430,7 @@ fn bootstrap_lower(
         stats.push(if b > 0.0 { 1.0 - a / b } else { 0.0 });
     }
     stats.sort_by(|a, b| a.total_cmp(b));
-    let q = ((1.0 - confidence) * resamples as f64).floor() as usize;
+    let q = (alpha * resamples as f64).floor() as usize;
     stats[q.min(resamples - 1)]
 }
 

@@ -34,7 +34,6 @@
 //! residual against the term's feature (the plot that shows it), and the TOML text of the
 //! custom effect to pass to `dynlab train --effects-file`.
 
-use std::collections::BTreeMap;
 use std::fmt::Write as _;
 
 use dynlab_learn::dynamics::conventions::wrap_angle;
@@ -53,6 +52,7 @@ use dynlab_learn::{Dataset, LearnError, Model, World};
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
+use crate::diagnosis::bootstrap_lower;
 use crate::report::{Chart, LineChart, Series, escape};
 
 /// Errors of a term search (finding nothing is an outcome, not an error).
@@ -1025,43 +1025,6 @@ fn solve(a: &[f64], b: &[f64], n: usize) -> Option<Vec<f64>> {
         x[col] = s / m[col * n + col];
     }
     x.iter().all(|v| v.is_finite()).then_some(x)
-}
-
-/// Lower end of the one-sided bootstrap interval (error probability `alpha`) of the
-/// improvement `1 − Σafter/Σbefore`, resampling whole trajectories (segments).
-fn bootstrap_lower(
-    ws: &[Window],
-    before: &[f64],
-    after: &[f64],
-    resamples: usize,
-    alpha: f64,
-    seed: u64,
-) -> f64 {
-    let mut per: BTreeMap<usize, (f64, f64)> = BTreeMap::new();
-    for (w, (b, a)) in ws.iter().zip(before.iter().zip(after)) {
-        let e = per.entry(w.trajectory).or_insert((0.0, 0.0));
-        e.0 += b;
-        e.1 += a;
-    }
-    let per: Vec<(f64, f64)> = per.into_values().collect();
-    if per.len() < 2 || resamples == 0 {
-        return f64::NEG_INFINITY;
-    }
-    let mut rng = SplitMix64::new(seed);
-    let mut stats: Vec<f64> = (0..resamples)
-        .map(|_| {
-            let (mut b, mut a) = (0.0, 0.0);
-            for _ in 0..per.len() {
-                let i = (rng.next_u64() % per.len() as u64) as usize;
-                b += per[i].0;
-                a += per[i].1;
-            }
-            if b > 0.0 { 1.0 - a / b } else { 0.0 }
-        })
-        .collect();
-    stats.sort_by(|a, b| a.total_cmp(b));
-    let q = (alpha * resamples as f64).floor() as usize;
-    stats[q.min(resamples - 1)]
 }
 
 /// The standard normal quantile `Φ⁻¹(p)` (bisection on `erfc`, to ~1e-9).
