@@ -42,6 +42,10 @@ pub struct DiagnoseArgs {
     /// drivetrain: `Df,Dr,Cm1,Cm2,Cr0`).
     #[arg(long, value_delimiter = ',')]
     refit: Option<Vec<String>>,
+    /// A refitted nominal parameter stays within this fraction of the model's value (e.g. 0.15;
+    /// default: within its physical bounds).
+    #[arg(long)]
+    refit_tolerance: Option<f64>,
     /// Forward selection adds at most this many effects.
     #[arg(long, default_value_t = 3)]
     max_effects: usize,
@@ -106,6 +110,7 @@ pub fn run(args: DiagnoseArgs) -> anyhow::Result<()> {
         },
         max_effects: args.max_effects,
         refit_params: args.refit.clone(),
+        refit_tolerance: args.refit_tolerance,
         ..DiagnoseConfig::default()
     };
     let d = diagnose(&model, &data, &cfg)?;

@@ -15,9 +15,12 @@
 //! the terms found (each with how often).
 //!
 //! `cargo run --release -p dynlab-diagnose --example open_world -- [--seeds N]
-//! [--nominal-seeds N] [--perturb F] [--episodes N] [--duration S] [--only NAME] [--noise X]`
-//! (defaults 5 seeds, 20 nominal seeds, f = 0.1, 4 × 15 s, noise ×2); `VERBOSE=1` prints every
-//! diagnosis.
+//! [--first-seed N] [--nominal-seeds N] [--perturb F] [--episodes N] [--duration S]
+//! [--only CASE,CASE] [--noise X] [--fit-iterations N] [--fit-windows N] [--car-refit BOOL]`
+//! (defaults 5 seeds from 0, 20 nominal seeds, f = 0.1, 4 × 15 s, noise ×2; the baseline is
+//! fitted with `dynlab train`'s defaults; `--only` takes case names as printed, e.g.
+//! `"aero_drag,none (nominal)"`; `--car-refit true` refits the car's nominal parameters in the
+//! diagnosis); `VERBOSE=1` prints every diagnosis.
 
 use std::collections::BTreeSet;
 use std::time::Instant;
@@ -132,6 +135,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let duration: f64 = arg("--duration", 15.0);
     let noise: f64 = arg("--noise", 2.0);
     let only: String = arg("--only", String::new());
+    let first_seed: u64 = arg("--first-seed", 0);
+    let refit: Option<bool> = std::env::args()
+        .position(|a| a == "--car-refit")
+        .and_then(|i| std::env::args().nth(i + 1))
+        .and_then(|v| v.parse().ok());
+    let defaults = TrainConfig::default();
+    let fit_iterations: usize = arg("--fit-iterations", defaults.physics_iterations);
+    let fit_windows: usize = arg("--fit-windows", defaults.physics_max_windows);
     let verbose = std::env::var("VERBOSE").is_ok();
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
     use Hidden::*;
@@ -165,7 +176,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 .collect::<Vec<_>>()
                 .join(" + ")
         };
-        if !only.is_empty() && !name.contains(&only) {
+        if !only.is_empty() && !only.split(',').any(|o| o == name) {
             continue;
         }
         let truth: BTreeSet<&str> = case
@@ -182,7 +193,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let mut wrong: BTreeSet<String> = BTreeSet::new();
         let mut beyond: Vec<f64> = Vec::new();
         let mut terms: std::collections::BTreeMap<String, usize> = Default::default();
-        for seed in 0..n {
+        for seed in first_seed..first_seed + n {
             let mut car = CarScenario::default();
             car.noise.position_std = 0.0005 * noise;
             car.noise.yaw_std = 0.002 * noise;
@@ -195,8 +206,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 kind: ModelKind::Physics,
                 steps: 5,
                 seed,
-                physics_iterations: 15,
-                physics_max_windows: 800,
+                physics_iterations: fit_iterations,
+                physics_max_windows: fit_windows,
                 ..TrainConfig::default()
             };
             let model = train(&nominal, &tc, &mut |_| {})?.model;
@@ -207,6 +218,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             let data = car_dataset(&hidden, episodes, duration, 1000 + seed, threads)?;
             let cfg = DiagnoseConfig {
                 seed,
+                refit_nominal: refit.or(DiagnoseConfig::default().refit_nominal),
                 ..DiagnoseConfig::default()
             };
             let d = diagnose(&model, &data, &cfg)?;

@@ -208,3 +208,56 @@ fn push_pusher_friction_is_found_and_recovered() {
     let d = run(Some(Effect::PusherFriction), 5);
     assert_found(&d, Effect::PusherFriction, "mu", 0.5, 0.05);
 }
+
+#[test]
+fn refit_tolerance_keeps_the_nominal_parameters_near_the_models_values() {
+    let d = data(Some(Effect::TableTilt), 1.0, 20, 403);
+    let physics = PhysicsModel::pushing(&[]).unwrap();
+    let given: Vec<(String, f64)> = physics
+        .param_names()
+        .into_iter()
+        .zip(physics.params().iter().copied())
+        .collect();
+    let model = Model::new(
+        ModelKind::Physics,
+        World::Push,
+        d.pose_dt_s,
+        None,
+        None,
+        Some(physics),
+        default_physics_solver(World::Push),
+    )
+    .unwrap();
+    let tol = 0.02;
+    let cfg = DiagnoseConfig {
+        seed: 3,
+        refit_tolerance: Some(tol),
+        discover: false,
+        ..DiagnoseConfig::default()
+    };
+    let diag = diagnose(&model, &d, &cfg).unwrap();
+    assert!(!diag.nominal_refit.is_empty(), "{}", diag.table());
+    let fitted = diag
+        .nominal_refit
+        .iter()
+        .chain(diag.candidates.iter().flat_map(|c| c.nominal_params.iter()));
+    let mut moved = false;
+    for (name, v) in fitted {
+        let g = given.iter().find(|(n, _)| n == name).unwrap().1;
+        assert!(
+            (v - g).abs() <= tol * g.abs() * (1.0 + 1e-9),
+            "{name} = {v}, model {g}, tolerance ±{tol}\n{}",
+            diag.table()
+        );
+        moved |= (v - g).abs() > 1e-3 * tol * g.abs();
+    }
+    assert!(moved, "no nominal parameter was refitted\n{}", diag.table());
+    for bad in [0.0, -0.1, f64::NAN] {
+        let cfg = DiagnoseConfig {
+            refit_tolerance: Some(bad),
+            ..DiagnoseConfig::default()
+        };
+        let err = diagnose(&model, &d, &cfg).unwrap_err().to_string();
+        assert!(err.contains("refit_tolerance"), "{err}");
+    }
+}
