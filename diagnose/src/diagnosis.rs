@@ -14,8 +14,9 @@
 //! step of the integrator. For a physics model this *is* the physics model with the effect added
 //! (its nominal parameters held at their fitted values); for a network it is the effect's own
 //! contribution fitted to the network's residual. Effect states (`motor_lag`'s filtered
-//! throttle) are reconstructed from the command history at every window start and carried along
-//! the rollout.
+//! throttle) are reconstructed from the command history at every window start (the recording's
+//! commands up to 3 s before the window's segment as well, so the cuts between segments do not
+//! restart them) and carried along the rollout.
 //!
 //! The effect's parameters `θ_e` are fitted within their bounds (bounded Levenberg–Marquardt
 //! with a clarabel QP step, several starts for the patch effects) on the k-step open-loop error
@@ -49,8 +50,8 @@ use dynlab_learn::dynamics::data::{
     DataError, SplitMix64, StateTrajectory, Window, split_trajectories, windows,
 };
 use dynlab_learn::dynamics::physics::{Effect, ModelError, PhysicsModel};
-use dynlab_learn::fit::{bounded_least_squares, cluster_std, initial_state};
-use dynlab_learn::train::segment;
+use dynlab_learn::fit::{bounded_least_squares, cluster_std};
+use dynlab_learn::train::{segment, segment_origins};
 use dynlab_learn::{Dataset, LearnError, Model, World};
 
 use crate::discovery::{Discovery, DiscoveryConfig, DiscoveryError, discover_terms_split};
@@ -455,6 +456,9 @@ pub struct Diagnosis {
 /// Windows, their data and the scale of each state dimension.
 struct Data<'a> {
     trajs: &'a [StateTrajectory],
+    /// Per segment: the commands of its recording before it (at most
+    /// [`EFFECT_HISTORY_S`]), from which effect states are rebuilt with the segment's own.
+    history: &'a [Vec<f64>],
     ds: usize,
     du: usize,
     k: usize,
@@ -512,11 +516,12 @@ impl Augmented<'_> {
         for (i, w) in ws.iter().enumerate() {
             let t = &d.trajs[w.trajectory];
             s[i * ds..(i + 1) * ds].copy_from_slice(&t.s[w.start * ds..(w.start + 1) * ds]);
+            let h = &d.history[w.trajectory];
             if !self.pure_physics {
-                sb.extend(initial_state(&self.base, t, w.start));
+                sb.extend(initial_state(&self.base, t, h, w.start));
             }
             if let Some(p) = &self.with {
-                sw.extend(initial_state(p, t, w.start));
+                sw.extend(initial_state(p, t, h, w.start));
             }
         }
         let mut err = vec![0.0; n];
@@ -589,6 +594,26 @@ impl Augmented<'_> {
         }
         err
     }
+}
+
+/// Commands before a segment that its effect states are rebuilt from \[s\]: 15 time constants
+/// of a 0.2 s motor lag; the segments' cuts do not restart the states.
+const EFFECT_HISTORY_S: f64 = 3.0;
+
+/// The state at sample `a` of segment `t`, extended by the effect states rebuilt over the
+/// commands `history` before the segment and the segment's own up to `a`.
+fn initial_state(p: &PhysicsModel, t: &StateTrajectory, history: &[f64], a: usize) -> Vec<f64> {
+    let ds = t.dim_s;
+    let mut s = t.s[a * ds..(a + 1) * ds].to_vec();
+    let ne = p.dim_effect_states();
+    if ne > 0 {
+        let mut u = history.to_vec();
+        u.extend_from_slice(&t.u[..(a + 1) * t.dim_u]);
+        let e = p.effect_states_along(&u, t.dt);
+        let i = history.len() / t.dim_u.max(1) + a;
+        s.extend_from_slice(&e[i * ne..(i + 1) * ne]);
+    }
+    s
 }
 
 /// Starting points of an effect's parameters (the rest at their defaults), chosen from the
@@ -1066,15 +1091,31 @@ pub fn diagnose(
         });
     }
     let k = cfg.steps_for(world);
-    let trajs = match world {
-        World::Car => segment(
-            &data.trajectories,
-            (cfg.segment_s / data.pose_dt_s.max(1e-9)).round().max(2.0) as usize + 1,
-        ),
+    let (trajs, history) = match world {
+        World::Car => {
+            let len = (cfg.segment_s / data.pose_dt_s.max(1e-9)).round().max(2.0) as usize + 1;
+            let keep = (EFFECT_HISTORY_S / data.pose_dt_s.max(1e-9)).ceil() as usize;
+            let history = segment_origins(&data.trajectories, len)
+                .into_iter()
+                .map(|(i, a, _)| {
+                    let u = &data.trajectories[i].u;
+                    let du = data.trajectories[i].dim_u;
+                    u[a.saturating_sub(keep) * du..a * du].to_vec()
+                })
+                .collect();
+            (segment(&data.trajectories, len), history)
+        }
         // the loader gives one state per push (`dynlab_learn::dataset::one_state_per_push`)
-        World::Push => data.trajectories.clone(),
+        World::Push => (
+            data.trajectories.clone(),
+            vec![Vec::new(); data.trajectories.len()],
+        ),
     };
-    let trajs: Vec<StateTrajectory> = trajs.into_iter().filter(|t| t.len() > k).collect();
+    let (trajs, history): (Vec<StateTrajectory>, Vec<Vec<f64>>) = trajs
+        .into_iter()
+        .zip(history)
+        .filter(|(t, _)| t.len() > k)
+        .unzip();
     let lengths: Vec<usize> = trajs.iter().map(|t| t.len()).collect();
     let too_little = |w: usize| DiagnosisError::TooLittleData {
         segments: trajs.len(),
@@ -1158,6 +1199,7 @@ pub fn diagnose(
         cfg,
         d: Data {
             trajs: &trajs,
+            history: &history,
             ds,
             du,
             k,
