@@ -12,7 +12,8 @@ use dynlab_learn::dynamics::data::SavGol;
 use dynlab_learn::dynamics::ode::Solver;
 use dynlab_learn::file::TrainingMeta;
 use dynlab_learn::{
-    KindDefaults, Loss, ModelKind, Progress, Split, TrainConfig, World, load_bags_with, save_model, train,
+    KindDefaults, Loss, ModelKind, Progress, Split, TrainConfig, World, load_bags_with, save_model,
+    train,
 };
 use indicatif::{ProgressBar, ProgressStyle};
 

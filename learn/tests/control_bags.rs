@@ -6,7 +6,7 @@ use std::path::PathBuf;
 
 use dynlab_learn::dynamics::data::SavGol;
 use dynlab_learn::{
-    Dataset, KindDefaults, ModelKind, TrainConfig, Topics, World, load_bags, train,
+    Dataset, KindDefaults, ModelKind, Topics, TrainConfig, World, load_bags, train,
 };
 
 fn bag(name: &str) -> PathBuf {
@@ -36,14 +36,16 @@ fn the_wide_pushing_bag_has_one_pose_per_push_from_starts_on_both_sides() {
     assert_eq!(d.trajectories.len(), 500);
     assert_eq!(d.transitions(), 5000);
     // the starts cover both scenes' start headings (free +0.2π, obstacle −0.2π)
-    let headings: Vec<f64> = d
-        .trajectories
-        .iter()
-        .map(|t| t.s[2])
-        .collect();
+    let headings: Vec<f64> = d.trajectories.iter().map(|t| t.s[2]).collect();
     let near = |h: f64| headings.iter().filter(|&&x| (x - h).abs() < 0.2).count();
-    let (free, obstacle) = (near(0.2 * std::f64::consts::PI), near(-0.2 * std::f64::consts::PI));
-    assert!(free >= 20 && obstacle >= 20, "starts near ±0.2π: {free}, {obstacle}");
+    let (free, obstacle) = (
+        near(0.2 * std::f64::consts::PI),
+        near(-0.2 * std::f64::consts::PI),
+    );
+    assert!(
+        free >= 20 && obstacle >= 20,
+        "starts near ±0.2π: {free}, {obstacle}"
+    );
 }
 
 #[test]
@@ -67,7 +69,11 @@ fn car_node_rk4_with_the_defaults_beats_the_constant_model_after_a_short_run() {
     let defaults = KindDefaults::for_kind(World::Car, ModelKind::NodeRk4);
     // the car needs the multi-step loss: with k = 1 a node-rk4 model barely beats the
     // constant model (0.043 against 0.051 after 300 epochs on bags/car_nominal)
-    assert!(defaults.steps >= 3, "car node-rk4 default k = {}", defaults.steps);
+    assert!(
+        defaults.steps >= 3,
+        "car node-rk4 default k = {}",
+        defaults.steps
+    );
     let cfg = TrainConfig {
         kind: ModelKind::NodeRk4,
         steps: defaults.steps,
