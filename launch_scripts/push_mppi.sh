@@ -57,7 +57,8 @@ start=$SECONDS
 while (( SECONDS - start < ${TIMEOUT:-300} )); do
   sleep 0.2
   grep -q "goal reached" "$log" 2>/dev/null && break
-  if (( $(grep -c "push [0-9]* from" "$log" 2>/dev/null || true) >= MAX_PUSHES )); then
+  n=$(grep -c "push [0-9]* from" "$log" 2>/dev/null) || n=0
+  if (( n >= MAX_PUSHES )); then
     sleep "$(python3 -c "print(2.5 / $rate)")"
     break
   fi
