@@ -81,7 +81,8 @@ for t in "${tracks[@]}"; do
   if [[ ! -f "$out/runs/true_$name/report.json" ]]; then
     echo "== true model laps, $name track"
     "$dl" eval race --model "$out/models/car_node-rk4" --laps 2 --track "$root/$track" \
-      "${set_eval[@]}" --out "$out/runs/true_$name" > "$out/runs/true_$name.txt"
+      "${set_eval[@]}" --out "$out/runs/true_$name" > "$out/runs/true_$name.txt" \
+      || echo "control.sh: the true model's laps on $name failed (see $out/runs/true_$name.txt)" >&2
   fi
   for kind in node-rk4 residual; do
     echo "== race $kind, $name track, ${RACE_SECONDS} s at ${SIM_RATE} × real time"
