@@ -16,7 +16,9 @@
 # within 30 ms of simulation time: $SIM_RATE (default 1) slows the simulation (0.2 for the
 # residual model, 0.1 for node-rk4 on 2 busy cores; the racer logs late commands).
 # With OUT_BAG and the `dynlab` binary present, the bag is checked at the end
-# (launch_scripts/race_check.py: laps, lap times, excursions, border distance, command rate).
+# (launch_scripts/race_check.py: laps, lap times, excursions, border distance, command rate, and
+# from the racer's log, which goes to OUT_BAG.racer.log too, solves and late commands; with
+# CHECK_ARGS=--json one JSON line).
 #
 # Binaries from $DYNLAB_BIN_DIR (default: target/release; build them with
 # `cargo build --release -p dynlab-nodes --bins`).
@@ -43,7 +45,13 @@ if [[ -n "$out" ]]; then
 fi
 "$bin/sim_node" --ros-args -p world:=car -p "scenario:=$scenario" -p "rate:=${SIM_RATE:-1.0}" &
 pids+=("$!")
-"$bin/racer" --ros-args -p "model:=$model" -p "track:=$track" -p use_sim_time:=true "$@" &
+if [[ -n "$out" ]]; then
+  # the racer's log also to OUT_BAG.racer.log (race_check.py reads its solve and late-command counts)
+  "$bin/racer" --ros-args -p "model:=$model" -p "track:=$track" -p use_sim_time:=true "$@" \
+    2> >(tee "$out.racer.log" >&2) &
+else
+  "$bin/racer" --ros-args -p "model:=$model" -p "track:=$track" -p use_sim_time:=true "$@" &
+fi
 pids+=("$!")
 
 sleep "$seconds"
@@ -52,5 +60,5 @@ trap - EXIT
 for p in "${pids[@]}"; do kill -INT "$p" 2>/dev/null || true; wait "$p" || true; done
 if [[ -n "$out" && -x "$bin/dynlab" ]]; then
   "$bin/dynlab" bag export "$out" > "$out.jsonl"
-  python3 "$here/launch_scripts/race_check.py" "$out.jsonl" "$track"
+  python3 "$here/launch_scripts/race_check.py" "$out.jsonl" "$track" --racer-log "$out.racer.log" ${CHECK_ARGS:-}
 fi

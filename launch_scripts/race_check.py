@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Laps and track excursions of a recorded race, computed from the bag alone.
 
-    launch_scripts/race_check.py BAG_EXPORT.jsonl TRACK.json [--json]
+    launch_scripts/race_check.py BAG_EXPORT.jsonl TRACK.json [--racer-log LOG] [--json]
 
 BAG_EXPORT.jsonl is `dynlab bag export BAG` of a bag recorded by launch_scripts/race.sh
 (topics /car/odom, /car/cmd, /car/pose). The driven line is the simulator's ground truth
@@ -10,12 +10,22 @@ BAG_EXPORT.jsonl is `dynlab bag export BAG` of a bag recorded by launch_scripts/
 outer border points). Reports completed laps and their times, excursions (times the car's
 centre left the track), the smallest border distance, top speed, the command rate and the
 command delay (log time at the recorder minus the command's stamp, both simulation time).
-Exit status 0 always; the caller judges the numbers. Standard library only.
+With --racer-log (the racer's log, as race.sh writes it to OUT_BAG.racer.log) also the racer's
+own counts from its progress lines ("N solves, last X ms (status), worst Y ms, Z late commands,
+M poses missed", logged every 100 solves): solves, late commands and poses missed at the last
+such line, the worst solve, and the median and 99th percentile of the sampled solve times (every
+100th solve, so p99 of a short run is the largest sample). Exit status 0 always; the caller
+judges the numbers. Standard library only.
 """
 
 import json
 import math
+import re
 import sys
+
+PROGRESS = re.compile(
+    r"(\d+) solves, last ([\d.]+) ms \([^)]*\), worst ([\d.]+) ms, (\d+) late commands, (\d+) poses missed"
+)
 
 
 def load_track(path):
@@ -135,12 +145,46 @@ def check(export_path, track_path):
     return rep
 
 
+def racer_log(path):
+    """Solve and late-command counts from the racer's progress lines (empty when none)."""
+    rows = []
+    with open(path, errors="replace") as f:
+        for line in f:
+            m = PROGRESS.search(line)
+            if m:
+                rows.append((int(m[1]), float(m[2]), float(m[3]), int(m[4]), int(m[5])))
+    if not rows:
+        return {"solves_logged": 0}
+    last = sorted(r[1] for r in rows)
+    return {
+        "solves_logged": rows[-1][0],
+        "late_commands": rows[-1][3],
+        "late_fraction": rows[-1][3] / rows[-1][0],
+        "poses_missed": rows[-1][4],
+        "solve_worst_ms": rows[-1][2],
+        "solve_sampled_p50_ms": last[len(last) // 2],
+        "solve_sampled_p99_ms": last[min(len(last) - 1, int(0.99 * len(last)))],
+        "solve_samples": len(last),
+    }
+
+
 def main():
-    args = [a for a in sys.argv[1:] if not a.startswith("--")]
+    argv = sys.argv[1:]
+    log = None
+    if "--racer-log" in argv:
+        i = argv.index("--racer-log")
+        if i + 1 >= len(argv):
+            print("race_check.py: --racer-log needs a file", file=sys.stderr)
+            sys.exit(2)
+        log = argv[i + 1]
+        argv = argv[:i] + argv[i + 2:]
+    args = [a for a in argv if not a.startswith("--")]
     if len(args) != 2:
         print(__doc__, file=sys.stderr)
         sys.exit(2)
     rep = check(args[0], args[1])
+    if log is not None:
+        rep.update(racer_log(log))
     if "--json" in sys.argv:
         print(json.dumps(rep))
         return

@@ -12,7 +12,8 @@ use dynlab_learn::dynamics::data::SavGol;
 use dynlab_learn::dynamics::ode::Solver;
 use dynlab_learn::file::TrainingMeta;
 use dynlab_learn::{
-    Loss, ModelKind, Progress, Split, TrainConfig, World, load_bags_with, save_model, train,
+    KindDefaults, Loss, ModelKind, Progress, Split, TrainConfig, World, load_bags_with, save_model,
+    train,
 };
 use indicatif::{ProgressBar, ProgressStyle};
 
@@ -28,9 +29,10 @@ pub struct TrainArgs {
     /// push or car (default: inferred from the bag's topics).
     #[arg(long)]
     world: Option<String>,
-    /// Rollout steps k of the discounted multi-step loss.
-    #[arg(long, default_value_t = 1)]
-    steps: usize,
+    /// Rollout steps k of the discounted multi-step loss (default: per world and kind, car
+    /// residual and node-* 5, otherwise 1; the command prints what it chose).
+    #[arg(long)]
+    steps: Option<usize>,
     /// Physics effects, comma-separated (physics and hybrid only), e.g. aero_drag,steering_offset.
     #[arg(long, value_delimiter = ',')]
     effects: Vec<String>,
@@ -49,7 +51,7 @@ pub struct TrainArgs {
     /// A physics parameter value set before the fit (repeatable), e.g. --set m=0.045 (kg).
     #[arg(long = "set", value_name = "NAME=VALUE")]
     set: Vec<String>,
-    /// Epochs (default 300).
+    /// Epochs (default: per world and kind, car residual and node-* 40, otherwise 300).
     #[arg(long)]
     epochs: Option<usize>,
     /// Stop after this many training windows in total.
@@ -126,9 +128,25 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
             data.trajectories.len()
         );
     }
+    let defaults = KindDefaults::for_kind(data.world, kind);
+    let mut chosen = Vec::new();
+    if args.steps.is_none() {
+        chosen.push(format!("--steps {}", defaults.steps));
+    }
+    if args.epochs.is_none() && kind.has_network() {
+        chosen.push(format!("--epochs {}", defaults.epochs));
+    }
+    if !chosen.is_empty() {
+        eprintln!(
+            "defaults for a {} {kind} model: {} (pass the flag to override)",
+            data.world,
+            chosen.join(" ")
+        );
+    }
     let mut cfg = TrainConfig {
         kind,
-        steps: args.steps,
+        steps: args.steps.unwrap_or(defaults.steps),
+        epochs: args.epochs.unwrap_or(defaults.epochs),
         seed: args.seed,
         effects: args.effects.clone(),
         custom_effects,
@@ -141,9 +159,6 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         },
         ..Default::default()
     };
-    if let Some(e) = args.epochs {
-        cfg.epochs = e;
-    }
     cfg.physics_free = args.free.clone();
     cfg.physics_max_windows = args.physics_windows.max(1);
     for kv in &args.set {

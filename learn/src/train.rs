@@ -163,6 +163,43 @@ impl Default for TrainConfig {
     }
 }
 
+/// Rollout steps and epochs for a world and model kind, for when the user sets neither
+/// (`dynlab train` without `--steps`/`--epochs`). Measured on the bundled bags
+/// (learn/README.md, "Defaults per world and kind"): the car's network kinds need the 5-step
+/// loss (with k = 1 a node-rk4 model barely beats the constant model and races badly) and reach
+/// their best validation loss within 40 epochs on the bundled track data; pushing models and
+/// the physics and hybrid kinds keep [`TrainConfig::default`]'s values.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct KindDefaults {
+    /// Rollout steps k of the loss.
+    pub steps: usize,
+    /// Epochs.
+    pub epochs: usize,
+}
+
+impl KindDefaults {
+    /// The defaults for `kind` on `world`.
+    pub fn for_kind(world: World, kind: ModelKind) -> Self {
+        let base = TrainConfig::default();
+        match (world, kind) {
+            (
+                World::Car,
+                ModelKind::Residual
+                | ModelKind::NodeEuler
+                | ModelKind::NodeRk4
+                | ModelKind::NodeDopri5,
+            ) => Self {
+                steps: 5,
+                epochs: 40,
+            },
+            _ => Self {
+                steps: base.steps,
+                epochs: base.epochs,
+            },
+        }
+    }
+}
+
 impl TrainConfig {
     /// Checks ranges and consistency.
     pub fn validate(&self) -> Result<(), LearnError> {

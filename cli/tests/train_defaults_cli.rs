@@ -1,0 +1,80 @@
+//! `dynlab train` picks rollout steps and epochs per world and kind when they are not given,
+//! says which, and explicit flags win.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn bag(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../bags")
+        .join(name)
+}
+
+/// Trains briefly (`--max-samples`) and returns stderr and the recorded (steps, epochs).
+fn train(bag: &Path, kind: &str, extra: &[&str], out: &Path) -> (String, u64, u64) {
+    let o = Command::new(env!("CARGO_BIN_EXE_dynlab"))
+        .args(["train", "--bag"])
+        .arg(bag)
+        .args(["--kind", kind, "--max-samples", "1000", "--quiet", "--out"])
+        .arg(out)
+        .args(extra)
+        .output()
+        .expect("run dynlab");
+    let err = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert!(o.status.success(), "train failed: {err}");
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("model.json")).unwrap()).unwrap();
+    let c = &m["training"]["config"];
+    (
+        err,
+        c["steps"].as_u64().unwrap(),
+        c["epochs"].as_u64().unwrap(),
+    )
+}
+
+#[test]
+fn the_car_network_kinds_default_to_the_multi_step_loss_and_say_so() {
+    let dir = tempfile::tempdir().unwrap();
+    let (err, steps, epochs) = train(&bag("car_nominal"), "residual", &[], &dir.path().join("m"));
+    assert!(
+        err.contains("defaults for a car residual model: --steps 5 --epochs 40"),
+        "{err}"
+    );
+    assert_eq!((steps, epochs), (5, 40));
+}
+
+#[test]
+fn explicit_flags_win_over_the_defaults() {
+    let dir = tempfile::tempdir().unwrap();
+    let (err, steps, epochs) = train(
+        &bag("car_nominal"),
+        "residual",
+        &["--steps", "2", "--epochs", "3"],
+        &dir.path().join("m"),
+    );
+    assert!(!err.contains("defaults for"), "{err}");
+    assert_eq!((steps, epochs), (2, 3));
+    // one flag given: only the other is a default
+    let (err, steps, epochs) = train(
+        &bag("car_nominal"),
+        "residual",
+        &["--steps", "2"],
+        &dir.path().join("m2"),
+    );
+    assert!(
+        err.contains("defaults for a car residual model: --epochs 40"),
+        "{err}"
+    );
+    assert_eq!((steps, epochs), (2, 40));
+}
+
+#[test]
+fn pushing_keeps_one_step_and_300_epochs() {
+    let dir = tempfile::tempdir().unwrap();
+    let (err, steps, epochs) = train(&bag("push_nominal"), "node-rk4", &[], &dir.path().join("m"));
+    assert!(
+        err.contains("defaults for a push node-rk4 model: --steps 1 --epochs 300"),
+        "{err}"
+    );
+    assert_eq!((steps, epochs), (1, 300));
+}
