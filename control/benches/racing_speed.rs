@@ -1,12 +1,23 @@
-//! Solve time of one receding-horizon racing step at n = 20 (20 Hz, 5 model steps per control
-//! step), per model kind and optimiser, measured side by side in one run.
+//! Time of one receding-horizon racing cycle at n = 20 (20 Hz, 5 model steps per control
+//! step), per model kind and cycle setting, measured side by side in one run.
 //!
 //! `cargo bench -p dynlab-control --bench racing_speed` — builds 8 × 64 GELU networks with
 //! random weights (the Kohler size; speed does not depend on the weights), the nominal physics
-//! model and the simulator itself, races 30 control cycles (3 for GD, whose 512-candidate line search is far slower) on an oval from a standing start and
-//! prints p50/p99 of the per-cycle solve time. `DYNLAB_RACE_MODEL=<dir>` adds a trained model.
-//! Row `node-rk4 fwd-jac` is the node-rk4 model linearised by forward mode through the RK4 stages
-//! (`Model::jacobians`) instead of `Model::jacobians_stagewise`: compare it with `node-rk4 8x64`.
+//! model and the simulator itself, races `DYNLAB_RACE_CYCLES` (default 30) control cycles (3 for
+//! GD, whose 512-candidate line search is far slower) on an oval from a standing start and
+//! prints p50/p99 of the per-cycle time. One model's rows run interleaved, cycle by cycle, so a
+//! change in the machine's load hits them alike; compare rows by their ratios (`p50/prev`,
+//! `p99/prev`: over the row of the previous path in the same family), not by absolute times.
+//! Rows: `sqp 1 it`, `sqp 3 it` (one solve per cycle, recovery off; `prev` = Clarabel's default
+//! QP settings with a hard QP first, the path before `SqpSettings::fast_qp`); `race` (the racing
+//! defaults: recovery starts when stalled — with random weights the car hardly moves, so nearly
+//! every cycle stalls); `stall …` (the racing defaults stalled on every cycle: the warm start and
+//! the three recovery starts; `prev` = the previous QPs on one thread, `1 thr` = the new QPs on
+//! one thread, plain = two threads, `8ms` = with `solve_budget` 8 ms).
+//! `DYNLAB_RACE_MODEL=<dir>` adds a trained model, `DYNLAB_RACE_ONLY=<text>` keeps the rows whose
+//! "model cycle" contains the text. Row `node-rk4 fwd-jac` is the node-rk4 model linearised by
+//! forward mode through the RK4 stages (`Model::jacobians`) instead of
+//! `Model::jacobians_stagewise`: compare it with `node-rk4 8x64`.
 
 use std::time::Instant;
 

@@ -296,8 +296,8 @@ fn jacobians_batched_over_the_horizon_equal_per_point_ones() {
                     na[r][c] = (0..6).map(|m| jac.ds[r * 6 + m] * a[m][c]).sum();
                 }
                 for c in 0..2 {
-                    nb[r][c] =
-                        jac.du[r * 2 + c] + (0..6).map(|m| jac.ds[r * 6 + m] * b[m][c]).sum::<f64>();
+                    nb[r][c] = jac.du[r * 2 + c]
+                        + (0..6).map(|m| jac.ds[r * 6 + m] * b[m][c]).sum::<f64>();
                 }
             }
             (a, b) = (na, nb);
@@ -338,7 +338,11 @@ fn racer_defaults_are_the_racing_settings() {
     );
     assert_eq!(d.sqp, SqpSettings { iterations: 3, ..o }.fast_qp());
     assert_eq!(
-        (d.sqp.trust_steering, d.sqp.trust_throttle, d.sqp.elastic_penalty),
+        (
+            d.sqp.trust_steering,
+            d.sqp.trust_throttle,
+            d.sqp.elastic_penalty
+        ),
         (o.trust_steering, o.trust_throttle, o.elastic_penalty)
     );
     // TOML keys
