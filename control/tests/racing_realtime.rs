@@ -267,6 +267,7 @@ fn sticky_elastic_qps_solve_an_infeasible_start_as_the_hard_first_path() {
 }
 
 #[test]
+#[allow(clippy::needless_range_loop)] // index loops mirror the matrix products
 fn jacobians_batched_over_the_horizon_equal_per_point_ones() {
     let model = node_car();
     let plant = Plant::new(&model, 5).unwrap();

@@ -86,9 +86,9 @@ pub struct RacerSettings {
     /// Regulariser.
     pub reg: Regulariser,
     /// SQP settings per cycle (few iterations: the warm start is close). Default 3 iterations
-    /// with the fast QPs of [`SqpSettings::fast_qp`] (`[sqp]` keys `sticky_elastic = false`,
-    /// `qp_tolerance = 1e-8`, `qp_refinement = true`, `qp_equilibrate = true` give Clarabel's
-    /// defaults, the previous path).
+    /// with the fast QPs of [`SqpSettings::fast_qp`] (an `[sqp]` table in a settings TOML
+    /// starts from [`SqpSettings::default`], Clarabel's defaults: the previous path, `iterations`
+    /// 50 unless given).
     pub sqp: SqpSettings,
     /// GD settings per cycle. Default 5 iterations.
     pub gd: GdSettings,
@@ -252,7 +252,7 @@ impl<'a> Racer<'a> {
                 "1 (solve the recovery starts one after the other) or more",
             ));
         }
-        if !(settings.solve_budget > 0.0) {
+        if settings.solve_budget.is_nan() || settings.solve_budget <= 0.0 {
             return Err(RacingError::setting(
                 "solve_budget",
                 settings.solve_budget,

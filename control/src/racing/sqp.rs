@@ -45,22 +45,21 @@ pub struct SqpSettings {
     /// Clarabel's iterative refinement of each KKT solve. Default true, Clarabel's own (the
     /// racer's default: false; the refinement was ≈ 20 % of the racing QP's time).
     pub qp_refinement: bool,
-    /// Clarabel's equilibration (Ruiz scaling) of the QP data. Default true, Clarabel's own (the
-    /// racer's default: false; without it the racing QPs took fewer interior-point iterations).
+    /// Clarabel's equilibration (Ruiz scaling) of the QP data. Default true, Clarabel's own (so
+    /// is the racer's: without it the racing QPs took fewer interior-point iterations, but one
+    /// ORCA lap run stalled in elastic QPs).
     pub qp_equilibrate: bool,
 }
 
 impl SqpSettings {
     /// These settings with the racer's fast QPs: `sticky_elastic`, `qp_tolerance` 1e-6, no
-    /// iterative refinement, no equilibration (≈ 0.5× the QP instructions of Clarabel's
-    /// defaults in the racing benchmark). [`RacerSettings`](super::RacerSettings)' default SQP
-    /// uses them; offline solves to convergence keep Clarabel's defaults.
+    /// iterative refinement (equilibration kept). [`RacerSettings`](super::RacerSettings)'
+    /// default SQP uses them; offline solves to convergence keep Clarabel's defaults.
     pub fn fast_qp(self) -> Self {
         Self {
             sticky_elastic: true,
             qp_tolerance: 1e-6,
             qp_refinement: false,
-            qp_equilibrate: false,
             ..self
         }
     }

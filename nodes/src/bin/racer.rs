@@ -100,7 +100,7 @@ fn main() -> anyhow::Result<()> {
             DEFAULT_BUDGET
         },
     )?;
-    if !(budget >= 0.0) {
+    if budget.is_nan() || budget < 0.0 {
         bail!(
             "parameter solve_budget: {budget} s; give a wall-clock budget per solve in seconds \
              (e.g. {DEFAULT_BUDGET}; 0: none)"
