@@ -173,6 +173,19 @@ impl Deadline {
         now < self.at && self.at - now > self.longest_iteration()
     }
 
+    /// A share of the time left for one of `parts` solves run one after the other: a deadline
+    /// at `now + (time left) / parts` (now, if none is left) that starts from this one's longest
+    /// iteration. Record its longest iteration back here when its solve is done.
+    pub fn share(&self, parts: usize) -> Deadline {
+        let now = Instant::now();
+        let left = self.at.saturating_duration_since(now);
+        let parts = u32::try_from(parts.max(1)).unwrap_or(u32::MAX);
+        Deadline {
+            at: now + left / parts,
+            longest_ns: AtomicU64::new(self.longest_ns.load(Ordering::Relaxed)),
+        }
+    }
+
     /// Records the duration of one iteration (of any solve sharing the deadline).
     pub fn record(&self, iteration: Duration) {
         let ns = u64::try_from(iteration.as_nanos()).unwrap_or(u64::MAX);

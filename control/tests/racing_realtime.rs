@@ -144,6 +144,11 @@ fn a_deadline_allows_an_iteration_only_while_the_longest_one_fits() {
     d.record(Duration::from_secs(1));
     assert_eq!(d.longest_iteration(), Duration::from_secs(10));
     assert!(d.allows_iteration());
+    // a share for one of 4 solves: a quarter of the time left, the longest iteration carried
+    let share = d.share(4);
+    assert!(share.instant() <= Instant::now() + Duration::from_secs(900));
+    assert!(share.instant() > Instant::now() + Duration::from_secs(800));
+    assert_eq!(share.longest_iteration(), Duration::from_secs(10));
     d.record(Duration::from_secs(7200));
     assert!(!d.allows_iteration());
     assert!(!Deadline::at(Instant::now() - Duration::from_secs(1)).allows_iteration());

@@ -111,7 +111,9 @@ pub struct RacerSettings {
     /// Wall-clock budget of one cycle's solve \[s\] (`inf`: none). When it runs out the
     /// optimiser starts no further iteration (an iteration is started only if the time left
     /// exceeds the longest one so far), recovery starts not yet begun are skipped, and the
-    /// cheapest plan found is used ([`RaceStep::deadline`] reports it; status
+    /// cheapest plan found is used. In a stalled cycle each thread shares the time left equally
+    /// among the starts it still has to solve (a warm start stuck facing a border does not take
+    /// the whole budget from the recovery starts) ([`RaceStep::deadline`] reports it; status
     /// [`SolveStatus::Deadline`]). The cycle can overrun it by at most one iteration that took
     /// longer than all before it. Default `inf` (the laps of `dynlab eval race` are timed by
     /// the simulation, not the wall clock; the `racer` node sets its own budget).
@@ -368,7 +370,7 @@ impl<'a> Racer<'a> {
             },
         };
         let deadline = deadline.as_ref();
-        let solve = |start: &[Input]| match st.optimizer {
+        let solve = |start: &[Input], deadline: Option<&Deadline>| match st.optimizer {
             Optimizer::Sqp => solve_sqp_until(&problem, start, &st.sqp, deadline),
             Optimizer::Gd => solve_gd_until(&problem, start, &st.gd, deadline),
         };
@@ -433,9 +435,11 @@ impl<'a> Racer<'a> {
 }
 
 /// Solves every start (the first is the warm start, the others recovery starts) on up to
-/// `threads` threads; a recovery start whose first iteration no longer fits before the
-/// `deadline` is skipped (`None`). Results in the order of `starts`; the first error in that
-/// order is returned.
+/// `threads` threads. With a `deadline`, each thread shares the time left among the starts it
+/// has left ([`Deadline::share`]: a stalled cycle's recovery starts get their turn instead of the
+/// warm start using the whole budget), and a recovery start whose first iteration no longer
+/// fits is skipped (`None`). Results in the order of `starts`; the first error in that order is
+/// returned.
 fn solve_starts<F>(
     starts: &[Vec<Input>],
     threads: usize,
@@ -443,31 +447,42 @@ fn solve_starts<F>(
     solve: &F,
 ) -> Result<Vec<Option<Solution>>, RacingError>
 where
-    F: Fn(&[Input]) -> Result<Solution, RacingError> + Sync,
+    F: Fn(&[Input], Option<&Deadline>) -> Result<Solution, RacingError> + Sync,
 {
-    let run = |i: usize| -> Option<Result<Solution, RacingError>> {
-        if i > 0 && deadline.is_some_and(|d| !d.allows_iteration()) {
+    // start i, with `left` starts (itself included) still to solve on this thread
+    let run = |i: usize, left: usize| -> Option<Result<Solution, RacingError>> {
+        let Some(d) = deadline else {
+            return Some(solve(&starts[i], None));
+        };
+        if i > 0 && !d.allows_iteration() {
             return None;
         }
-        Some(solve(&starts[i]))
+        let share = d.share(left);
+        let out = solve(&starts[i], Some(&share));
+        d.record(share.longest_iteration());
+        Some(out)
     };
-    let results: Vec<Option<Result<Solution, RacingError>>> = if threads <= 1 || starts.len() < 2 {
-        (0..starts.len()).map(run).collect()
+    let on_thread = |ids: Vec<usize>| -> Vec<(usize, Option<Result<Solution, RacingError>>)> {
+        let n = ids.len();
+        ids.into_iter()
+            .enumerate()
+            .map(|(j, i)| (i, run(i, n - j)))
+            .collect()
+    };
+    let mut out: Vec<Option<Result<Solution, RacingError>>> =
+        (0..starts.len()).map(|_| None).collect();
+    if threads <= 1 || starts.len() < 2 {
+        for (i, r) in on_thread((0..starts.len()).collect()) {
+            out[i] = r;
+        }
     } else {
         // the warm start (0) and the straight start (2) here, the full-lock starts (1, 3) on a
         // second thread
-        let mut out: Vec<Option<Result<Solution, RacingError>>> =
-            (0..starts.len()).map(|_| None).collect();
-        let run = &run;
+        let on_thread = &on_thread;
         std::thread::scope(|scope| {
-            let other = scope.spawn(move || {
-                (1..starts.len())
-                    .step_by(2)
-                    .map(|i| (i, run(i)))
-                    .collect::<Vec<_>>()
-            });
-            for i in (0..starts.len()).step_by(2) {
-                out[i] = run(i);
+            let other = scope.spawn(move || on_thread((1..starts.len()).step_by(2).collect()));
+            for (i, r) in on_thread((0..starts.len()).step_by(2).collect()) {
+                out[i] = r;
             }
             match other.join() {
                 Ok(done) => {
@@ -478,7 +493,6 @@ where
                 Err(panic) => std::panic::resume_unwind(panic),
             }
         });
-        out
-    };
-    results.into_iter().map(Option::transpose).collect()
+    }
+    out.into_iter().map(Option::transpose).collect()
 }
