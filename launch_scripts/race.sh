@@ -13,8 +13,10 @@
 # Extra arguments go to the racer's --ros-args, e.g. `-p optimizer:=gd` or `-p delay:=0.05`.
 # The racer publishes each command 30 ms (its `delay`) of simulation time after the pose it was
 # computed from and plans from the state predicted at that time, so every solve must finish
-# within 30 ms of simulation time: $SIM_RATE (default 1) slows the simulation (0.2 for the
-# residual model, 0.1 for node-rk4 on 2 busy cores; the racer logs late commands).
+# within 30 ms of simulation time: the racer stops each solve at its `solve_budget` (15 ms of
+# wall clock) and sends the best plan found, so the simulation runs at real time ($SIM_RATE,
+# default 1; lower it to give the optimiser more simulated time per solve). The racer logs late
+# commands and the solves stopped at the budget every 100 solves.
 # With OUT_BAG and the `dynlab` binary present, the bag is checked at the end
 # (launch_scripts/race_check.py: laps, lap times, excursions, border distance, command rate, and
 # from the racer's log, which goes to OUT_BAG.racer.log too, solves and late commands; with

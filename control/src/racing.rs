@@ -40,15 +40,18 @@ mod truth;
 
 pub use cost::{InputLimits, Objective, Regulariser, Target, TrackTerms};
 pub use estimate::CarStateEstimator;
-pub use gd::{GdSettings, gradient, solve_gd};
+pub use gd::{GdSettings, gradient, solve_gd, solve_gd_until};
 pub use laps::{LapReport, LapSettings, TracePoint, run_laps};
 pub use manoeuvre::Manoeuvre;
 pub use onpolicy::{OnPolicySettings, racing_episode};
 pub use plant::{CarDynamics, Input, Linearization, Plant, State};
 pub use profile::SpeedProfile;
 pub use race::{Optimizer, RaceStep, Racer, RacerSettings};
-pub use sqp::{SqpSettings, solve_sqp};
+pub use sqp::{SqpSettings, solve_sqp, solve_sqp_until};
 pub use truth::{SimCar, true_car_model};
+
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::{Duration, Instant};
 
 use dynlab_learn::LearnError;
 
@@ -104,6 +107,9 @@ pub enum SolveStatus {
     NumericalError,
     /// The model produced non-finite states along the initial guess.
     ModelFailure,
+    /// Stopped at the solve's wall-clock deadline (a racer's `solve_budget`); the inputs are
+    /// the best found by then (the initial guess if no iteration fitted).
+    Deadline,
 }
 
 impl SolveStatus {
@@ -121,7 +127,69 @@ impl std::fmt::Display for SolveStatus {
             SolveStatus::Infeasible => "infeasible",
             SolveStatus::NumericalError => "numerical-error",
             SolveStatus::ModelFailure => "model-failure",
+            SolveStatus::Deadline => "deadline",
         })
+    }
+}
+
+/// A wall-clock deadline for one or more solves (the solves of a racing cycle share one), with
+/// the longest optimiser iteration any of them took so far: an iteration (or a solve) is only
+/// started while more time than that is left, so the deadline is overrun by at most the part
+/// of one iteration that took longer than all before it.
+#[derive(Debug)]
+pub struct Deadline {
+    at: Instant,
+    longest_ns: AtomicU64,
+}
+
+impl Deadline {
+    /// A deadline at the instant `at`.
+    pub fn at(at: Instant) -> Self {
+        Self {
+            at,
+            longest_ns: AtomicU64::new(0),
+        }
+    }
+
+    /// A deadline `budget` from now.
+    pub fn after(budget: Duration) -> Self {
+        Self::at(Instant::now() + budget)
+    }
+
+    /// The instant of the deadline.
+    pub fn instant(&self) -> Instant {
+        self.at
+    }
+
+    /// The longest iteration recorded so far.
+    pub fn longest_iteration(&self) -> Duration {
+        Duration::from_nanos(self.longest_ns.load(Ordering::Relaxed))
+    }
+
+    /// Whether an iteration may start now: more time is left than the longest iteration so
+    /// far (before any was recorded: whether the deadline is still ahead).
+    pub fn allows_iteration(&self) -> bool {
+        let now = Instant::now();
+        now < self.at && self.at - now > self.longest_iteration()
+    }
+
+    /// A share of the time left for one of `parts` solves run one after the other: a deadline
+    /// at `now + (time left) / parts` (now, if none is left) that starts from this one's longest
+    /// iteration. Record its longest iteration back here when its solve is done.
+    pub fn share(&self, parts: usize) -> Deadline {
+        let now = Instant::now();
+        let left = self.at.saturating_duration_since(now);
+        let parts = u32::try_from(parts.max(1)).unwrap_or(u32::MAX);
+        Deadline {
+            at: now + left / parts,
+            longest_ns: AtomicU64::new(self.longest_ns.load(Ordering::Relaxed)),
+        }
+    }
+
+    /// Records the duration of one iteration (of any solve sharing the deadline).
+    pub fn record(&self, iteration: Duration) {
+        let ns = u64::try_from(iteration.as_nanos()).unwrap_or(u64::MAX);
+        self.longest_ns.fetch_max(ns, Ordering::Relaxed);
     }
 }
 

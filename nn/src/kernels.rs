@@ -542,6 +542,23 @@ fn dense_forward_impl<const F: bool, const W: bool>(
             32 => whole_rows!(6, 32),
             _ => {}
         }
+        // One row (a batch-1 forward: the sequential rollouts of a controller) of a layer 64 or
+        // 32·j wide: the row's whole 64 (or 32) columns as independent accumulators, so the k
+        // dependent FMAs of each column vector overlap instead of running one vector after the
+        // other (latency-bound). Same arithmetic per element: bitwise the 16-column blocks.
+        // (Not 64 columns under tanh: its polynomial in registers spilled in wider blocks.)
+        if m == 1 {
+            match n_pad {
+                64 if act != Activation::Tanh => {
+                    dense_block::<F, 1, 64>(act, 0, k, n, n_pad, a, wt, bias_pad, out, z)
+                }
+                p if p % 32 == 0 => {
+                    dense_block::<F, 1, 32>(act, 0, k, n, n_pad, a, wt, bias_pad, out, z)
+                }
+                _ => dense_block::<F, 1, NR>(act, 0, k, n, n_pad, a, wt, bias_pad, out, z),
+            }
+            return;
+        }
         // AVX-512: one 16-lane register per row, so twice the rows for 8 accumulators.
         while i + 2 * MR <= m {
             dense_block::<F, { 2 * MR }, NR>(act, i, k, n, n_pad, a, wt, bias_pad, out, z);

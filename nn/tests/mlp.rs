@@ -255,6 +255,36 @@ fn rows_are_independent_of_the_rest_of_the_batch() {
 }
 
 #[test]
+fn a_single_row_forward_is_bitwise_that_row_of_a_batch_at_every_width() {
+    // A batch of one runs its own kernel path (whole 64- or 32-column rows as independent
+    // accumulators, for the sequential rollouts of the controllers); it must give every bit of
+    // the same row evaluated in a batch.
+    for width in [64, 96, 128, 40, 16, 3] {
+        for act in [
+            Activation::Gelu,
+            Activation::Tanh,
+            Activation::Relu,
+            Activation::Identity,
+        ] {
+            let spec = MlpSpec::uniform(5, &[width, width, width], 3, act).unwrap();
+            let mlp = Mlp::new(spec, Init::Auto, 7);
+            let x = data(13, 37 * 5, -2.0, 2.0);
+            let mut ws = mlp.workspace();
+            let all = mlp.forward(&x, &mut ws).unwrap().to_vec();
+            let mut ws1 = mlp.workspace();
+            for r in [0, 1, 18, 36] {
+                let one = mlp.forward(&x[r * 5..(r + 1) * 5], &mut ws1).unwrap();
+                assert_eq!(
+                    one,
+                    &all[r * 3..(r + 1) * 3],
+                    "width {width}, {act}, row {r}"
+                );
+            }
+        }
+    }
+}
+
+#[test]
 fn same_seed_same_network_different_seed_different_network() {
     let spec = MlpSpec::uniform(6, &[100, 100], 3, Activation::Tanh).unwrap();
     let a = Mlp::new(spec.clone(), Init::Auto, 1);

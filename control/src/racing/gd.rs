@@ -1,7 +1,7 @@
 //! The exact gradient `dℓ/du` by reverse mode and the paper's batch gradient descent.
 
 use super::plant::{Input, Linearization};
-use super::{Problem, RacingError, Solution, SolveStatus};
+use super::{Deadline, Problem, RacingError, Solution, SolveStatus};
 
 /// Settings of the batch gradient descent (Kohler et al., Sec. III-C).
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -166,6 +166,19 @@ pub fn solve_gd(
     initial: &[Input],
     settings: &GdSettings,
 ) -> Result<Solution, RacingError> {
+    solve_gd_until(problem, initial, settings, None)
+}
+
+/// [`solve_gd`] that stops at a wall-clock `deadline` (`None`: exactly [`solve_gd`]): an
+/// iteration is only started while [`Deadline::allows_iteration`]; a solve stopped this way
+/// returns the cheapest inputs found with [`SolveStatus::Deadline`] (the initial guess, with
+/// its gradient evaluated, when no iteration fitted).
+pub fn solve_gd_until(
+    problem: &Problem<'_>,
+    initial: &[Input],
+    settings: &GdSettings,
+    deadline: Option<&Deadline>,
+) -> Result<Solution, RacingError> {
     if settings.step_sizes == 0
         || !(settings.smallest_step > 0.0 && settings.largest_step >= settings.smallest_step)
     {
@@ -204,6 +217,11 @@ pub fn solve_gd(
     let mut status = SolveStatus::MaxIterations;
     let mut iterations = 0;
     for _ in 0..settings.iterations {
+        let started = std::time::Instant::now();
+        if deadline.is_some_and(|d| !d.allows_iteration()) {
+            status = SolveStatus::Deadline;
+            break;
+        }
         iterations += 1;
         let cands: Vec<Vec<Input>> = alphas
             .iter()
@@ -234,6 +252,9 @@ pub fn solve_gd(
         u = cands[best.1].clone();
         (cost, grad, lin) = gradient(problem, &u)?;
         history.push(cost);
+        if let Some(d) = deadline {
+            d.record(started.elapsed());
+        }
     }
     Ok(Solution {
         inputs: u,

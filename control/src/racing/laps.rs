@@ -61,13 +61,19 @@ pub struct LapReport {
     pub min_border_distance: f64,
     /// Wall-clock time of every solve \[s\] (from the caller's clock).
     pub solve_times: Vec<f64>,
-    /// Solves per status `[solved, max-iterations, infeasible, numerical-error, model-failure]`.
+    /// Solves per status `[solved, max-iterations, infeasible, numerical-error, model-failure]`
+    /// (a solve stopped at the racer's `solve_budget` counts as max-iterations; see
+    /// [`LapReport::deadlines`]).
     pub statuses: [usize; 5],
     /// QPs that needed the elastic fallback.
     pub elastic_qps: usize,
     /// Cycles whose plan came from a recovery start (the racer had stalled).
     #[serde(default)]
     pub recoveries: usize,
+    /// Cycles in which a solve stopped at the racer's `solve_budget`
+    /// ([`RaceStep::deadline`](super::RaceStep::deadline)).
+    #[serde(default)]
+    pub deadlines: usize,
     /// Top speed \[m/s\].
     pub top_speed: f64,
     /// The driven line, one point per model step.
@@ -115,6 +121,7 @@ pub fn run_laps(
         statuses: [0; 5],
         elastic_qps: 0,
         recoveries: 0,
+        deadlines: 0,
         top_speed: 0.0,
         trace: Vec::new(),
     };
@@ -141,7 +148,10 @@ pub fn run_laps(
                 SolveStatus::Infeasible => 2,
                 SolveStatus::NumericalError => 3,
                 SolveStatus::ModelFailure => 4,
+                // stopped early, as at the iteration limit
+                SolveStatus::Deadline => 1,
             }] += 1;
+            rep.deadlines += usize::from(r.deadline);
             rep.elastic_qps += r.elastic_qps;
             rep.recoveries += usize::from(r.recovered);
             input = CarInput::new(r.input[0], r.input[1]);

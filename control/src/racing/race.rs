@@ -1,13 +1,15 @@
 //! Receding-horizon racing: re-solve from the measured state every control cycle.
 
+use std::time::Duration;
+
 use dynlab_sim::Track;
 
 use super::cost::{InputLimits, Objective, Regulariser, TrackTerms};
-use super::gd::{GdSettings, solve_gd};
+use super::gd::{GdSettings, solve_gd_until};
 use super::plant::{CarDynamics, Input, Plant, State};
 use super::profile::SpeedProfile;
-use super::sqp::{SqpSettings, solve_sqp};
-use super::{Problem, RacingError, SolveStatus};
+use super::sqp::{SqpSettings, solve_sqp_until};
+use super::{Deadline, Problem, RacingError, Solution, SolveStatus};
 
 /// Which optimiser the racer runs.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -83,7 +85,10 @@ pub struct RacerSettings {
     pub limits: InputLimits,
     /// Regulariser.
     pub reg: Regulariser,
-    /// SQP settings per cycle (few iterations: the warm start is close). Default 3 iterations.
+    /// SQP settings per cycle (few iterations: the warm start is close). Default 3 iterations
+    /// with the fast QPs of [`SqpSettings::fast_qp`] (an `[sqp]` table in a settings TOML
+    /// starts from [`SqpSettings::default`], Clarabel's defaults: the previous path, `iterations`
+    /// 50 unless given).
     pub sqp: SqpSettings,
     /// GD settings per cycle. Default 5 iterations.
     pub gd: GdSettings,
@@ -97,6 +102,22 @@ pub struct RacerSettings {
     pub recovery_fraction: f64,
     /// Throttle of the recovery starts. Default 0.4.
     pub recovery_throttle: f64,
+    /// Threads for a stalled cycle's solves (the warm start and the recovery starts): 1 solves
+    /// them one after the other; 2 (or more) splits them over two threads (the warm start and the
+    /// straight start on the calling thread, the full-lock starts on a second one). The plan
+    /// does not depend on it (each solve is the same; the cheapest wins, ties to the earlier
+    /// start) unless a `solve_budget` cuts solves short. Default 2.
+    pub recovery_threads: usize,
+    /// Wall-clock budget of one cycle's solve \[s\] (`inf`: none). When it runs out the
+    /// optimiser starts no further iteration (an iteration is started only if the time left
+    /// exceeds the longest one so far), recovery starts not yet begun are skipped, and the
+    /// cheapest plan found is used. In a stalled cycle each thread shares the time left equally
+    /// among the starts it still has to solve (a warm start stuck facing a border does not take
+    /// the whole budget from the recovery starts) ([`RaceStep::deadline`] reports it; status
+    /// [`SolveStatus::Deadline`]). The cycle can overrun it by at most one iteration that took
+    /// longer than all before it. Default `inf` (the laps of `dynlab eval race` are timed by
+    /// the simulation, not the wall clock; the `racer` node sets its own budget).
+    pub solve_budget: f64,
 }
 
 impl Default for RacerSettings {
@@ -126,7 +147,8 @@ impl Default for RacerSettings {
             sqp: SqpSettings {
                 iterations: 3,
                 ..SqpSettings::default()
-            },
+            }
+            .fast_qp(),
             gd: GdSettings {
                 iterations: 5,
                 ..GdSettings::default()
@@ -134,6 +156,8 @@ impl Default for RacerSettings {
             initial: [0.0, 0.5],
             recovery_fraction: 0.5,
             recovery_throttle: 0.4,
+            recovery_threads: 2,
+            solve_budget: f64::INFINITY,
         }
     }
 }
@@ -155,6 +179,12 @@ pub struct RaceStep {
     pub elastic_qps: usize,
     /// Whether a recovery start gave the plan (see [`RacerSettings::recovery_fraction`]).
     pub recovered: bool,
+    /// Recovery starts solved this cycle (0 unless the racer had stalled; fewer than 3 when
+    /// the `solve_budget` ran out before they began).
+    pub recovery_solves: usize,
+    /// Whether a solve of this cycle stopped at the `solve_budget` or a recovery start was
+    /// skipped for it (see [`RacerSettings::solve_budget`]).
+    pub deadline: bool,
 }
 
 /// Receding-horizon racer over a car model on a track.
@@ -215,6 +245,20 @@ impl<'a> Racer<'a> {
                 "recovery_fraction",
                 settings.recovery_fraction,
                 "a fraction of the reference progress in [0, 1] (0: no recovery starts)",
+            ));
+        }
+        if settings.recovery_threads == 0 {
+            return Err(RacingError::setting(
+                "recovery_threads",
+                settings.recovery_threads,
+                "1 (solve the recovery starts one after the other) or more",
+            ));
+        }
+        if settings.solve_budget.is_nan() || settings.solve_budget <= 0.0 {
+            return Err(RacingError::setting(
+                "solve_budget",
+                settings.solve_budget,
+                "a wall-clock budget per cycle in seconds, > 0 (inf: none)",
             ));
         }
         if !settings.recovery_throttle.is_finite() {
@@ -285,6 +329,10 @@ impl<'a> Racer<'a> {
     /// status.
     pub fn step(&mut self, s: State) -> Result<RaceStep, RacingError> {
         let st = &self.settings;
+        let deadline = st
+            .solve_budget
+            .is_finite()
+            .then(|| Deadline::after(Duration::from_secs_f64(st.solve_budget)));
         let here = match self.segment {
             Some(h) => self.track.locate_near([s[0], s[1]], h, 12),
             None => self.track.locate([s[0], s[1]]),
@@ -321,21 +369,36 @@ impl<'a> Racer<'a> {
                 start_segment: Some(here.segment),
             },
         };
-        let solve = |start: &[Input]| match st.optimizer {
-            Optimizer::Sqp => solve_sqp(&problem, start, &st.sqp),
-            Optimizer::Gd => solve_gd(&problem, start, &st.gd),
+        let deadline = deadline.as_ref();
+        let solve = |start: &[Input], deadline: Option<&Deadline>| match st.optimizer {
+            Optimizer::Sqp => solve_sqp_until(&problem, start, &st.sqp, deadline),
+            Optimizer::Gd => solve_gd_until(&problem, start, &st.gd, deadline),
         };
-        let mut sol = solve(&self.warm)?;
-        let mut recovered = false;
+        let mut starts = vec![self.warm.clone()];
         if self.stalled {
             let d = st.recovery_throttle;
             for delta in [-st.limits.steering_max, 0.0, st.limits.steering_max] {
-                let start = vec![st.limits.clamp([delta, d]); st.horizon];
-                let alt = solve(&start)?;
-                if alt.cost < sol.cost {
-                    sol = alt;
-                    recovered = true;
-                }
+                starts.push(vec![st.limits.clamp([delta, d]); st.horizon]);
+            }
+        }
+        let mut solved = solve_starts(&starts, st.recovery_threads, deadline, &solve)?.into_iter();
+        let mut sol = solved
+            .next()
+            .flatten()
+            .expect("the warm start is always solved");
+        let mut recovered = false;
+        let mut recovery_solves = 0;
+        let mut deadline_hit = sol.status == SolveStatus::Deadline;
+        for alt in solved {
+            let Some(alt) = alt else {
+                deadline_hit = true;
+                continue;
+            };
+            recovery_solves += 1;
+            deadline_hit |= alt.status == SolveStatus::Deadline;
+            if alt.cost < sol.cost {
+                sol = alt;
+                recovered = true;
             }
         }
         let goal = reference.last().copied().unwrap_or(0.0);
@@ -365,6 +428,71 @@ impl<'a> Racer<'a> {
             predicted: sol.states,
             elastic_qps: sol.elastic_qps,
             recovered,
+            recovery_solves,
+            deadline: deadline_hit,
         })
     }
+}
+
+/// Solves every start (the first is the warm start, the others recovery starts) on up to
+/// `threads` threads. With a `deadline`, each thread shares the time left among the starts it
+/// has left ([`Deadline::share`]: a stalled cycle's recovery starts get their turn instead of the
+/// warm start using the whole budget), and a recovery start whose first iteration no longer
+/// fits is skipped (`None`). Results in the order of `starts`; the first error in that order is
+/// returned.
+fn solve_starts<F>(
+    starts: &[Vec<Input>],
+    threads: usize,
+    deadline: Option<&Deadline>,
+    solve: &F,
+) -> Result<Vec<Option<Solution>>, RacingError>
+where
+    F: Fn(&[Input], Option<&Deadline>) -> Result<Solution, RacingError> + Sync,
+{
+    // start i, with `left` starts (itself included) still to solve on this thread
+    let run = |i: usize, left: usize| -> Option<Result<Solution, RacingError>> {
+        let Some(d) = deadline else {
+            return Some(solve(&starts[i], None));
+        };
+        if i > 0 && !d.allows_iteration() {
+            return None;
+        }
+        let share = d.share(left);
+        let out = solve(&starts[i], Some(&share));
+        d.record(share.longest_iteration());
+        Some(out)
+    };
+    let on_thread = |ids: Vec<usize>| -> Vec<(usize, Option<Result<Solution, RacingError>>)> {
+        let n = ids.len();
+        ids.into_iter()
+            .enumerate()
+            .map(|(j, i)| (i, run(i, n - j)))
+            .collect()
+    };
+    let mut out: Vec<Option<Result<Solution, RacingError>>> =
+        (0..starts.len()).map(|_| None).collect();
+    if threads <= 1 || starts.len() < 2 {
+        for (i, r) in on_thread((0..starts.len()).collect()) {
+            out[i] = r;
+        }
+    } else {
+        // the warm start (0) and the straight start (2) here, the full-lock starts (1, 3) on a
+        // second thread
+        let on_thread = &on_thread;
+        std::thread::scope(|scope| {
+            let other = scope.spawn(move || on_thread((1..starts.len()).step_by(2).collect()));
+            for (i, r) in on_thread((0..starts.len()).step_by(2).collect()) {
+                out[i] = r;
+            }
+            match other.join() {
+                Ok(done) => {
+                    for (i, r) in done {
+                        out[i] = r;
+                    }
+                }
+                Err(panic) => std::panic::resume_unwind(panic),
+            }
+        });
+    }
+    out.into_iter().map(Option::transpose).collect()
 }

@@ -1,5 +1,7 @@
 //! Trust-region SQP on Clarabel with the exact Jacobians of the learned model.
 
+use std::time::Instant;
+
 use clarabel::algebra::CscMatrix;
 use clarabel::solver::{
     DefaultSettingsBuilder, DefaultSolver, IPSolver, NonnegativeConeT, SolverStatus,
@@ -7,7 +9,7 @@ use clarabel::solver::{
 
 use super::gd::gradient_from;
 use super::plant::{Input, Linearization};
-use super::{Problem, RacingError, Solution, SolveStatus};
+use super::{Deadline, Problem, RacingError, Solution, SolveStatus};
 
 /// Settings of the SQP.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -31,6 +33,36 @@ pub struct SqpSettings {
     /// per metre (an exact penalty: equal to the hard QP whenever that one is feasible);
     /// `None` reports [`SolveStatus::Infeasible`] instead. Default `Some(1000)`.
     pub elastic_penalty: Option<f64>,
+    /// Once a QP of a solve needed the elastic fallback, solve the following QPs of the same
+    /// solve as elastic QPs directly instead of first finding the hard one infeasible again (the
+    /// exact penalty gives the hard QP's step whenever that one is feasible). Default false
+    /// (the racer's default: true, see [`SqpSettings::fast_qp`]).
+    pub sticky_elastic: bool,
+    /// Clarabel's gap and feasibility tolerances (`tol_gap_abs`, `tol_gap_rel`, `tol_feas`)
+    /// for the QPs. Default 1e-8, Clarabel's own (the racer's default: 1e-6, two fewer
+    /// interior-point iterations for a step the trust region and the ratio test check anyway).
+    pub qp_tolerance: f64,
+    /// Clarabel's iterative refinement of each KKT solve. Default true, Clarabel's own (the
+    /// racer's default: false; the refinement was ≈ 20 % of the racing QP's time).
+    pub qp_refinement: bool,
+    /// Clarabel's equilibration (Ruiz scaling) of the QP data. Default true, Clarabel's own (so
+    /// is the racer's: without it the racing QPs took fewer interior-point iterations, but one
+    /// ORCA lap run stalled in elastic QPs).
+    pub qp_equilibrate: bool,
+}
+
+impl SqpSettings {
+    /// These settings with the racer's fast QPs: `sticky_elastic`, `qp_tolerance` 1e-6, no
+    /// iterative refinement (equilibration kept). [`RacerSettings`](super::RacerSettings)'
+    /// default SQP uses them; offline solves to convergence keep Clarabel's defaults.
+    pub fn fast_qp(self) -> Self {
+        Self {
+            sticky_elastic: true,
+            qp_tolerance: 1e-6,
+            qp_refinement: false,
+            ..self
+        }
+    }
 }
 
 impl Default for SqpSettings {
@@ -43,6 +75,10 @@ impl Default for SqpSettings {
             tolerance: 1e-9,
             track_constraints: true,
             elastic_penalty: Some(1000.0),
+            sticky_elastic: false,
+            qp_tolerance: 1e-8,
+            qp_refinement: true,
+            qp_equilibrate: true,
         }
     }
 }
@@ -52,6 +88,8 @@ enum QpOutcome {
         du: Vec<f64>,
         predicted: f64,
         elastic: bool,
+        /// Largest border slack of an elastic QP \[m\] (0 for a hard one).
+        max_slack: f64,
     },
     Infeasible,
     Failed,
@@ -210,9 +248,15 @@ fn solve_qp(
     let Pc = csc(nv, nv, &Pf, true);
     let Ac = csc(rows, nv, &A, false);
     let cones = [NonnegativeConeT(rows)];
+    let tol = settings.qp_tolerance;
     let Ok(cfg) = DefaultSettingsBuilder::default()
         .verbose(false)
         .max_iter(100)
+        .tol_gap_abs(tol)
+        .tol_gap_rel(tol)
+        .tol_feas(tol)
+        .iterative_refinement_enable(settings.qp_refinement)
+        .equilibrate_enable(settings.qp_equilibrate)
         .build()
     else {
         return QpOutcome::Failed;
@@ -224,6 +268,7 @@ fn solve_qp(
     match solver.solution.status {
         SolverStatus::Solved | SolverStatus::AlmostSolved => {
             let du = solver.solution.x[..m].to_vec();
+            let max_slack = solver.solution.x[m..].iter().fold(0.0f64, |a, &b| a.max(b));
             let mut quad = 0.0;
             for a in 0..m {
                 for b in 0..m {
@@ -235,6 +280,7 @@ fn solve_qp(
                 predicted: -(lin_term + 0.5 * quad),
                 du,
                 elastic,
+                max_slack,
             }
         }
         SolverStatus::PrimalInfeasible | SolverStatus::AlmostPrimalInfeasible => {
@@ -253,6 +299,32 @@ pub fn solve_sqp(
     initial: &[Input],
     settings: &SqpSettings,
 ) -> Result<Solution, RacingError> {
+    solve_sqp_until(problem, initial, settings, None)
+}
+
+/// [`solve_sqp`] that stops at a wall-clock `deadline` (`None`: no deadline, exactly
+/// [`solve_sqp`]).
+///
+/// An iteration (the first one including the initial linearisation) is only started while
+/// [`Deadline::allows_iteration`]: more time is left than the longest iteration recorded on
+/// the deadline so far. A solve stopped this way returns the best iterate found (every accepted
+/// step lowers the true cost, so that is the last accepted one) with [`SolveStatus::Deadline`].
+/// When not even the first iteration fits, the initial guess (clamped to the input limits) is
+/// rolled out and returned with 0 iterations: a plan is always returned. Without a deadline, or
+/// when it is not reached, the result is bitwise that of [`solve_sqp`].
+pub fn solve_sqp_until(
+    problem: &Problem<'_>,
+    initial: &[Input],
+    settings: &SqpSettings,
+    deadline: Option<&Deadline>,
+) -> Result<Solution, RacingError> {
+    if !(settings.qp_tolerance > 0.0 && settings.qp_tolerance < 1.0) {
+        return Err(RacingError::setting(
+            "sqp.qp_tolerance",
+            settings.qp_tolerance,
+            "a QP tolerance in (0, 1), e.g. 1e-6 (Clarabel's default 1e-8)",
+        ));
+    }
     if !(settings.trust_steering > 0.0 && settings.trust_throttle > 0.0) {
         return Err(RacingError::setting(
             "sqp.trust_steering/trust_throttle",
@@ -262,6 +334,25 @@ pub fn solve_sqp(
     }
     let limits = problem.objective.limits;
     let mut u: Vec<Input> = initial.iter().map(|x| limits.clamp(*x)).collect();
+    let entry = Instant::now();
+    if deadline.is_some_and(|d| !d.allows_iteration()) {
+        // no time for an iteration: the initial guess's plan, without its Jacobians
+        let states = problem.plant.rollout(&problem.s0, &u)?;
+        let cost = problem.objective.cost(&states, &u);
+        return Ok(Solution {
+            inputs: u,
+            states,
+            cost,
+            status: if cost.is_finite() {
+                SolveStatus::Deadline
+            } else {
+                SolveStatus::ModelFailure
+            },
+            iterations: 0,
+            history: vec![cost],
+            elastic_qps: 0,
+        });
+    }
     let mut lin = problem.plant.linearize(&problem.s0, &u)?;
     let (mut cost, _) = gradient_from(problem, &u, &lin);
     let mut history = vec![cost];
@@ -284,13 +375,27 @@ pub fn solve_sqp(
     // the fine trajectory of the last accepted step, linearised lazily
     let mut stale: Option<Vec<f64>> = None;
     while iterations < settings.iterations {
+        // the first iteration started with the initial linearisation (on entry)
+        let started = if iterations == 0 {
+            entry
+        } else {
+            Instant::now()
+        };
+        if iterations > 0 && deadline.is_some_and(|d| !d.allows_iteration()) {
+            status = SolveStatus::Deadline;
+            break;
+        }
         iterations += 1;
         let radius = [r0[0] * scale, r0[1] * scale];
         if let Some(fine) = stale.take() {
             lin = problem.plant.linearize_fine(&fine, &u)?;
         }
-        let mut out = solve_qp(problem, &u, &lin, radius, settings, false);
-        if matches!(out, QpOutcome::Infeasible) && settings.elastic_penalty.is_some() {
+        let go_elastic = settings.sticky_elastic && elastic_qps > 0;
+        // a direct elastic QP counts as elastic only when its slacks are used (the hard QP
+        // would have been infeasible)
+        let mut out = solve_qp(problem, &u, &lin, radius, settings, go_elastic);
+        if !go_elastic && matches!(out, QpOutcome::Infeasible) && settings.elastic_penalty.is_some()
+        {
             out = solve_qp(problem, &u, &lin, radius, settings, true);
         }
         let (du, predicted, elastic) = match out {
@@ -298,7 +403,8 @@ pub fn solve_sqp(
                 du,
                 predicted,
                 elastic,
-            } => (du, predicted, elastic),
+                max_slack,
+            } => (du, predicted, elastic && (!go_elastic || max_slack > 1e-6)),
             QpOutcome::Infeasible => {
                 status = SolveStatus::Infeasible;
                 break;
@@ -344,6 +450,9 @@ pub fn solve_sqp(
                 status = SolveStatus::Solved;
                 break;
             }
+        }
+        if let Some(d) = deadline {
+            d.record(started.elapsed());
         }
     }
     Ok(Solution {

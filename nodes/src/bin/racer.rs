@@ -12,10 +12,13 @@
 //! default `launch_scripts/tracks/default.json`), `optimizer` (`sqp`), `settings` (TOML with
 //! RacerSettings fields, optional), `horizon` (20), `hold` (model steps per control step, 5:
 //! 20 Hz with a 100 Hz model), `delay` (command delay \[s\], default 0.03 = three model
-//! steps, enough for a solve at a fifth of real time: the command computed from the pose stamped `t` is published when the clock reaches
+//! steps, with the solve budget enough for real time: the command computed from the pose stamped `t` is published when the clock reaches
 //! `t + delay`, and the optimiser starts from the state predicted at that time under the
 //! commands already sent; 0 publishes at once and assumes no delay; see
-//! `dynlab_nodes::racer`), `reference_speed` (m/s, default the settings' 2.0; can be changed
+//! `dynlab_nodes::racer`), `solve_budget` (wall-clock seconds per solve, default 0.015, or the
+//! settings file's `solve_budget`; 0: none): when it runs out the optimiser stops and the best
+//! plan found is sent (RacerSettings::solve_budget; the periodic log counts these solves),
+//! `reference_speed` (m/s, default the settings' 2.0; can be changed
 //! while the node runs: `ros2 param set /racer reference_speed 2.5`), `use_sim_time` (follow
 //! `/clock`; recommended with `sim_node`), `stale_timeout` (s, default 0.2: twenty pose periods
 //! at 100 Hz). The other parameters are read-only.
@@ -42,6 +45,9 @@ use dynlab_sim::{CarInput, Track};
 use dynlab_simbridge::messages as m;
 
 const POLL: Duration = Duration::from_millis(2);
+/// Default wall-clock budget of a solve \[s\]: the 30 ms command delay less room for the pose's
+/// way in, the one iteration a budget can be overrun by, and the command's way out.
+const DEFAULT_BUDGET: f64 = 0.015;
 
 fn main() -> anyhow::Result<()> {
     let known = [
@@ -55,6 +61,7 @@ fn main() -> anyhow::Result<()> {
         "reference_speed",
         "use_sim_time",
         "stale_timeout",
+        "solve_budget",
     ];
     let Started { mut node, shutdown } = start_node("racer", &known)?;
     let p = node.params();
@@ -85,6 +92,21 @@ fn main() -> anyhow::Result<()> {
     settings.horizon = usize::try_from(horizon).context("parameter horizon must be ≥ 1")?;
     settings.hold = usize::try_from(hold).context("parameter hold must be ≥ 1")?;
     settings.reference_speed = p.get_or("reference_speed", settings.reference_speed)?;
+    let budget: f64 = p.get_or(
+        "solve_budget",
+        if settings.solve_budget.is_finite() {
+            settings.solve_budget
+        } else {
+            DEFAULT_BUDGET
+        },
+    )?;
+    if budget.is_nan() || budget < 0.0 {
+        bail!(
+            "parameter solve_budget: {budget} s; give a wall-clock budget per solve in seconds \
+             (e.g. {DEFAULT_BUDGET}; 0: none)"
+        );
+    }
+    settings.solve_budget = if budget > 0.0 { budget } else { f64::INFINITY };
     let racer = Racer::new(&model, &track, settings)?;
     let dt = dynlab_control::racing::CarDynamics::dt(&model);
     let delay_steps = (delay / dt).round();
@@ -97,14 +119,19 @@ fn main() -> anyhow::Result<()> {
     let mut hold = StaleHold::new(stale_timeout, rc.period())?;
     let steady0 = Instant::now();
     tracing::info!(
-        "racing {} ({:.2} m) with {} ({:?}, n = {}, {:.0} Hz, command delay {:.0} ms)",
+        "racing {} ({:.2} m) with {} ({:?}, n = {}, {:.0} Hz, command delay {:.0} ms, solve budget {})",
         track_path,
         track.length(),
         model_dir,
         settings.optimizer,
         settings.horizon,
         1.0 / rc.period(),
-        1e3 * rc.delay()
+        1e3 * rc.delay(),
+        if settings.solve_budget.is_finite() {
+            format!("{:.1} ms", 1e3 * settings.solve_budget)
+        } else {
+            "none".into()
+        }
     );
     node.declare_parameter(
         "reference_speed",
@@ -131,6 +158,7 @@ fn main() -> anyhow::Result<()> {
     let mut last_stamp: Option<f64> = None;
     let mut missed = 0u64;
     let mut worst = 0.0f64;
+    let mut budget_hits = 0u64;
     let limits = settings.limits;
     while !shutdown.requested() {
         waits.wait(POLL)?;
@@ -222,9 +250,11 @@ fn main() -> anyhow::Result<()> {
         let dt = t0.elapsed().as_secs_f64();
         worst = worst.max(dt);
         solves += 1;
+        budget_hits += u64::from(planned.step.deadline);
         if solves.is_multiple_of(100) {
             tracing::info!(
-                "{solves} solves, last {:.1} ms ({}), worst {:.1} ms, {} late commands, {} poses missed",
+                "{solves} solves, last {:.1} ms ({}), worst {:.1} ms, {budget_hits} stopped at the \
+                 solve budget, {} late commands, {} poses missed",
                 1e3 * dt,
                 planned.step.status,
                 1e3 * worst,
