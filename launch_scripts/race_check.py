@@ -11,11 +11,13 @@ outer border points). Reports completed laps and their times, excursions (times 
 centre left the track), the smallest border distance, top speed, the command rate and the
 command delay (log time at the recorder minus the command's stamp, both simulation time).
 With --racer-log (the racer's log, as race.sh writes it to OUT_BAG.racer.log) also the racer's
-own counts from its progress lines ("N solves, last X ms (status), worst Y ms, Z late commands,
-M poses missed", logged every 100 solves): solves, late commands and poses missed at the last
-such line, the worst solve, and the median and 99th percentile of the sampled solve times (every
-100th solve, so p99 of a short run is the largest sample). Exit status 0 always; the caller
-judges the numbers. Standard library only.
+own counts: from its summary at shutdown ("racing summary: N solves, solve p50 X ms, p99 Y ms,
+worst Z ms, B stopped at the solve budget, L late commands, M poses missed") when the log has
+one — every solve counted —, otherwise from its progress lines ("N solves, last X ms (status),
+worst Y ms, [B stopped at the solve budget, ]Z late commands, M poses missed", logged every 100
+solves): the counts at the last such line, the worst solve, and the median and 99th percentile
+of the sampled solve times (every 100th solve, so p99 of a short run is the largest sample).
+Exit status 0 always; the caller judges the numbers. Standard library only.
 """
 
 import json
@@ -24,7 +26,12 @@ import re
 import sys
 
 PROGRESS = re.compile(
-    r"(\d+) solves, last ([\d.]+) ms \([^)]*\), worst ([\d.]+) ms, (\d+) late commands, (\d+) poses missed"
+    r"(\d+) solves, last ([\d.]+) ms \([^)]*\), worst ([\d.]+) ms, "
+    r"(?:(\d+) stopped at the solve budget, )?(\d+) late commands, (\d+) poses missed"
+)
+SUMMARY = re.compile(
+    r"racing summary: (\d+) solves, solve p50 ([\d.]+) ms, p99 ([\d.]+) ms, worst ([\d.]+) ms, "
+    r"(\d+) stopped at the solve budget, (\d+) late commands, (\d+) poses missed"
 )
 
 
@@ -146,24 +153,42 @@ def check(export_path, track_path):
 
 
 def racer_log(path):
-    """Solve and late-command counts from the racer's progress lines (empty when none)."""
-    rows = []
+    """Solve and late-command counts from the racer's summary or progress lines (empty when none)."""
+    rows, summary = [], None
     with open(path, errors="replace") as f:
         for line in f:
+            m = SUMMARY.search(line)
+            if m:
+                summary = m
+                continue
             m = PROGRESS.search(line)
             if m:
-                rows.append((int(m[1]), float(m[2]), float(m[3]), int(m[4]), int(m[5])))
+                rows.append((int(m[1]), float(m[2]), float(m[3]), int(m[4] or 0), int(m[5]), int(m[6])))
+    if summary is not None:
+        n = int(summary[1])
+        return {
+            "solves_logged": n,
+            "late_commands": int(summary[6]),
+            "late_fraction": int(summary[6]) / n if n else 0.0,
+            "poses_missed": int(summary[7]),
+            "solve_worst_ms": float(summary[4]),
+            "solve_p50_ms": float(summary[2]),
+            "solve_p99_ms": float(summary[3]),
+            "budget_stops": int(summary[5]),
+            "solve_samples": n,
+        }
     if not rows:
         return {"solves_logged": 0}
     last = sorted(r[1] for r in rows)
     return {
         "solves_logged": rows[-1][0],
-        "late_commands": rows[-1][3],
-        "late_fraction": rows[-1][3] / rows[-1][0],
-        "poses_missed": rows[-1][4],
+        "late_commands": rows[-1][4],
+        "late_fraction": rows[-1][4] / rows[-1][0],
+        "poses_missed": rows[-1][5],
         "solve_worst_ms": rows[-1][2],
         "solve_sampled_p50_ms": last[len(last) // 2],
         "solve_sampled_p99_ms": last[min(len(last) - 1, int(0.99 * len(last)))],
+        "budget_stops": rows[-1][3],
         "solve_samples": len(last),
     }
 

@@ -28,8 +28,8 @@ use std::time::Instant;
 use dynlab_diagnose::diagnosis::simdata::car_dataset;
 use dynlab_diagnose::diagnosis::{DiagnoseConfig, diagnose};
 use dynlab_learn::dynamics::physics::{Effect, PhysicsModel};
-use dynlab_learn::{Model, ModelKind, World};
 use dynlab_learn::train::{TrainConfig, train};
+use dynlab_learn::{Model, ModelKind, World};
 use dynlab_sim::car::{
     AeroDrag, GripPatch, MotorLag, SteeringGainSpeed, SteeringOffset, SteeringRateLimit,
 };

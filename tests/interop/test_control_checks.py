@@ -99,6 +99,19 @@ def test_the_racer_log_gives_late_commands_and_solve_times(tmp_path):
     assert rep["solve_sampled_p50_ms"] == 8.0
     assert rep["solve_samples"] == 3
     assert racer_log(write(tmp_path / "empty.log", ["nothing"])) == {"solves_logged": 0}
+    # the progress lines of a racer with a solve budget
+    lines.append("\x1b[32m INFO\x1b[0m racer: 400 solves, last 9.0 ms (deadline), worst 62.0 ms, "
+                 "3 stopped at the solve budget, 5 late commands, 2 poses missed")
+    rep = racer_log(write(tmp_path / "budget.log", lines))
+    assert (rep["solves_logged"], rep["late_commands"], rep["budget_stops"]) == (400, 5, 3)
+    assert rep["poses_missed"] == 2
+    # the summary at shutdown wins over the sampled progress lines
+    lines.append("\x1b[32m INFO\x1b[0m racer: racing summary: 457 solves, solve p50 4.2 ms, p99 11.5 ms, "
+                 "worst 62.0 ms, 3 stopped at the solve budget, 6 late commands, 2 poses missed")
+    rep = racer_log(write(tmp_path / "summary.log", lines))
+    assert rep["solves_logged"] == 457 and rep["late_commands"] == 6
+    assert (rep["solve_p50_ms"], rep["solve_p99_ms"], rep["solve_worst_ms"]) == (4.2, 11.5, 62.0)
+    assert "solve_sampled_p50_ms" not in rep
 
 
 def test_push_mppi_sh_runs_one_judged_episode_over_dds(tmp_path):
