@@ -115,7 +115,9 @@ pub struct RacerSettings {
     /// among the starts it still has to solve (a warm start stuck facing a border does not take
     /// the whole budget from the recovery starts) ([`RaceStep::deadline`] reports it; status
     /// [`SolveStatus::Deadline`]). The cycle can overrun it by at most one iteration that took
-    /// longer than all before it. Default `inf` (the laps of `dynlab eval race` are timed by
+    /// longer than all before it. After three consecutive stalled cycles the next ones are
+    /// solved in full, without the budget, until the car is moving again (a car held standing
+    /// by short recovery solves is worse than a late command). Default `inf` (the laps of `dynlab eval race` are timed by
     /// the simulation, not the wall clock; the `racer` node sets its own budget).
     pub solve_budget: f64,
 }
@@ -198,6 +200,8 @@ pub struct Racer<'a> {
     segment: Option<usize>,
     profile: SpeedProfile,
     stalled: bool,
+    /// Consecutive cycles that ended stalled.
+    stalled_cycles: usize,
     /// Effect states of the model (`d_f`, `delta_w`) after the inputs this racer applied:
     /// its own command history, advanced by every applied input over the control period.
     extra: Option<Vec<f64>>,
@@ -286,6 +290,7 @@ impl<'a> Racer<'a> {
             last: None,
             segment: None,
             stalled: false,
+            stalled_cycles: 0,
             extra: None,
         })
     }
@@ -311,6 +316,7 @@ impl<'a> Racer<'a> {
         self.last = None;
         self.segment = None;
         self.stalled = false;
+        self.stalled_cycles = 0;
         self.extra = None;
     }
 
@@ -369,7 +375,11 @@ impl<'a> Racer<'a> {
                 start_segment: Some(here.segment),
             },
         };
-        let deadline = deadline.as_ref();
+        // a car stuck for several cycles gets its recovery solved in full: its recovery starts
+        // cut short by the budget need not beat a warm start that keeps it standing
+        let deadline = deadline
+            .as_ref()
+            .filter(|_| self.stalled_cycles < STALLED_CYCLES_WITH_BUDGET);
         let solve = |start: &[Input], deadline: Option<&Deadline>| match st.optimizer {
             Optimizer::Sqp => solve_sqp_until(&problem, start, &st.sqp, deadline),
             Optimizer::Gd => solve_gd_until(&problem, start, &st.gd, deadline),
@@ -405,6 +415,11 @@ impl<'a> Racer<'a> {
         self.stalled = st.recovery_fraction > 0.0
             && goal > 0.0
             && problem.objective.progress(&sol.states) < st.recovery_fraction * goal;
+        self.stalled_cycles = if self.stalled {
+            self.stalled_cycles + 1
+        } else {
+            0
+        };
         let input = st.limits.clamp(sol.inputs[0]);
         // shift: drop the applied input, repeat the last
         let mut warm = sol.inputs[1..].to_vec();
@@ -433,6 +448,11 @@ impl<'a> Racer<'a> {
         })
     }
 }
+
+/// Consecutive stalled cycles solved within the `solve_budget`; the next ones solve the warm and
+/// recovery starts in full (measured over DDS: a learned car that braked to a stop with the
+/// budget cutting its recovery starts short stood for the rest of the run, throttle 0.12).
+const STALLED_CYCLES_WITH_BUDGET: usize = 3;
 
 /// Solves every start (the first is the warm start, the others recovery starts) on up to
 /// `threads` threads. With a `deadline`, each thread shares the time left among the starts it
