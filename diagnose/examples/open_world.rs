@@ -25,9 +25,10 @@
 use std::collections::BTreeSet;
 use std::time::Instant;
 
+use dynlab_control::racing::true_car_model;
 use dynlab_diagnose::diagnosis::simdata::car_dataset;
 use dynlab_diagnose::diagnosis::{DiagnoseConfig, diagnose};
-use dynlab_learn::dynamics::physics::{Effect, PhysicsModel};
+use dynlab_learn::dynamics::physics::Effect;
 use dynlab_learn::train::{TrainConfig, train};
 use dynlab_learn::{Model, ModelKind, World};
 use dynlab_sim::car::{
@@ -137,42 +138,25 @@ fn true_model(car: &CarScenario, case: &[Hidden], like: &Model) -> Option<Model>
         .iter()
         .map(|h| h.library().and_then(|l| Effect::from_name(l.0)))
         .collect::<Option<_>>()?;
-    let mut p = PhysicsModel::car(&effects).ok()?;
-    let c = &car.car;
-    let mut values = vec![
-        ("m", c.mass),
-        ("Iz", c.inertia_z),
-        ("lf", c.lf),
-        ("lr", c.lr),
-        ("Bf", c.front.b),
-        ("Cf", c.front.c),
-        ("Df", c.front.d),
-        ("Br", c.rear.b),
-        ("Cr", c.rear.c),
-        ("Dr", c.rear.d),
-        ("Cm1", c.cm1),
-        ("Cm2", c.cm2),
-        ("Cr0", c.cr0),
-        ("Cr2", c.cr2),
-        ("v_reg", c.slip_speed_floor),
-    ];
+    let nominal = true_car_model(&car.car, like.dt()).ok()?;
+    let mut p = nominal.physics()?.with_effects(&effects).ok()?;
     for h in case {
-        match h {
-            Hidden::Drag => values.push(("aero_drag.c", 0.01)),
-            Hidden::Lag => values.push(("motor_lag.tau", 0.2)),
-            Hidden::Offset => values.push(("steering_offset.delta0", 0.03)),
+        let values: &[(&str, f64)] = match h {
+            Hidden::Drag => &[("aero_drag.c", 0.01)],
+            Hidden::Lag => &[("motor_lag.tau", 0.2)],
+            Hidden::Offset => &[("steering_offset.delta0", 0.03)],
             // the simulator's disc has a sharp edge, the model's the smallest width it allows
-            Hidden::Disc => values.extend([
+            Hidden::Disc => &[
                 ("grip_patch.cx", 0.5),
                 ("grip_patch.cy", 0.0),
                 ("grip_patch.r", 0.6),
                 ("grip_patch.k", 0.5),
-            ]),
+            ],
             _ => return None,
+        };
+        for &(name, v) in values {
+            p.set_param(name, v).ok()?;
         }
-    }
-    for (name, v) in values {
-        p.set_param(name, v).ok()?;
     }
     Model::new(
         ModelKind::Physics,
