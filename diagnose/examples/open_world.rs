@@ -285,11 +285,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             } else if floor.is_some() && !case.is_empty() {
                 removable.push(0.0);
             }
-            if verbose && let Some(f) = floor {
-                println!("true model (simulator's parameters and effects): held-out error {f:.4}");
-            }
             if verbose {
                 println!("--- {name}, seed {seed}\n{}", d.table());
+                if let Some(f) = floor {
+                    println!(
+                        "true model (simulator's parameters and effects): held-out error {f:.4}"
+                    );
+                }
             }
             let got: BTreeSet<&str> = d.effects.iter().map(|s| s.as_str()).collect();
             ok += usize::from(got == truth);
