@@ -16,11 +16,13 @@
 //!
 //! `cargo run --release -p dynlab-diagnose --example open_world -- [--seeds N]
 //! [--first-seed N] [--nominal-seeds N] [--perturb F] [--episodes N] [--duration S]
-//! [--only CASE,CASE] [--noise X] [--fit-iterations N] [--fit-windows N] [--car-refit BOOL]`
+//! [--only CASE,CASE] [--noise X] [--fit-iterations N] [--fit-windows N] [--car-refit BOOL]
+//! [--refit-tolerance F]`
 //! (defaults 5 seeds from 0, 20 nominal seeds, f = 0.1, 4 × 15 s, noise ×2; the baseline is
 //! fitted with `dynlab train`'s defaults; `--only` takes case names as printed, e.g.
 //! `"aero_drag,none (nominal)"`; `--car-refit true` refits the car's nominal parameters in the
-//! diagnosis); `VERBOSE=1` prints every diagnosis.
+//! diagnosis, within ±F of the model's values with `--refit-tolerance F`); `VERBOSE=1` prints
+//! every diagnosis.
 
 use std::collections::BTreeSet;
 use std::time::Instant;
@@ -36,13 +38,16 @@ use dynlab_sim::car::{
 };
 use dynlab_sim::{CarScenario, Region, RegionShape};
 
-fn arg<T: std::str::FromStr>(name: &str, default: T) -> T {
+fn opt<T: std::str::FromStr>(name: &str) -> Option<T> {
     let a: Vec<String> = std::env::args().collect();
     a.iter()
         .position(|x| x == name)
         .and_then(|i| a.get(i + 1))
         .and_then(|v| v.parse().ok())
-        .unwrap_or(default)
+}
+
+fn arg<T: std::str::FromStr>(name: &str, default: T) -> T {
+    opt(name).unwrap_or(default)
 }
 
 /// A hidden effect of the simulator: its switch, the library effect that models it (`None`:
@@ -179,10 +184,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let noise: f64 = arg("--noise", 2.0);
     let only: String = arg("--only", String::new());
     let first_seed: u64 = arg("--first-seed", 0);
-    let refit: Option<bool> = std::env::args()
-        .position(|a| a == "--car-refit")
-        .and_then(|i| std::env::args().nth(i + 1))
-        .and_then(|v| v.parse().ok());
+    let refit: Option<bool> = opt("--car-refit");
+    let refit_tolerance: Option<f64> = opt("--refit-tolerance");
     let defaults = TrainConfig::default();
     let fit_iterations: usize = arg("--fit-iterations", defaults.physics_iterations);
     let fit_windows: usize = arg("--fit-windows", defaults.physics_max_windows);
@@ -264,6 +267,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             let cfg = DiagnoseConfig {
                 seed,
                 refit_nominal: refit.or(DiagnoseConfig::default().refit_nominal),
+                refit_tolerance,
                 ..DiagnoseConfig::default()
             };
             let d = diagnose(&model, &data, &cfg)?;
