@@ -209,7 +209,12 @@ def main():
         sys.exit(2)
     rep = check(args[0], args[1])
     if log is not None:
-        rep.update(racer_log(log))
+        try:
+            rep.update(racer_log(log))
+        except OSError as e:
+            print(f"race_check.py: cannot read the racer log {log}: {e.strerror}; race.sh writes it "
+                  "beside the bag as OUT_BAG.racer.log", file=sys.stderr)
+            sys.exit(2)
     if "--json" in sys.argv:
         print(json.dumps(rep))
         return

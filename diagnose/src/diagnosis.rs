@@ -47,10 +47,10 @@ use std::collections::BTreeMap;
 
 use dynlab_learn::dynamics::conventions::wrap_angle;
 use dynlab_learn::dynamics::data::{
-    DataError, SplitMix64, StateTrajectory, Window, split_trajectories, windows,
+    DataError, Split, SplitMix64, StateTrajectory, Window, split_trajectories, windows,
 };
 use dynlab_learn::dynamics::physics::{Effect, ModelError, PhysicsModel};
-use dynlab_learn::fit::{bounded_least_squares, cluster_std};
+use dynlab_learn::fit::{bounded_least_squares, cluster_std, initial_state_after};
 use dynlab_learn::train::{segment, segment_origins};
 use dynlab_learn::{Dataset, LearnError, Model, World};
 
@@ -518,10 +518,10 @@ impl Augmented<'_> {
             s[i * ds..(i + 1) * ds].copy_from_slice(&t.s[w.start * ds..(w.start + 1) * ds]);
             let h = &d.history[w.trajectory];
             if !self.pure_physics {
-                sb.extend(initial_state(&self.base, t, h, w.start));
+                sb.extend(initial_state_after(&self.base, h, t, w.start));
             }
             if let Some(p) = &self.with {
-                sw.extend(initial_state(p, t, h, w.start));
+                sw.extend(initial_state_after(p, h, t, w.start));
             }
         }
         let mut err = vec![0.0; n];
@@ -599,22 +599,6 @@ impl Augmented<'_> {
 /// Commands before a segment that its effect states are rebuilt from \[s\]: 15 time constants
 /// of a 0.2 s motor lag; the segments' cuts do not restart the states.
 const EFFECT_HISTORY_S: f64 = 3.0;
-
-/// The state at sample `a` of segment `t`, extended by the effect states rebuilt over the
-/// commands `history` before the segment and the segment's own up to `a`.
-fn initial_state(p: &PhysicsModel, t: &StateTrajectory, history: &[f64], a: usize) -> Vec<f64> {
-    let ds = t.dim_s;
-    let mut s = t.s[a * ds..(a + 1) * ds].to_vec();
-    let ne = p.dim_effect_states();
-    if ne > 0 {
-        let mut u = history.to_vec();
-        u.extend_from_slice(&t.u[..(a + 1) * t.dim_u]);
-        let e = p.effect_states_along(&u, t.dt);
-        let i = history.len() / t.dim_u.max(1) + a;
-        s.extend_from_slice(&e[i * ne..(i + 1) * ne]);
-    }
-    s
-}
 
 /// Starting points of an effect's parameters (the rest at their defaults), chosen from the
 /// data's extent for the patch effects.
@@ -1117,31 +1101,26 @@ pub fn diagnose(
         .filter(|(t, _)| t.len() > k)
         .unzip();
     let lengths: Vec<usize> = trajs.iter().map(|t| t.len()).collect();
-    let too_little = |w: usize| DiagnosisError::TooLittleData {
-        segments: trajs.len(),
-        windows: w,
+    let WindowSplit {
+        split,
+        all,
+        fit: fit_w,
+        test: test_w,
+    } = split_windows(
+        &lengths,
         k,
-    };
-    if trajs.len() < 4 {
-        return Err(too_little(0));
-    }
-    let all = windows(&lengths, k).map_err(|_| too_little(0))?;
-    let split = split_trajectories(trajs.len(), cfg.holdout_fraction, cfg.seed)?;
-    let is_test: Vec<bool> = (0..trajs.len())
-        .map(|i| split.validation.binary_search(&i).is_ok())
-        .collect();
-    let (mut test_w, mut fit_w): (Vec<Window>, Vec<Window>) =
-        all.iter().partition(|w| is_test[w.trajectory]);
-    let subsample = |v: &mut Vec<Window>, n: usize, salt: u64| {
-        SplitMix64::new(cfg.seed ^ salt).shuffle(v);
-        v.truncate(n.max(1));
-        v.sort_by_key(|w| (w.trajectory, w.start));
-    };
-    subsample(&mut fit_w, cfg.fit_windows, 0x243F_6A88_85A3_08D3);
-    subsample(&mut test_w, cfg.score_windows, 0x1319_8A2E_0370_7344);
-    if fit_w.is_empty() || test_w.is_empty() {
-        return Err(too_little(all.len()));
-    }
+        cfg.holdout_fraction,
+        cfg.seed,
+        [cfg.fit_windows, cfg.score_windows],
+    )
+    .map_err(|e| match e {
+        SplitFailure::TooLittle(windows) => DiagnosisError::TooLittleData {
+            segments: lengths.len(),
+            windows,
+            k,
+        },
+        SplitFailure::Data(e) => e.into(),
+    })?;
     let ds = world.state_dim();
     let du = world.action_dim();
     let angle = world.angle_dim();
@@ -1481,6 +1460,64 @@ pub fn push_level_dataset(mut data: Dataset) -> Dataset {
         data.pose_dt_s = 1.0;
     }
     data
+}
+
+/// Segments split into a fit and a held-out half by whole segments (seeded), and seeded
+/// subsamples of the k-step windows of each: the split the diagnosis and the term search share.
+pub(crate) struct WindowSplit {
+    /// Segment indices of each half.
+    pub(crate) split: Split<usize>,
+    /// Every k-step window.
+    pub(crate) all: Vec<Window>,
+    /// Fit-half windows (at most the first of `counts`).
+    pub(crate) fit: Vec<Window>,
+    /// Held-out windows (at most the second of `counts`).
+    pub(crate) test: Vec<Window>,
+}
+
+/// Why [`split_windows`] has no split.
+pub(crate) enum SplitFailure {
+    /// Fewer than 4 segments longer than k, or a half without windows (all the windows).
+    TooLittle(usize),
+    /// A bad setting.
+    Data(DataError),
+}
+
+/// [`WindowSplit`] of segments of `lengths` samples: `holdout` of them held out, at most
+/// `counts = [fit, held-out]` windows of `k` steps kept in each half.
+pub(crate) fn split_windows(
+    lengths: &[usize],
+    k: usize,
+    holdout: f64,
+    seed: u64,
+    counts: [usize; 2],
+) -> Result<WindowSplit, SplitFailure> {
+    if lengths.len() < 4 {
+        return Err(SplitFailure::TooLittle(0));
+    }
+    let all = windows(lengths, k).map_err(|_| SplitFailure::TooLittle(0))?;
+    let split = split_trajectories(lengths.len(), holdout, seed).map_err(SplitFailure::Data)?;
+    let is_test: Vec<bool> = (0..lengths.len())
+        .map(|i| split.validation.binary_search(&i).is_ok())
+        .collect();
+    let (mut test, mut fit): (Vec<Window>, Vec<Window>) =
+        all.iter().partition(|w| is_test[w.trajectory]);
+    let subsample = |v: &mut Vec<Window>, n: usize, salt: u64| {
+        SplitMix64::new(seed ^ salt).shuffle(v);
+        v.truncate(n.max(1));
+        v.sort_by_key(|w| (w.trajectory, w.start));
+    };
+    subsample(&mut fit, counts[0], 0x243F_6A88_85A3_08D3);
+    subsample(&mut test, counts[1], 0x1319_8A2E_0370_7344);
+    if fit.is_empty() || test.is_empty() {
+        return Err(SplitFailure::TooLittle(all.len()));
+    }
+    Ok(WindowSplit {
+        split,
+        all,
+        fit,
+        test,
+    })
 }
 
 /// One-sided lower bootstrap bound (error probability `alpha`) of the error reduction

@@ -37,9 +37,7 @@
 use std::fmt::Write as _;
 
 use dynlab_learn::dynamics::conventions::wrap_angle;
-use dynlab_learn::dynamics::data::{
-    DataError, SplitMix64, StateTrajectory, Window, split_trajectories, windows,
-};
+use dynlab_learn::dynamics::data::{DataError, SplitMix64, StateTrajectory, Window};
 use dynlab_learn::dynamics::ode::Solver;
 use dynlab_learn::dynamics::physics::custom::{COEFFICIENT_BOUND, fmt_num};
 use dynlab_learn::dynamics::physics::features::{Area, Feature, library, time_unit};
@@ -52,7 +50,7 @@ use dynlab_learn::{Dataset, LearnError, Model, World};
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
-use crate::diagnosis::bootstrap_lower;
+use crate::diagnosis::{SplitFailure, WindowSplit, bootstrap_lower, split_windows};
 use crate::report::{Chart, LineChart, Series, escape};
 
 /// Errors of a term search (finding nothing is an outcome, not an error).
@@ -418,33 +416,30 @@ pub fn discover_terms(
         World::Push => data.trajectories.clone(),
     };
     let trajs: Vec<StateTrajectory> = trajs.into_iter().filter(|t| t.len() > k).collect();
-    let too_little = |w: usize| DiscoveryError::TooLittleData {
-        segments: trajs.len(),
-        windows: w,
-        k,
-    };
-    if trajs.len() < 4 {
-        return Err(too_little(0));
-    }
     let lengths: Vec<usize> = trajs.iter().map(|t| t.len()).collect();
-    let all = windows(&lengths, k).map_err(|_| too_little(0))?;
-    let split = split_trajectories(trajs.len(), cfg.holdout_fraction, cfg.seed)?;
-    let is_test: Vec<bool> = (0..trajs.len())
-        .map(|i| split.validation.binary_search(&i).is_ok())
+    let WindowSplit {
+        split,
+        fit: fit_w,
+        test: test_w,
+        ..
+    } = split_windows(
+        &lengths,
+        k,
+        cfg.holdout_fraction,
+        cfg.seed,
+        [cfg.fit_windows, cfg.score_windows],
+    )
+    .map_err(|e| match e {
+        SplitFailure::TooLittle(windows) => DiscoveryError::TooLittleData {
+            segments: lengths.len(),
+            windows,
+            k,
+        },
+        SplitFailure::Data(e) => e.into(),
+    })?;
+    let fit_trajs: Vec<usize> = (0..trajs.len())
+        .filter(|i| split.validation.binary_search(i).is_err())
         .collect();
-    let (mut test_w, mut fit_w): (Vec<Window>, Vec<Window>) =
-        all.iter().partition(|w| is_test[w.trajectory]);
-    let subsample = |v: &mut Vec<Window>, n: usize, salt: u64| {
-        SplitMix64::new(cfg.seed ^ salt).shuffle(v);
-        v.truncate(n.max(1));
-        v.sort_by_key(|w| (w.trajectory, w.start));
-    };
-    subsample(&mut fit_w, cfg.fit_windows, 0x243F_6A88_85A3_08D3);
-    subsample(&mut test_w, cfg.score_windows, 0x1319_8A2E_0370_7344);
-    if fit_w.is_empty() || test_w.is_empty() {
-        return Err(too_little(all.len()));
-    }
-    let fit_trajs: Vec<usize> = (0..trajs.len()).filter(|&i| !is_test[i]).collect();
     let segments = [fit_trajs.len(), split.validation.len()];
     discover_terms_split(
         physics,

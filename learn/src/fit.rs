@@ -331,12 +331,28 @@ pub(crate) fn solve(a: &[f64], b: &[f64], n: usize) -> Option<Vec<f64>> {
 /// states (`motor_lag`'s `d_f`, `steering_lag`'s `δ_w`) rebuilt from the trajectory's commands
 /// before `a` by [`PhysicsModel::effect_states_along`] (started settled at the first command).
 pub fn initial_state(p: &PhysicsModel, t: &StateTrajectory, a: usize) -> Vec<f64> {
+    initial_state_after(p, &[], t, a)
+}
+
+/// [`initial_state`] of a trajectory that continues a recording: the effect states are rebuilt
+/// over `before` (the recording's commands before `t`, `n × dim_u`, settled at its first) and
+/// `t`'s own commands up to `a`, so that cutting a recording into segments does not restart them.
+pub fn initial_state_after(
+    p: &PhysicsModel,
+    before: &[f64],
+    t: &StateTrajectory,
+    a: usize,
+) -> Vec<f64> {
     let ds = t.dim_s;
     let mut s = t.s[a * ds..(a + 1) * ds].to_vec();
     let ne = p.dim_effect_states();
     if ne > 0 {
-        let e = p.effect_states_along(&t.u[..(a + 1) * t.dim_u], t.dt);
-        s.extend_from_slice(&e[a * ne..(a + 1) * ne]);
+        let mut u = Vec::with_capacity(before.len() + (a + 1) * t.dim_u);
+        u.extend_from_slice(before);
+        u.extend_from_slice(&t.u[..(a + 1) * t.dim_u]);
+        let e = p.effect_states_along(&u, t.dt);
+        let i = before.len() / t.dim_u.max(1) + a;
+        s.extend_from_slice(&e[i * ne..(i + 1) * ne]);
     }
     s
 }
