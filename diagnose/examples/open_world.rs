@@ -189,6 +189,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let defaults = TrainConfig::default();
     let fit_iterations: usize = arg("--fit-iterations", defaults.physics_iterations);
     let fit_windows: usize = arg("--fit-windows", defaults.physics_max_windows);
+    let train_steps: usize = arg("--train-steps", 5);
+    let physics_free: Option<Vec<String>> = opt::<String>("--physics-free")
+        .map(|s| s.split(',').map(|x| x.trim().to_string()).collect());
     let verbose = std::env::var("VERBOSE").is_ok();
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
     use Hidden::*;
@@ -252,13 +255,30 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             let nominal = car_dataset(&car, episodes, duration, 5000 + seed, threads)?;
             let tc = TrainConfig {
                 kind: ModelKind::Physics,
-                steps: 5,
+                steps: train_steps,
                 seed,
                 physics_iterations: fit_iterations,
                 physics_max_windows: fit_windows,
+                physics_free: physics_free.clone(),
                 ..TrainConfig::default()
             };
             let model = train(&nominal, &tc, &mut |_| {})?.model;
+            if verbose
+                && let (Some(fit), Ok(truth)) =
+                    (model.physics(), true_car_model(&car.car, model.dt()))
+                && let Some(tp) = truth.physics()
+            {
+                let row: Vec<String> = fit
+                    .param_names()
+                    .iter()
+                    .zip(fit.params().iter().zip(tp.params()))
+                    .map(|(n, (f, t))| format!("{n} {:+.1}%", 100.0 * (f / t - 1.0)))
+                    .collect();
+                println!(
+                    "fitted nominal parameters against the car's: {}",
+                    row.join(", ")
+                );
+            }
             let mut hidden = car.clone();
             for h in &case {
                 h.apply(&mut hidden);

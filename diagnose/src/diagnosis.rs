@@ -810,7 +810,23 @@ impl Ctx<'_> {
         }
         scored.sort_by(|a, b| a.0.total_cmp(&b.0));
         scored.truncate(2);
-        let nr = (self.fit_w.len() * k * ds) as f64;
+        // forward-difference step of parameter c (backwards at the upper bound)
+        let fd_step = |c: usize, th: &[f64]| -> f64 {
+            let h = 1e-4 * th[c].abs().max(1e-3 * (upper[c] - lower[c]).min(1.0));
+            if th[c] + h <= upper[c] { h } else { -h }
+        };
+        let fit_w = match scored.first() {
+            Some((_, th0)) => robust_windows(
+                &self.fit_w,
+                ds,
+                th0,
+                &|c: usize| if free[c] { fd_step(c, th0) } else { 0.0 },
+                &|th: &[f64], r: &mut Vec<f64>| cost_of(th, &self.fit_w, Some(r)).is_some(),
+            ),
+            None => Vec::new(),
+        };
+        let fit_w = fit_w.as_slice();
+        let nr = (fit_w.len() * k * ds) as f64;
         // the baseline and the joint refits start further from their optimum, and a candidate
         // must not be credited with iterations its baseline did not get
         let iterations = if cand.is_none() {
@@ -823,7 +839,7 @@ impl Ctx<'_> {
             let mut eval = |th: &[f64], with_j: bool| -> (Vec<f64>, Vec<f64>) {
                 let resid_of = |th: &[f64]| -> Vec<f64> {
                     let mut r = Vec::new();
-                    match cost_of(th, &self.fit_w, Some(&mut r)) {
+                    match cost_of(th, fit_w, Some(&mut r)) {
                         Some(_) => r.iter().map(|x| x / nr.sqrt()).collect(),
                         None => vec![f64::INFINITY],
                     }
@@ -838,16 +854,15 @@ impl Ctx<'_> {
                     if !free[c] {
                         continue;
                     }
-                    let h = 1e-4 * th[c].abs().max(1e-3 * (upper[c] - lower[c]).min(1.0));
+                    let h = fd_step(c, th);
                     let mut t2 = th.to_vec();
-                    let sgn = if th[c] + h <= upper[c] { 1.0 } else { -1.0 };
-                    t2[c] += sgn * h;
+                    t2[c] += h;
                     let r2 = resid_of(&t2);
                     if r2.len() != r.len() {
                         continue;
                     }
                     for (i, (a, b)) in r2.iter().zip(&r).enumerate() {
-                        jac[i * np + c] = (a - b) / (sgn * h);
+                        jac[i * np + c] = (a - b) / h;
                     }
                 }
                 (r, jac)
@@ -858,7 +873,7 @@ impl Ctx<'_> {
             let (r, jac) = eval(&res.theta, true);
             let cluster: Vec<usize> = (0..k)
                 .flat_map(|_| {
-                    self.fit_w
+                    fit_w
                         .iter()
                         .flat_map(|w| std::iter::repeat_n(w.trajectory, ds))
                 })
@@ -1519,6 +1534,67 @@ pub(crate) fn split_windows(
         test,
     })
 }
+
+/// The fit windows without the chaotic ones: a window whose k-step error is more than
+/// [`SENSITIVITY_LIMIT`] times as sensitive to the fitted parameters as the median window's (a
+/// rollout near a spin or a tire-saturation bifurcation, where a tiny change of a parameter
+/// changes the whole trajectory) would dominate both the fit and `JᵀJ`: Levenberg–Marquardt
+/// then takes steps too small to leave its start and the standard errors shrink to nothing.
+/// Sensitivity: `Σ (∂r/∂θ_c)²` over the window's residuals at `theta0`, by forward differences
+/// of `step(c)`. `resid(θ, r)` fills the residual rows, step-major `(step, window, dimension)`
+/// with `ds` dimensions, and returns false for parameters the model refuses. Keeps every
+/// window when fewer than half would stay.
+pub(crate) fn robust_windows(
+    fit_w: &[Window],
+    ds: usize,
+    theta0: &[f64],
+    step: &dyn Fn(usize) -> f64,
+    resid: &dyn Fn(&[f64], &mut Vec<f64>) -> bool,
+) -> Vec<Window> {
+    let n = fit_w.len();
+    let mut r0 = Vec::new();
+    if n == 0 || !resid(theta0, &mut r0) {
+        return fit_w.to_vec();
+    }
+    let mut sens = vec![0.0; n];
+    for c in 0..theta0.len() {
+        let h = step(c);
+        if !(h.is_finite() && h != 0.0) {
+            continue;
+        }
+        let mut t = theta0.to_vec();
+        t[c] += h;
+        let mut r = Vec::new();
+        if !resid(&t, &mut r) || r.len() != r0.len() {
+            continue;
+        }
+        for (row, (a, b)) in r.iter().zip(&r0).enumerate() {
+            let d = (a - b) / h;
+            sens[(row / ds) % n] += d * d;
+        }
+    }
+    let mut sorted: Vec<f64> = sens.iter().copied().filter(|v| v.is_finite()).collect();
+    if sorted.is_empty() {
+        return fit_w.to_vec();
+    }
+    sorted.sort_by(|a, b| a.total_cmp(b));
+    let median = sorted[sorted.len() / 2];
+    let keep: Vec<Window> = fit_w
+        .iter()
+        .zip(&sens)
+        .filter(|(_, s)| s.is_finite() && **s <= SENSITIVITY_LIMIT * median.max(1e-300))
+        .map(|(w, _)| *w)
+        .collect();
+    if keep.len() < n / 2 {
+        fit_w.to_vec()
+    } else {
+        keep
+    }
+}
+
+/// How many times the median window's sensitivity a fit window may have (see
+/// [`robust_windows`]).
+const SENSITIVITY_LIMIT: f64 = 100.0;
 
 /// One-sided lower bootstrap bound (error probability `alpha`) of the error reduction
 /// `1 − Σafter/Σbefore`, resampling held-out segments whole (shared with the term search).

@@ -50,7 +50,7 @@ use dynlab_learn::{Dataset, LearnError, Model, World};
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
-use crate::diagnosis::{SplitFailure, WindowSplit, bootstrap_lower, split_windows};
+use crate::diagnosis::{SplitFailure, WindowSplit, bootstrap_lower, robust_windows, split_windows};
 use crate::report::{Chart, LineChart, Series, escape};
 
 /// Errors of a term search (finding nothing is an outcome, not an error).
@@ -841,7 +841,19 @@ fn fit_effect(
         p[range.clone()].copy_from_slice(th);
         m.set_params(&p).ok().map(|_| m)
     };
-    let fit_w = robust_windows(ctx, fit_w, &theta0, &model_of);
+    let fit_w = robust_windows(
+        fit_w,
+        ctx.ds,
+        &theta0,
+        &|c: usize| 1e-4 * theta0[c].abs().max(1e-3),
+        &|th: &[f64], r: &mut Vec<f64>| {
+            model_of(th)
+                .map(|m| {
+                    ctx.errors(&m, fit_w, Some(r));
+                })
+                .is_some()
+        },
+    );
     let fit_w = fit_w.as_slice();
     let nr = (fit_w.len() * ctx.k * ctx.ds) as f64;
     let resid_of = |th: &[f64]| -> Vec<f64> {
@@ -893,64 +905,6 @@ fn fit_effect(
     };
     Ok((res.theta, std))
 }
-
-/// The fit windows without the chaotic ones: a window whose k-step error is more than
-/// [`SENSITIVITY_LIMIT`] times as sensitive to the coefficients as the median window's (a
-/// rollout near a spin or a tire-saturation bifurcation, where a tiny change of a coefficient
-/// changes the whole trajectory) would dominate both the fit and `JᵀJ`, and shrink the
-/// standard errors to nothing. Sensitivity: `Σ (∂r/∂θ)²` over the window's residuals at the
-/// start values, by finite differences.
-fn robust_windows(
-    ctx: &Ctx,
-    fit_w: &[Window],
-    theta0: &[f64],
-    model_of: &dyn Fn(&[f64]) -> Option<PhysicsModel>,
-) -> Vec<Window> {
-    let n = fit_w.len();
-    let Some(m0) = model_of(theta0) else {
-        return fit_w.to_vec();
-    };
-    let mut r0 = Vec::new();
-    ctx.errors(&m0, fit_w, Some(&mut r0));
-    let mut sens = vec![0.0; n];
-    for c in 0..theta0.len() {
-        let h = 1e-4 * theta0[c].abs().max(1e-3);
-        let mut t = theta0.to_vec();
-        t[c] += h;
-        let Some(m) = model_of(&t) else { continue };
-        let mut r = Vec::new();
-        ctx.errors(&m, fit_w, Some(&mut r));
-        if r.len() != r0.len() {
-            continue;
-        }
-        for (row, (a, b)) in r.iter().zip(&r0).enumerate() {
-            let i = (row / ctx.ds) % n;
-            let d = (a - b) / h;
-            sens[i] += d * d;
-        }
-    }
-    let mut sorted: Vec<f64> = sens.iter().copied().filter(|v| v.is_finite()).collect();
-    if sorted.is_empty() {
-        return fit_w.to_vec();
-    }
-    sorted.sort_by(|a, b| a.total_cmp(b));
-    let median = sorted[sorted.len() / 2];
-    let keep: Vec<Window> = fit_w
-        .iter()
-        .zip(&sens)
-        .filter(|(_, s)| s.is_finite() && **s <= SENSITIVITY_LIMIT * median.max(1e-300))
-        .map(|(w, _)| *w)
-        .collect();
-    if keep.len() < n / 2 {
-        fit_w.to_vec()
-    } else {
-        keep
-    }
-}
-
-/// How many times the median window's sensitivity a fit window may have (see
-/// [`robust_windows`]).
-const SENSITIVITY_LIMIT: f64 = 100.0;
 
 /// Least squares of `y` on the columns `cols` of `x` (`n × nf`): coefficients and residual sum
 /// of squares, `None` when singular.
