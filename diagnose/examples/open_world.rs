@@ -17,9 +17,9 @@
 //! `cargo run --release -p dynlab-diagnose --example open_world -- [--seeds N]
 //! [--first-seed N] [--nominal-seeds N] [--perturb F] [--episodes N] [--duration S]
 //! [--only CASE,CASE] [--noise X] [--fit-iterations N] [--fit-windows N] [--car-refit BOOL]
-//! [--refit-tolerance F]`
+//! [--refit-tolerance F] [--train-steps K] [--physics-free a,b]`
 //! (defaults 5 seeds from 0, 20 nominal seeds, f = 0.1, 4 × 15 s, noise ×2; the baseline is
-//! fitted with `dynlab train`'s defaults; `--only` takes case names as printed, e.g.
+//! fitted with `dynlab train`'s defaults, which `--train-steps` and `--physics-free` change; `--only` takes case names as printed, e.g.
 //! `"aero_drag,none (nominal)"`; `--car-refit true` refits the car's nominal parameters in the
 //! diagnosis, within ±F of the model's values with `--refit-tolerance F`); `VERBOSE=1` prints
 //! every diagnosis.
@@ -31,7 +31,7 @@ use dynlab_control::racing::true_car_model;
 use dynlab_diagnose::diagnosis::simdata::car_dataset;
 use dynlab_diagnose::diagnosis::{DiagnoseConfig, diagnose};
 use dynlab_learn::dynamics::physics::Effect;
-use dynlab_learn::train::{TrainConfig, train};
+use dynlab_learn::train::{KindDefaults, TrainConfig, train};
 use dynlab_learn::{Model, ModelKind, World};
 use dynlab_sim::car::{
     AeroDrag, GripPatch, MotorLag, SteeringGainSpeed, SteeringOffset, SteeringRateLimit,
@@ -189,7 +189,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let defaults = TrainConfig::default();
     let fit_iterations: usize = arg("--fit-iterations", defaults.physics_iterations);
     let fit_windows: usize = arg("--fit-windows", defaults.physics_max_windows);
-    let train_steps: usize = arg("--train-steps", 5);
+    let train_steps: usize = arg(
+        "--train-steps",
+        KindDefaults::for_kind(World::Car, ModelKind::Physics).steps,
+    );
     let physics_free: Option<Vec<String>> = opt::<String>("--physics-free")
         .map(|s| s.split(',').map(|x| x.trim().to_string()).collect());
     let verbose = std::env::var("VERBOSE").is_ok();

@@ -50,7 +50,7 @@ use dynlab_learn::dynamics::data::{
     DataError, Split, SplitMix64, StateTrajectory, Window, split_trajectories, windows,
 };
 use dynlab_learn::dynamics::physics::{Effect, ModelError, PhysicsModel};
-use dynlab_learn::fit::{bounded_least_squares, cluster_std, initial_state_after};
+use dynlab_learn::fit::{bounded_least_squares, calm_windows, cluster_std, initial_state_after};
 use dynlab_learn::train::{segment, segment_origins};
 use dynlab_learn::{Dataset, LearnError, Model, World};
 
@@ -1535,15 +1535,11 @@ pub(crate) fn split_windows(
     })
 }
 
-/// The fit windows without the chaotic ones: a window whose k-step error is more than
-/// [`SENSITIVITY_LIMIT`] times as sensitive to the fitted parameters as the median window's (a
-/// rollout near a spin or a tire-saturation bifurcation, where a tiny change of a parameter
-/// changes the whole trajectory) would dominate both the fit and `JᵀJ`: Levenberg–Marquardt
-/// then takes steps too small to leave its start and the standard errors shrink to nothing.
-/// Sensitivity: `Σ (∂r/∂θ_c)²` over the window's residuals at `theta0`, by forward differences
-/// of `step(c)`. `resid(θ, r)` fills the residual rows, step-major `(step, window, dimension)`
-/// with `ds` dimensions, and returns false for parameters the model refuses. Keeps every
-/// window when fewer than half would stay.
+/// The fit windows without the chaotic ones ([`calm_windows`]): the sensitivity of each
+/// window's residuals to the fitted parameters at `theta0`, by forward differences of
+/// `step(c)` (0: a parameter held). `resid(θ, r)` fills the residual rows, step-major
+/// `(step, window, dimension)` with `ds` dimensions, and returns false for parameters the
+/// model refuses.
 pub(crate) fn robust_windows(
     fit_w: &[Window],
     ds: usize,
@@ -1573,28 +1569,12 @@ pub(crate) fn robust_windows(
             sens[(row / ds) % n] += d * d;
         }
     }
-    let mut sorted: Vec<f64> = sens.iter().copied().filter(|v| v.is_finite()).collect();
-    if sorted.is_empty() {
-        return fit_w.to_vec();
-    }
-    sorted.sort_by(|a, b| a.total_cmp(b));
-    let median = sorted[sorted.len() / 2];
-    let keep: Vec<Window> = fit_w
+    fit_w
         .iter()
-        .zip(&sens)
-        .filter(|(_, s)| s.is_finite() && **s <= SENSITIVITY_LIMIT * median.max(1e-300))
-        .map(|(w, _)| *w)
-        .collect();
-    if keep.len() < n / 2 {
-        fit_w.to_vec()
-    } else {
-        keep
-    }
+        .zip(calm_windows(&sens))
+        .filter_map(|(w, k)| k.then_some(*w))
+        .collect()
 }
-
-/// How many times the median window's sensitivity a fit window may have (see
-/// [`robust_windows`]).
-const SENSITIVITY_LIMIT: f64 = 100.0;
 
 /// One-sided lower bootstrap bound (error probability `alpha`) of the error reduction
 /// `1 − Σafter/Σbefore`, resampling held-out segments whole (shared with the term search).

@@ -137,6 +137,38 @@ pub fn bounded_least_squares(
     }
 }
 
+/// How many times the median window's sensitivity a fit window may have (see
+/// [`calm_windows`]).
+pub const SENSITIVITY_LIMIT: f64 = 100.0;
+
+/// Which fit windows a k-step fit keeps, from each window's sensitivity `Σ (∂r/∂θ)²` to the
+/// fitted parameters: those at most [`SENSITIVITY_LIMIT`] times the median's. A rollout near
+/// a spin or a tire-saturation bifurcation, where a tiny change of a parameter changes the
+/// whole trajectory, would dominate both the fit and `JᵀJ`: Levenberg–Marquardt then takes
+/// steps too small to leave its start and the standard errors shrink to nothing. Every
+/// window is kept when fewer than half would stay; non-finite sensitivities are left out.
+pub fn calm_windows(sensitivity: &[f64]) -> Vec<bool> {
+    let mut sorted: Vec<f64> = sensitivity
+        .iter()
+        .copied()
+        .filter(|v| v.is_finite())
+        .collect();
+    if sorted.is_empty() {
+        return vec![true; sensitivity.len()];
+    }
+    sorted.sort_by(|a, b| a.total_cmp(b));
+    let limit = SENSITIVITY_LIMIT * sorted[sorted.len() / 2].max(1e-300);
+    let keep: Vec<bool> = sensitivity
+        .iter()
+        .map(|s| s.is_finite() && *s <= limit)
+        .collect();
+    if 2 * keep.iter().filter(|&&k| k).count() < sensitivity.len() {
+        vec![true; sensitivity.len()]
+    } else {
+        keep
+    }
+}
+
 /// Cluster-robust ("sandwich") standard errors of a least-squares fit: residuals `r` and
 /// Jacobian `jac` (`m × n` row-major) at the solution, and a cluster id per residual (the
 /// trajectory it comes from). `Cov = A⁻¹ B A⁻¹ · G/(G − 1)` with `A = JᵀJ` and
@@ -483,7 +515,7 @@ pub(crate) fn fit_physics(
     let upper: Vec<f64> = specs.iter().map(|(_, s)| s.upper).collect();
     let base = p.clone();
     let lens: Vec<usize> = trajs.iter().map(StateTrajectory::len).collect();
-    let mut eval = |theta: &[f64], with_j: bool| -> (Vec<f64>, Vec<f64>) {
+    let eval_on = |ws: &[Window], theta: &[f64], with_j: bool| -> (Vec<f64>, Vec<f64>) {
         let mut p = base.clone();
         if p.set_params(theta).is_err() {
             return (vec![f64::INFINITY], Vec::new());
@@ -508,7 +540,7 @@ pub(crate) fn fit_physics(
             (e, vec![Vec::new(); lens.len()])
         };
         let ne = dp - ds;
-        for w in &ws {
+        for w in ws {
             let t = &trajs[w.trajectory];
             let a0 = w.start;
             let mut s = t.s[a0 * ds..(a0 + 1) * ds].to_vec();
@@ -574,6 +606,34 @@ pub(crate) fn fit_physics(
         }
         (r, jac)
     };
+    // rollouts through a spin out of the fit (see `calm_windows`): sensitivity of each
+    // window's residuals to the free parameters, each column scaled by its parameter's size
+    if free.iter().any(|&f| f) && k > 1 {
+        let (r, jac) = eval_on(&ws, p.params(), true);
+        let rows = k * lr.len();
+        if r.len() == ws.len() * rows && jac.len() == r.len() * np {
+            let theta = p.params();
+            let sens: Vec<f64> = (0..ws.len())
+                .map(|i| {
+                    let mut s = 0.0;
+                    for row in i * rows..(i + 1) * rows {
+                        for c in (0..np).filter(|&c| free[c]) {
+                            let d = jac[row * np + c] * theta[c].abs().max(1e-12);
+                            s += d * d;
+                        }
+                    }
+                    s
+                })
+                .collect();
+            let keep = calm_windows(&sens);
+            ws = ws
+                .into_iter()
+                .zip(keep)
+                .filter_map(|(w, k)| k.then_some(w))
+                .collect();
+        }
+    }
+    let mut eval = |theta: &[f64], with_j: bool| eval_on(&ws, theta, with_j);
     let mut res = bounded_least_squares(
         p.params(),
         &lower,
