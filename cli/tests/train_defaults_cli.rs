@@ -78,3 +78,19 @@ fn pushing_keeps_one_step_and_300_epochs() {
     );
     assert_eq!((steps, epochs), (1, 300));
 }
+
+#[test]
+fn the_car_physics_model_defaults_to_20_step_rollouts() {
+    let dir = tempfile::tempdir().unwrap();
+    let (err, steps, _) = train(
+        &bag("car_nominal"),
+        "physics",
+        &["--physics-windows", "100"],
+        &dir.path().join("m"),
+    );
+    assert!(
+        err.contains("defaults for a car physics model: --steps 20 ("),
+        "{err}"
+    );
+    assert_eq!(steps, 20);
+}

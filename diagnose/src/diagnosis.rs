@@ -822,6 +822,7 @@ impl Ctx<'_> {
                 th0,
                 &|c: usize| if free[c] { fd_step(c, th0) } else { 0.0 },
                 &|th: &[f64], r: &mut Vec<f64>| cost_of(th, &self.fit_w, Some(r)).is_some(),
+                1e4,
             ),
             None => Vec::new(),
         };
@@ -1546,6 +1547,7 @@ pub(crate) fn robust_windows(
     theta0: &[f64],
     step: &dyn Fn(usize) -> f64,
     resid: &dyn Fn(&[f64], &mut Vec<f64>) -> bool,
+    limit: f64,
 ) -> Vec<Window> {
     let n = fit_w.len();
     let mut r0 = Vec::new();
@@ -1571,7 +1573,7 @@ pub(crate) fn robust_windows(
     }
     fit_w
         .iter()
-        .zip(calm_windows(&sens))
+        .zip(calm_windows(&sens, limit))
         .filter_map(|(w, k)| k.then_some(*w))
         .collect()
 }

@@ -44,7 +44,7 @@ use dynlab_learn::dynamics::physics::features::{Area, Feature, library, time_uni
 use dynlab_learn::dynamics::physics::{
     CustomEffect, CustomTerm, ModelError, PhysicsModel, Robot, Target,
 };
-use dynlab_learn::fit::{bounded_least_squares, cluster_std, initial_state};
+use dynlab_learn::fit::{SENSITIVITY_LIMIT, bounded_least_squares, cluster_std, initial_state};
 use dynlab_learn::train::segment;
 use dynlab_learn::{Dataset, LearnError, Model, World};
 use serde::{Deserialize, Serialize};
@@ -853,6 +853,7 @@ fn fit_effect(
                 })
                 .is_some()
         },
+        SENSITIVITY_LIMIT,
     );
     let fit_w = fit_w.as_slice();
     let nr = (fit_w.len() * ctx.k * ctx.ds) as f64;

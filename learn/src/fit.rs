@@ -137,17 +137,17 @@ pub fn bounded_least_squares(
     }
 }
 
-/// How many times the median window's sensitivity a fit window may have (see
+/// How many times the median window's sensitivity a fit window may have by default (see
 /// [`calm_windows`]).
 pub const SENSITIVITY_LIMIT: f64 = 100.0;
 
 /// Which fit windows a k-step fit keeps, from each window's sensitivity `Σ (∂r/∂θ)²` to the
-/// fitted parameters: those at most [`SENSITIVITY_LIMIT`] times the median's. A rollout near
+/// fitted parameters: those at most `limit` times the median's (e.g. [`SENSITIVITY_LIMIT`]). A rollout near
 /// a spin or a tire-saturation bifurcation, where a tiny change of a parameter changes the
 /// whole trajectory, would dominate both the fit and `JᵀJ`: Levenberg–Marquardt then takes
 /// steps too small to leave its start and the standard errors shrink to nothing. Every
 /// window is kept when fewer than half would stay; non-finite sensitivities are left out.
-pub fn calm_windows(sensitivity: &[f64]) -> Vec<bool> {
+pub fn calm_windows(sensitivity: &[f64], limit: f64) -> Vec<bool> {
     let mut sorted: Vec<f64> = sensitivity
         .iter()
         .copied()
@@ -157,7 +157,7 @@ pub fn calm_windows(sensitivity: &[f64]) -> Vec<bool> {
         return vec![true; sensitivity.len()];
     }
     sorted.sort_by(|a, b| a.total_cmp(b));
-    let limit = SENSITIVITY_LIMIT * sorted[sorted.len() / 2].max(1e-300);
+    let limit = limit * sorted[sorted.len() / 2].max(1e-300);
     let keep: Vec<bool> = sensitivity
         .iter()
         .map(|s| s.is_finite() && *s <= limit)
@@ -625,7 +625,7 @@ pub(crate) fn fit_physics(
                     s
                 })
                 .collect();
-            let keep = calm_windows(&sens);
+            let keep = calm_windows(&sens, SENSITIVITY_LIMIT);
             ws = ws
                 .into_iter()
                 .zip(keep)

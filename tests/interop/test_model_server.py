@@ -105,7 +105,7 @@ def bag_messages(seconds: float) -> list[tuple[int, int, object]]:
 @pytest.fixture(scope="module")
 def car_model(tmp_path_factory):
     out = tmp_path_factory.mktemp("model") / "car_physics"
-    run("dynlab", "train", "--bag", BAG, "--kind", "physics", "--out", out, timeout=120)
+    run("dynlab", "train", "--bag", BAG, "--kind", "physics", "--out", out, timeout=300)
     return out
 
 

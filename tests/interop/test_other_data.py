@@ -92,7 +92,7 @@ def write_mocap_bag(path, with_cmd=True):
 @pytest.fixture(scope="module")
 def car_model(tmp_path_factory):
     out = tmp_path_factory.mktemp("model") / "car_physics"
-    run("dynlab", "train", "--bag", BAG, "--kind", "physics", "--out", out, timeout=120)
+    run("dynlab", "train", "--bag", BAG, "--kind", "physics", "--out", out, timeout=300)
     return out
 
 
