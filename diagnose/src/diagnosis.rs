@@ -512,7 +512,14 @@ impl Augmented<'_> {
         let db = self.base.dim_state();
         let mut sb: Vec<f64> = Vec::new();
         let mut sw: Vec<f64> = Vec::new();
-        let dw = self.with.as_ref().map_or(0, |p| p.dim_state());
+        // a physics model is integrated here, with its effect states (the model's own step
+        // would restart them at every step): augmented, or as given
+        let with = match &self.with {
+            Some(p) => Some(p),
+            None if self.pure_physics => Some(&self.base),
+            None => None,
+        };
+        let dw = with.map_or(0, |p| p.dim_state());
         for (i, w) in ws.iter().enumerate() {
             let t = &d.trajs[w.trajectory];
             s[i * ds..(i + 1) * ds].copy_from_slice(&t.s[w.start * ds..(w.start + 1) * ds]);
@@ -520,7 +527,7 @@ impl Augmented<'_> {
             if !self.pure_physics {
                 sb.extend(initial_state_after(&self.base, h, t, w.start));
             }
-            if let Some(p) = &self.with {
+            if let Some(p) = with {
                 sw.extend(initial_state_after(p, h, t, w.start));
             }
         }
@@ -536,14 +543,12 @@ impl Augmented<'_> {
             }
             if self.pure_physics {
                 // the model is Φ_P: the augmented model is Φ_{P+e}
-                if let Some(p) = &self.with {
+                if let Some(p) = with {
                     p.integrate_step(&solver, n, &sw, &u, dt_phys, &mut nw);
                     for i in 0..n {
                         next[i * ds..(i + 1) * ds].copy_from_slice(&nw[i * dw..i * dw + ds]);
                     }
                     sw.copy_from_slice(&nw);
-                } else {
-                    let _ = self.model.step(&s, &u, &mut next);
                 }
             } else {
                 let _ = self.model.step(&s, &u, &mut next);
@@ -1159,8 +1164,7 @@ pub fn diagnose(
         Some(p) => p.clone(),
         None => PhysicsModel::new(world.robot(), &[])?,
     };
-    let pure_physics =
-        model.physics().is_some() && model.network().is_none() && base.dim_state() == ds;
+    let pure_physics = model.physics().is_some() && model.network().is_none();
     // nominal parameters refitted with every candidate and for the baseline (physics models)
     let names = base.param_names();
     let refit: Vec<String> = if pure_physics && cfg.refit_nominal_for(world) {

@@ -1,7 +1,8 @@
 //! Effects with state through the loop, on simulator data with a hidden motor lag: a physics
 //! model trained with `motor_lag` beats the one without on held-out data, `compare` (with a
 //! baseline) agrees with `evaluate`, and the live predictor of `model_server` keeps the same
-//! effect states from the command stream as the offline pipeline rebuilds from the bag.
+//! effect states from the command stream as the offline pipeline rebuilds from the bag; a model
+//! that has the lag is diagnosed with its lag state.
 
 use dynlab_diagnose::compare::online::{OnlineConfig, OnlinePredictor, replay};
 use dynlab_diagnose::compare::{CompareConfig, compare_with_baseline};
@@ -179,4 +180,63 @@ fn the_live_predictor_keeps_the_effect_states_of_the_offline_pipeline() {
         "only {matched} predictions at offline stamps"
     );
     assert!(worst < 1e-9, "online d_f differs from offline by {worst:e}");
+}
+
+/// A physics model that already has `motor_lag` is diagnosed with its lag state carried
+/// through every window: on lagged data its baseline error is far below that of the model
+/// without the lag (the model's own step restarts the state at every step, which is no lag).
+#[test]
+fn a_model_with_motor_lag_is_diagnosed_with_its_lag_state() {
+    use dynlab_diagnose::diagnosis::simdata::car_dataset;
+    use dynlab_diagnose::diagnosis::{DiagnoseConfig, diagnose};
+    use dynlab_learn::dynamics::physics::PhysicsModel;
+    use dynlab_learn::train::default_physics_solver;
+    let data = car_dataset(&car_scenario(Some(Effect::MotorLag), 1.0), 3, 15.0, 311, 2).unwrap();
+    let model = |p: PhysicsModel| {
+        Model::new(
+            ModelKind::Physics,
+            World::Car,
+            data.pose_dt_s,
+            None,
+            None,
+            Some(p),
+            default_physics_solver(World::Car),
+        )
+        .unwrap()
+    };
+    let mut lagged = PhysicsModel::car(&[Effect::MotorLag]).unwrap();
+    lagged.set_param("motor_lag.tau", 0.2).unwrap();
+    let cfg = DiagnoseConfig {
+        seed: 1,
+        fit_windows: 300,
+        score_windows: 1000,
+        bootstrap: 200,
+        effects: Some(vec![Effect::MotorLag]),
+        discover: false,
+        ..DiagnoseConfig::default()
+    };
+    let without = diagnose(&model(PhysicsModel::car(&[]).unwrap()), &data, &cfg).unwrap();
+    let with = diagnose(&model(lagged), &data, &cfg).unwrap();
+    assert_eq!(
+        without.verdict.as_deref(),
+        Some("motor_lag"),
+        "{}",
+        without.table()
+    );
+    assert!(
+        with.baseline_error < 0.6 * without.baseline_error,
+        "baseline with the lag {:.4}, without {:.4}\n{}",
+        with.baseline_error,
+        without.baseline_error,
+        with.table()
+    );
+    // what the lag removes in the first diagnosis is what the lagged model starts without
+    let after = without.joint.as_ref().unwrap().error_after;
+    assert!(
+        (with.baseline_error - after).abs() <= 0.25 * after,
+        "lagged model {:.4}, the diagnosis's fitted lag {:.4}",
+        with.baseline_error,
+        after
+    );
+    assert!(with.effects.is_empty(), "{}", with.table());
 }
