@@ -827,7 +827,7 @@ impl Ctx<'_> {
                 th0,
                 &|c: usize| if free[c] { fd_step(c, th0) } else { 0.0 },
                 &|th: &[f64], r: &mut Vec<f64>| cost_of(th, &self.fit_w, Some(r)).is_some(),
-                1e4,
+                EFFECT_FIT_SENSITIVITY_LIMIT,
             ),
             None => Vec::new(),
         };
@@ -1539,6 +1539,12 @@ pub(crate) fn split_windows(
         test,
     })
 }
+
+/// How many times the median window's sensitivity a window of an effect fit may have: 10⁴,
+/// looser than training's and the term search's 100×, because a grip patch's signature is the
+/// spins it causes (at 100× its held-out bootstrap bound fell below 0 on a patch fitted
+/// within 0.1 m and 0.02 of the truth).
+const EFFECT_FIT_SENSITIVITY_LIMIT: f64 = 1e4;
 
 /// The fit windows without the chaotic ones ([`calm_windows`]): the sensitivity of each
 /// window's residuals to the fitted parameters at `theta0`, by forward differences of
