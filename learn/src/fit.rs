@@ -142,11 +142,11 @@ pub fn bounded_least_squares(
 pub const SENSITIVITY_LIMIT: f64 = 100.0;
 
 /// Which fit windows a k-step fit keeps, from each window's sensitivity `Σ (∂r/∂θ)²` to the
-/// fitted parameters: those at most `limit` times the median's (e.g. [`SENSITIVITY_LIMIT`]). A rollout near
-/// a spin or a tire-saturation bifurcation, where a tiny change of a parameter changes the
-/// whole trajectory, would dominate both the fit and `JᵀJ`: Levenberg–Marquardt then takes
-/// steps too small to leave its start and the standard errors shrink to nothing. Every
-/// window is kept when fewer than half would stay; non-finite sensitivities are left out.
+/// fitted parameters: those at most `limit` times the median's (e.g. [`SENSITIVITY_LIMIT`]).
+/// A rollout near a spin or a tire-saturation bifurcation, where a tiny change of a parameter
+/// changes the whole trajectory, would dominate both the fit and `JᵀJ`: Levenberg–Marquardt
+/// then takes steps too small to leave its start and the standard errors shrink to nothing.
+/// Every window is kept when fewer than half would stay; non-finite sensitivities are left out.
 pub fn calm_windows(sensitivity: &[f64], limit: f64) -> Vec<bool> {
     let mut sorted: Vec<f64> = sensitivity
         .iter()
