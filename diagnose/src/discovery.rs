@@ -23,11 +23,9 @@
 //!    on the held-out half. It is **significant** when it removes at least
 //!    [`DiscoveryConfig::min_reduction`] of the baseline error, the lower end of a one-sided
 //!    bootstrap interval over held-out segments (resampled whole) of its improvement is above
-//!    zero at error probability `1 − confidence`, and its coefficient is more than `z` standard
-//!    errors (clustered by trajectory) from zero, `z` the Bonferroni threshold for the `M` pairs.
-//!    (The fit half chose the term among the `M` pairs; the held-out half tests one term a
-//!    round and the rounds stop at the first that fails, a fixed-sequence test whose error
-//!    probability is that of one test.) The search stops at the first term that is not significant or after
+//!    zero at error probability `(1 − confidence)/M` (Bonferroni), and its coefficient is more
+//!    than the same threshold's `z` standard errors (clustered by trajectory) from zero. The
+//!    search stops at the first term that is not significant or after
 //!    [`DiscoveryConfig::max_terms`]. Chaotic fit windows (a rollout near a spin, far more
 //!    sensitive to the coefficients than the median window) are left out of the fit.
 //!
@@ -596,12 +594,8 @@ pub fn discover_terms_split(
     }
     let cluster: Vec<usize> = trans.iter().map(|&(ti, _)| ti).collect();
     let pairs = nf * targets.len();
-    // the screen and the coefficient's t-value look at every pair on the fit half: Bonferroni
-    // over the M pairs; the held-out half sees one term a round, chosen without it, and the
-    // rounds stop at the first term that fails (a fixed-sequence test): 1 − confidence each
     let alpha = (1.0 - cfg.confidence) / pairs as f64;
     let z = normal_quantile(1.0 - alpha / 2.0);
-    let alpha_test = 1.0 - cfg.confidence;
 
     // 2. one-step screen: single-feature regressions per target, clustered t-values
     struct Pick {
@@ -736,7 +730,7 @@ pub fn discover_terms_split(
             &prev_test,
             &test,
             cfg.bootstrap,
-            alpha_test,
+            alpha,
             cfg.seed ^ (round as u64 + 1).wrapping_mul(0x9E37_79B9_7F4A_7C15),
         );
         let j = theta.len() - 1;
