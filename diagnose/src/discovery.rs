@@ -14,7 +14,9 @@
 //!    [`DiscoveryConfig::max_candidates`] go on. (The one-step residual alone cannot choose: a
 //!    feature of the *estimated* state such as the slip angle `α_f` correlates with the
 //!    state-estimation noise that the stiff tire dynamics amplify, and wins the one-step fit
-//!    against the true term.)
+//!    against the true term.) Pairs with the shape of a nominal parameter's own term
+//!    ([`Target::nominal_parameter`]: the car's `v̇ₓ` on `d`, `d·vₓ`, `1`, `vₓ²`) are not tried:
+//!    such a term is a change of that parameter, which training fits, not a missing effect.
 //! 3. **Sparse forward selection on the k-step error**: each round scores every screened pair by
 //!    its Gauss–Newton gain on the fit half's k-step open-loop error (the error each state
 //!    dimension divided by its RMS k-step change, as in the [diagnosis](crate::diagnosis)), with
@@ -581,6 +583,9 @@ pub fn discover_terms_split(
         Area { lo, hi }
     };
     let feats: Vec<Feature> = library(robot, Some(area), cfg.grid);
+    // (target, feature) pairs with the shape of a nominal parameter's own term are that
+    // parameter, not an effect: not tried
+    let tried = |t: Target, f: usize| t.nominal_parameter(&feats[f]).is_none();
     let nf = feats.len();
     let params = physics.params();
     let mut x = vec![0.0; n * nf];
@@ -593,7 +598,10 @@ pub fn discover_terms_split(
         }
     }
     let cluster: Vec<usize> = trans.iter().map(|&(ti, _)| ti).collect();
-    let pairs = nf * targets.len();
+    let pairs: usize = targets
+        .iter()
+        .map(|&t| (0..nf).filter(|&f| tried(t, f)).count())
+        .sum();
     let alpha = (1.0 - cfg.confidence) / pairs as f64;
     let z = normal_quantile(1.0 - alpha / 2.0);
 
@@ -611,7 +619,7 @@ pub fn discover_terms_split(
         if yy <= 0.0 {
             continue;
         }
-        for f in 0..nf {
+        for f in (0..nf).filter(|&f| tried(reg.target, f)) {
             let Some((b, rss)) = least_squares(&x, nf, &reg.y, &[f]) else {
                 continue;
             };

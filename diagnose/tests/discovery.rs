@@ -209,6 +209,37 @@ fn perturbed_nominal_car_trained_then_searched_has_no_significant_term() {
     }
 }
 
+/// Data whose quadratic drag `C_r2` is 20 times the model's: the drivetrain-shaped pairs
+/// (`v̇ₓ` on `vₓ²`, `vₓ|vₓ|`, `d`, `d·vₓ`, `1`) are a nominal parameter, not an effect, and are
+/// never tried (the pair count says so); whatever else the search finds is another shape.
+#[test]
+fn a_nominal_parameter_change_is_not_reported_as_a_term() {
+    let mut truth = PhysicsModel::car(&[]).unwrap();
+    let cr2 = truth.params()[truth.param_index("Cr2").unwrap()];
+    truth.set_param("Cr2", 20.0 * cr2).unwrap();
+    let data = car_data(&truth, 31, 2, 12.0);
+    let model = physics_model(PhysicsModel::car(&[]).unwrap(), data.pose_dt_s);
+    let d = search(&model, &data, 31);
+    println!("{}", d.table());
+    let shaped = ["vx*vx", "vx*|vx|", "d", "d*vx", "d*|vx|", "1"];
+    assert!(
+        d.terms
+            .iter()
+            .all(|t| !(t.state == "vx" && shaped.contains(&t.feature.as_str()))),
+        "{}",
+        d.table()
+    );
+    let all = DiscoveryConfig::default();
+    let features = dynlab_learn::dynamics::physics::features::library(
+        dynlab_learn::dynamics::physics::Robot::Car,
+        None,
+        0,
+    )
+    .len()
+        + all.grid * all.grid;
+    assert_eq!(d.pairs_tried, 3 * features - shaped.len(), "{}", d.table());
+}
+
 /// `train` with the discovered custom effect (the `--effects-file` path) lowers the held-out
 /// error against the same training without it; the model file keeps the term and reloads.
 #[test]

@@ -112,6 +112,23 @@ impl Target {
             .map(|e| e.0)
             .collect()
     }
+    /// The nominal parameter whose own term in this derivative has the shape of `feature`, if
+    /// any: a term `ṡ += θ·feature` then changes that parameter (and trades off against it in
+    /// a fit) rather than adding an effect. Car `v̇ₓ`, from the drivetrain
+    /// `F_x = (C_m1 − C_m2·vₓ)·d − C_r0·tanh(vₓ/v_reg) − C_r2·vₓ|vₓ|` over the mass: `d`
+    /// (`Cm1`), `d·vₓ`, `d·|vₓ|` (`Cm2`), `1` (`Cr0`, driving forward), `vₓ²`, `vₓ|vₓ|` (`Cr2`). The tire forces are
+    /// nonlinear in their parameters and shared by `v̇_y` and `ω̇`, so no single term has their
+    /// shape; pushing has none listed.
+    pub fn nominal_parameter(self, feature: &Feature) -> Option<&'static str> {
+        match (self, feature.name().as_str()) {
+            (Target::Vx, "d") => Some("Cm1"),
+            (Target::Vx, "d*vx" | "d*|vx|") => Some("Cm2"),
+            (Target::Vx, "1") => Some("Cr0"),
+            (Target::Vx, "vx*vx" | "vx*|vx|") => Some("Cr2"),
+            _ => None,
+        }
+    }
+
     /// Looks a target up by name.
     pub fn from_name(name: &str) -> Result<Target, CustomError> {
         TARGETS
@@ -449,6 +466,20 @@ state = "omega"
 feature = "delta*vx"
 coefficient = -3.2
 "#;
+
+    #[test]
+    fn drivetrain_shaped_terms_name_their_parameter() {
+        let f = |n: &str| Feature::parse(n).unwrap();
+        assert_eq!(Target::Vx.nominal_parameter(&f("vx*vx")), Some("Cr2"));
+        assert_eq!(Target::Vx.nominal_parameter(&f("vx*|vx|")), Some("Cr2"));
+        assert_eq!(Target::Vx.nominal_parameter(&f("d*vx")), Some("Cm2"));
+        assert_eq!(Target::Vx.nominal_parameter(&f("d")), Some("Cm1"));
+        assert_eq!(Target::Vx.nominal_parameter(&f("1")), Some("Cr0"));
+        // other shapes, or the same shape in another derivative, are candidate effects
+        assert_eq!(Target::Vx.nominal_parameter(&f("vx")), None);
+        assert_eq!(Target::Omega.nominal_parameter(&f("vx*vx")), None);
+        assert_eq!(Target::Vy.nominal_parameter(&f("d")), None);
+    }
 
     #[test]
     fn toml_round_trip() {
