@@ -114,6 +114,11 @@ fn out_of_library_steering_gain_is_discovered_over_seeds() {
         );
         assert!(found.coefficient < 0.0, "{table}");
         assert!(d.error_reduction >= 0.4, "{table}");
+        // the held-out windows left out of the score (rollouts through a spin) are few
+        assert!(
+            d.spin_windows * 100 <= 15 * (d.windows[1] + d.spin_windows),
+            "{table}"
+        );
         let eff = d.effect.as_ref().expect(&table);
         assert_eq!(
             CustomEffect::from_toml(d.effect_toml.as_ref().unwrap()).unwrap(),
@@ -122,6 +127,7 @@ fn out_of_library_steering_gain_is_discovered_over_seeds() {
         let back: Discovery = serde_json::from_str(&d.to_json()).unwrap();
         assert_eq!(back.terms.len(), d.terms.len());
         assert_eq!(back.effect, d.effect);
+        assert_eq!(back.spin_windows, d.spin_windows);
         let html = discovery_html(&d);
         assert!(html.contains("<section") && html.contains(&found.symbol));
         reductions.push(d.error_reduction);
