@@ -30,7 +30,7 @@ use std::time::Instant;
 use dynlab_control::racing::true_car_model;
 use dynlab_diagnose::diagnosis::simdata::car_dataset;
 use dynlab_diagnose::diagnosis::{DiagnoseConfig, diagnose};
-use dynlab_learn::dynamics::physics::Effect;
+use dynlab_learn::dynamics::physics::{Effect, Target};
 use dynlab_learn::train::{KindDefaults, TrainConfig, train};
 use dynlab_learn::{Model, ModelKind, World};
 use dynlab_sim::car::{
@@ -331,8 +331,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     beyond.push(disc.error_reduction);
                     for t in sig {
                         let key = format!(
-                            "{}̇ {} {}",
-                            t.state,
+                            "{} {} {}",
+                            Target::from_name(&t.state).map_or(t.state.as_str(), |x| x.symbol()),
                             if t.coefficient < 0.0 { "−" } else { "+" },
                             t.symbol
                         );
