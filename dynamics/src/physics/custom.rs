@@ -116,9 +116,9 @@ impl Target {
     /// any: a term `ṡ += θ·feature` then changes that parameter (and trades off against it in
     /// a fit) rather than adding an effect. Car `v̇ₓ`, from the drivetrain
     /// `F_x = (C_m1 − C_m2·vₓ)·d − C_r0·tanh(vₓ/v_reg) − C_r2·vₓ|vₓ|` over the mass: `d`
-    /// (`Cm1`), `d·vₓ`, `d·|vₓ|` (`Cm2`), `1` (`Cr0`, driving forward), `vₓ²`, `vₓ|vₓ|` (`Cr2`). The tire forces are
-    /// nonlinear in their parameters and shared by `v̇_y` and `ω̇`, so no single term has their
-    /// shape; pushing has none listed.
+    /// (`Cm1`), `d·vₓ`, `d·|vₓ|` (`Cm2`), `1` (`Cr0`, driving forward), `vₓ²`, `vₓ|vₓ|`
+    /// (`Cr2`). The tire forces are nonlinear in their parameters and shared by `v̇_y` and
+    /// `ω̇`, so no single term has their shape; pushing has none listed.
     pub fn nominal_parameter(self, feature: &Feature) -> Option<&'static str> {
         match (self, feature.name().as_str()) {
             (Target::Vx, "d") => Some("Cm1"),
