@@ -12,7 +12,8 @@ use dynlab_diagnose::diagnosis::{DiagnoseConfig, diagnose};
 use dynlab_diagnose::discovery::{Discovery, DiscoveryConfig, discover_terms, discovery_html};
 use dynlab_learn::dynamics::data::{CommandSample, PoseSample, SavGol, SplitMix64};
 use dynlab_learn::dynamics::ode::Solver;
-use dynlab_learn::dynamics::physics::{CustomEffect, PhysicsModel};
+use dynlab_learn::dynamics::physics::features::library;
+use dynlab_learn::dynamics::physics::{CustomEffect, PhysicsModel, Robot};
 use dynlab_learn::train::default_physics_solver;
 use dynlab_learn::{Dataset, Model, ModelKind, TrainConfig, World, load_model, save_model, train};
 
@@ -235,14 +236,8 @@ fn a_nominal_parameter_change_is_not_reported_as_a_term() {
         "{}",
         d.table()
     );
-    let all = DiscoveryConfig::default();
-    let features = dynlab_learn::dynamics::physics::features::library(
-        dynlab_learn::dynamics::physics::Robot::Car,
-        None,
-        0,
-    )
-    .len()
-        + all.grid * all.grid;
+    let grid = DiscoveryConfig::default().grid;
+    let features = library(Robot::Car, None, 0).len() + grid * grid;
     assert_eq!(d.pairs_tried, 3 * features - shaped.len(), "{}", d.table());
 }
 
