@@ -4,8 +4,9 @@
 //! parameter scaled by its own seeded factor in [1 − f, 1 + f]; `--perturb 0` for the datasheet
 //! car), nominal data from it, the physics model fitted on those (`dynlab train --kind physics`),
 //! then data of the same car with the hidden effects, diagnosed. Cases: nominal, each library
-//! effect alone, pairs of library effects, and effects outside the library (the steering gain
-//! falling with speed, a steering-servo rate limit, a low-grip band across the floor).
+//! effect alone (the simulator's steering-servo rate limit is the library's `steering_lag`),
+//! pairs of library effects, and effects outside the library (the steering gain falling with
+//! speed, a low-grip band across the floor).
 //!
 //! Per case: how often the selected set is exactly the hidden library effects (outside the
 //! library and nominal: nothing named); the held-out 50-step error the selected effects remove
@@ -29,7 +30,7 @@ use std::time::Instant;
 
 use dynlab_control::racing::true_car_model;
 use dynlab_diagnose::diagnosis::simdata::car_dataset;
-use dynlab_diagnose::diagnosis::{DiagnoseConfig, diagnose};
+use dynlab_diagnose::diagnosis::{DiagnoseConfig, diagnose, diagnose_on_windows_of};
 use dynlab_learn::dynamics::physics::{Effect, Target};
 use dynlab_learn::train::{KindDefaults, TrainConfig, train};
 use dynlab_learn::{Model, ModelKind, World};
@@ -70,6 +71,8 @@ impl Hidden {
             Hidden::Lag => Some(("motor_lag", "motor_lag.tau", 0.2)),
             Hidden::Offset => Some(("steering_offset", "steering_offset.delta0", 0.03)),
             Hidden::Disc => Some(("grip_patch", "grip_patch.k", 0.5)),
+            // the library's servo model: a lag with a (smooth) rate limit
+            Hidden::RateLimit => Some(("steering_lag", "steering_lag.rate", 3.0)),
             _ => None,
         }
     }
@@ -77,7 +80,6 @@ impl Hidden {
     fn name(self) -> &'static str {
         match self {
             Hidden::GainSpeed => "steering_gain_speed*",
-            Hidden::RateLimit => "steering_rate_limit*",
             Hidden::Band => "grip_band*",
             h => h.library().map_or("", |l| l.0),
         }
@@ -151,6 +153,7 @@ fn true_model(car: &CarScenario, case: &[Hidden], like: &Model) -> Option<Model>
             Hidden::Lag => &[("motor_lag.tau", 0.2)],
             Hidden::Offset => &[("steering_offset.delta0", 0.03)],
             // the simulator's disc has a sharp edge, the model's the smallest width it allows
+            Hidden::RateLimit => &[("steering_lag.tau", 0.05), ("steering_lag.rate", 3.0)],
             Hidden::Disc => &[
                 ("grip_patch.cx", 0.5),
                 ("grip_patch.cy", 0.0),
@@ -303,7 +306,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                         discover: false,
                         ..cfg.clone()
                     };
-                    Some(diagnose(&m, &data, &tcfg)?.baseline_error)
+                    Some(diagnose_on_windows_of(&m, &model, &data, &tcfg)?.baseline_error)
                 }
                 None => None,
             };

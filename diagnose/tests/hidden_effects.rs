@@ -94,6 +94,51 @@ fn car_grip_patch_is_found() {
 }
 
 #[test]
+fn a_pair_of_library_effects_is_named_by_forward_selection() {
+    // drag and a steering offset at once: both added, one step each, both recovered
+    let mut scenario = car_scenario(Some(Effect::AeroDrag), 1.0);
+    scenario.effects.steering_offset = Some(dynlab_sim::car::SteeringOffset::default());
+    let data = car_dataset(&scenario, 3, 15.0, 310, 2).unwrap();
+    let model = Model::new(
+        ModelKind::Physics,
+        World::Car,
+        data.pose_dt_s,
+        None,
+        None,
+        Some(PhysicsModel::car(&[]).unwrap()),
+        default_physics_solver(World::Car),
+    )
+    .unwrap();
+    let cfg = DiagnoseConfig {
+        seed: 7,
+        fit_windows: 400,
+        score_windows: 1500,
+        bootstrap: 500,
+        ..DiagnoseConfig::default()
+    };
+    let d = diagnose(&model, &data, &cfg).unwrap();
+    let table = d.table();
+    let mut named = d.effects.clone();
+    named.sort();
+    assert_eq!(named, ["aero_drag", "steering_offset"], "{table}");
+    assert_eq!(d.selection.len(), 3, "two effects added, then none: {table}");
+    let joint = d.joint.as_ref().expect("a joint fit");
+    assert!(joint.reduction_vs_model >= 0.5, "{table}");
+    assert!((joint.params["aero_drag.c"] - 0.01).abs() <= 0.002, "{table}");
+    assert!(
+        (joint.params["steering_offset.delta0"] - 0.03).abs() <= 0.005,
+        "{table}"
+    );
+    // held-out windows that roll out through a spin are left out of the scores, and few
+    assert!(
+        d.spin_windows * 100 <= 15 * (d.windows[1] + d.spin_windows),
+        "{table}"
+    );
+    let back: Diagnosis = serde_json::from_value(d.to_json()).unwrap();
+    assert_eq!(back.spin_windows, d.spin_windows);
+}
+
+#[test]
 fn diagnosis_is_deterministic_and_json_has_the_contract_keys() {
     let few = Some(vec![Effect::SteeringOffset, Effect::AeroDrag]);
     let a = run_car_with(Some(Effect::SteeringOffset), 6, few.clone());
