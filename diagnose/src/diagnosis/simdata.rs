@@ -73,7 +73,19 @@ pub fn push_dataset(
         pushes_per_episode: pushes,
         ..PushExplorer::default()
     };
-    let eps = generate_push_episodes(scenario, &explorer, seed, episodes, threads.max(1))
+    push_dataset_with(scenario, &explorer, episodes, seed, threads)
+}
+
+/// `episodes` pushing episodes from `scenario` driven by `explorer` (its pushes per episode,
+/// start jitter, pose rate), seeded.
+pub fn push_dataset_with(
+    scenario: &PushScenario,
+    explorer: &PushExplorer,
+    episodes: u64,
+    seed: u64,
+    threads: usize,
+) -> Result<Dataset, DiagnosisError> {
+    let eps = generate_push_episodes(scenario, explorer, seed, episodes, threads.max(1))
         .map_err(|e| DiagnosisError::Simulator(e.to_string()))?;
     to_dataset(World::Push, &concatenate(&eps, 0, GAP_NS))
 }

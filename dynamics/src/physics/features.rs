@@ -23,7 +23,13 @@
 //! | `cos_psi`, `sin_psi` | `cos ψ`, `sin ψ` | - | heading |
 //!
 //! Atoms of the pusher (state `(x, y, θ)`, action `(p, φ, ℓ)`): `p`, `phi` (`φ`, rad), `l`
-//! (`ℓ`), `cos_phi`, `sin_phi`, `theta` (`θ`, rad), `cos_theta`, `sin_theta`.
+//! (`ℓ`), `cos_phi`, `sin_phi`, `theta` (`θ`, rad), `cos_theta`, `sin_theta`, and the doubled
+//! heading `cos_2theta`, `sin_2theta` (`cos 2θ`, `sin 2θ`). A frictionless pusher presses along
+//! the pushed face's normal, the block's heading `θ` in the world, whatever the push angle `φ`;
+//! a table whose friction depends on the direction (a grain, which has no sign) turns the
+//! block's motion away from that normal by an amount periodic in `2(θ − γ)` for a grain at `γ`,
+//! and `a·sin 2θ + b·cos 2θ` is `A·sin 2(θ − γ)` for any `γ`. The library's
+//! `ℓ·cos φ·sin 2θ`, `ℓ·cos φ·cos 2θ` scale it by the pusher's advance along the normal.
 //!
 //! Both robots: `x`, `y` (m, world/table frame), `1` (a constant) and position basis functions
 //! `gauss(cx,cy,r)` = `exp(−((x − cx)² + (y − cy)²)/(2r²))` (a Gaussian bump of width `r` \[m\]
@@ -177,6 +183,11 @@ pub enum Atom {
     CosTheta,
     /// Pushing: `sin θ`.
     SinTheta,
+    /// Pushing: `cos 2θ`, the doubled heading: the pushed face's normal in the world, as an
+    /// axis (a table's grain has no sign).
+    Cos2Theta,
+    /// Pushing: `sin 2θ` (see [`Atom::Cos2Theta`]).
+    Sin2Theta,
     /// Position `x` (world/table frame).
     X,
     /// Position `y` (world/table frame).
@@ -203,7 +214,7 @@ enum Owner {
 }
 
 /// Name, symbol, unit and owner of every atom but `gauss`.
-const TABLE: [(Atom, &str, &str, Unit, Owner); 25] = [
+const TABLE: [(Atom, &str, &str, Unit, Owner); 27] = [
     (Atom::Vx, "vx", "vₓ", Unit::new(1, -1), Owner::Car),
     (Atom::Vy, "vy", "v_y", Unit::new(1, -1), Owner::Car),
     (Atom::Omega, "omega", "ω", Unit::new(0, -1), Owner::Car),
@@ -277,6 +288,20 @@ const TABLE: [(Atom, &str, &str, Unit, Owner); 25] = [
         Atom::SinTheta,
         "sin_theta",
         "sin θ",
+        Unit::new(0, 0),
+        Owner::Pushing,
+    ),
+    (
+        Atom::Cos2Theta,
+        "cos_2theta",
+        "cos 2θ",
+        Unit::new(0, 0),
+        Owner::Pushing,
+    ),
+    (
+        Atom::Sin2Theta,
+        "sin_2theta",
+        "sin 2θ",
         Unit::new(0, 0),
         Owner::Pushing,
     ),
@@ -439,6 +464,8 @@ fn push_atom<R: Real>(a: &Atom, s: &[R], u: &[R]) -> R {
         Atom::Theta => s[2],
         Atom::CosTheta => s[2].cos(),
         Atom::SinTheta => s[2].sin(),
+        Atom::Cos2Theta => (s[2] * R::cst(2.0)).cos(),
+        Atom::Sin2Theta => (s[2] * R::cst(2.0)).sin(),
         _ => R::cst(0.0),
     }
 }
@@ -658,6 +685,8 @@ pub fn library(robot: Robot, area: Option<Area>, grid: usize) -> Vec<Feature> {
             "l*x",
             "l*y",
             "1",
+            "l*cos_phi*cos_2theta",
+            "l*cos_phi*sin_2theta",
         ],
     };
     let mut v: Vec<Feature> = names
@@ -717,6 +746,45 @@ mod tests {
         assert_eq!(Unit::new(-1, -1).format("s"), "1/(m·s)");
         assert_eq!(Unit::new(1, -2).format("s"), "m/s²");
         assert_eq!(Unit::default().format("s"), "-");
+        // the doubled heading: name, symbol and a product with ℓ·cos φ
+        let f = Feature::parse("l*cos_phi*sin_2theta").unwrap();
+        assert_eq!(
+            f.factors(),
+            &[Atom::PushLength, Atom::CosPhi, Atom::Sin2Theta]
+        );
+        assert_eq!(f.name(), "l*cos_phi*sin_2theta");
+        assert_eq!(f.symbol(), "ℓ·cos φ·sin 2θ");
+        assert_eq!(f.unit(), Unit::default());
+        assert_eq!(
+            Feature::parse("l*cos_phi*cos_2theta").unwrap().symbol(),
+            "ℓ·cos φ·cos 2θ"
+        );
+        assert!(
+            Feature::parse("cos_2theta")
+                .unwrap()
+                .check_robot(Robot::Car)
+                .is_err()
+        );
+    }
+
+    #[test]
+    fn doubled_heading_has_no_sign() {
+        // a grain has no sign: the heading θ and its reverse θ + π give the same value, and
+        // a·sin 2θ + b·cos 2θ is A·sin 2(θ − γ) for the grain angle γ
+        let (s, u) = ([0.1, -0.2, 0.7], [0.3, -0.4, 0.8]);
+        let s_rev = [s[0], s[1], s[2] + std::f64::consts::PI];
+        for a in [Atom::Sin2Theta, Atom::Cos2Theta] {
+            let v = a.eval(Robot::Pushing, &[], &s, &u);
+            let w = a.eval(Robot::Pushing, &[], &s_rev, &u);
+            assert!((v - w).abs() < 1e-12, "{}", a.name());
+        }
+        let gamma = 0.5236;
+        let (sin2, cos2) = (
+            Atom::Sin2Theta.eval(Robot::Pushing, &[], &s, &u),
+            Atom::Cos2Theta.eval(Robot::Pushing, &[], &s, &u),
+        );
+        let combined = (2.0 * gamma).cos() * sin2 - (2.0 * gamma).sin() * cos2;
+        assert!((combined - (2.0 * (s[2] - gamma)).sin()).abs() < 1e-12);
     }
 
     #[test]
@@ -754,6 +822,33 @@ mod tests {
                     u2[k - 6] += h;
                 }
                 let fd = (f.eval(Robot::Car, &p, &s2, &u2) - v.v) / h;
+                assert!(
+                    (fd - v.d[k]).abs() < 1e-4 * (1.0 + fd.abs()),
+                    "{} d{k}",
+                    f.name()
+                );
+            }
+        }
+        // pushing: state (x, y, θ), action (p, φ, ℓ)
+        let s = [0.3, -0.1, 0.6];
+        let u = [0.2, -0.5, 0.7];
+        let area = Area {
+            lo: [-0.5, -0.5],
+            hi: [0.5, 0.5],
+        };
+        for f in library(Robot::Pushing, Some(area), 2) {
+            let sd: Vec<Dual<6>> = (0..3).map(|i| Dual::var(s[i], i)).collect();
+            let ud: Vec<Dual<6>> = (0..3).map(|i| Dual::var(u[i], 3 + i)).collect();
+            let v = f.eval(Robot::Pushing, &[], &sd, &ud);
+            for k in 0..6 {
+                let (mut s2, mut u2) = (s, u);
+                let h = 1e-6;
+                if k < 3 {
+                    s2[k] += h;
+                } else {
+                    u2[k - 3] += h;
+                }
+                let fd = (f.eval(Robot::Pushing, &[], &s2, &u2) - v.v) / h;
                 assert!(
                     (fd - v.d[k]).abs() < 1e-4 * (1.0 + fd.abs()),
                     "{} d{k}",
