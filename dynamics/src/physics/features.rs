@@ -778,7 +778,7 @@ mod tests {
             let w = a.eval(Robot::Pushing, &[], &s_rev, &u);
             assert!((v - w).abs() < 1e-12, "{}", a.name());
         }
-        let gamma = 0.5236;
+        let gamma = 0.4;
         let (sin2, cos2) = (
             Atom::Sin2Theta.eval(Robot::Pushing, &[], &s, &u),
             Atom::Cos2Theta.eval(Robot::Pushing, &[], &s, &u),

@@ -1,0 +1,109 @@
+//! Anisotropic table friction, a pushing effect outside the diagnosis library, on simulator
+//! data: the library names nothing and the term search beyond it finds the grain's sideways
+//! drift on the doubled heading, `ẏ_b += a·ℓ·cos φ·sin 2θ + b·ℓ·cos φ·cos 2θ`, with the signs
+//! the grain's angle gives; on nominal data of the same kind no grain term is found.
+//!
+//! The data: the simulator's pushing world (`[effects.anisotropic_friction]`, ratio 2, grain at
+//! 30°), 100 explorer episodes of 10 pushes starting at headings all round (a grain has no sign
+//! and a table tilt has one: with the explorer's ±45° the library's `table_tilt` takes most of
+//! the error), noise ×2; the model is the nominal pushing physics model, whose `c` and `κ` the
+//! diagnosis refits. Everything is seeded.
+
+use dynlab_diagnose::diagnosis::simdata::{push_dataset_with, push_scenario};
+use dynlab_diagnose::diagnosis::{DiagnoseConfig, Diagnosis, diagnose};
+use dynlab_learn::dynamics::physics::PhysicsModel;
+use dynlab_learn::train::default_physics_solver;
+use dynlab_learn::{Dataset, Model, ModelKind, World};
+use dynlab_sim::PushExplorer;
+use dynlab_sim::push::AnisotropicFriction;
+
+/// The grain's features.
+///
+/// Over seeds 0–9 of this set-up (measured once, printed by the test with `--nocapture`): a
+/// significant grain term in 10/10, first on `ℓ·cos φ·cos 2θ`, the `sin 2θ` one second in 8,
+/// every sign the truth's, 43–78 % of the held-out 3-step error removed; the library named
+/// `friction_patch` (a disc of higher friction) beside it in 1/10 (seed 3). The test runs two.
+const GRAIN: [&str; 2] = ["l*cos_phi*sin_2theta", "l*cos_phi*cos_2theta"];
+
+fn data(grain: Option<f64>, seed: u64) -> Dataset {
+    let mut s = push_scenario(None, 2.0);
+    s.effects.anisotropic_friction = grain.map(|angle| AnisotropicFriction {
+        enabled: true,
+        ratio: 2.0,
+        angle,
+    });
+    let explorer = PushExplorer {
+        start_jitter: [0.05, 0.05, std::f64::consts::PI],
+        ..PushExplorer::default()
+    };
+    push_dataset_with(&s, &explorer, 100, 4100 + seed, 2).unwrap()
+}
+
+fn diagnosed(data: &Dataset, seed: u64) -> Diagnosis {
+    let model = Model::new(
+        ModelKind::Physics,
+        World::Push,
+        data.pose_dt_s,
+        None,
+        None,
+        Some(PhysicsModel::pushing(&[]).unwrap()),
+        default_physics_solver(World::Push),
+    )
+    .unwrap();
+    let cfg = DiagnoseConfig {
+        seed,
+        ..DiagnoseConfig::default()
+    };
+    diagnose(&model, data, &cfg).unwrap()
+}
+
+#[test]
+fn anisotropic_friction_is_found_beyond_the_library() {
+    let gamma = 30f64.to_radians();
+    for seed in [1u64, 2] {
+        let d = diagnosed(&data(Some(gamma), seed), seed);
+        let table = d.table();
+        println!("seed {seed}\n{table}");
+        // no library effect stands in for the grain
+        assert!(d.effects.is_empty(), "{table}");
+        let disc = d.discovery.as_ref().expect("the term search runs");
+        let found: Vec<_> = disc.terms.iter().filter(|t| t.significant).collect();
+        assert!(!found.is_empty(), "{table}");
+        // the first term is the grain's drift in the block frame
+        assert_eq!(found[0].state, "by", "{table}");
+        assert!(GRAIN.contains(&found[0].feature.as_str()), "{table}");
+        // signs: ẏ_b = A·ℓ·cos φ·sin 2(θ − γ) with A < 0 (towards the grain), so the sin 2θ
+        // coefficient is A·cos 2γ < 0 and the cos 2θ one −A·sin 2γ > 0 for γ = 30°
+        for t in found.iter().filter(|t| t.state == "by") {
+            match t.feature.as_str() {
+                "l*cos_phi*sin_2theta" => assert!(t.coefficient < 0.0, "{table}"),
+                "l*cos_phi*cos_2theta" => assert!(t.coefficient > 0.0, "{table}"),
+                _ => {}
+            }
+        }
+        assert!(disc.error_reduction >= 0.4, "{table}");
+        // the custom effect file holds the term
+        let toml = disc.effect_toml.as_ref().expect("an effect file");
+        assert!(toml.contains(&found[0].feature), "{toml}");
+    }
+}
+
+/// Nominal data of the same kind: nothing named, and no term on the grain's features. (With
+/// 1000 pushes the nominal model's own structural error can show as a term on other features —
+/// `θ̇` on `ℓ·sin φ`, the under-turning of angled pushes; that is the model, not a grain.)
+#[test]
+fn nominal_pushing_data_have_no_grain_term() {
+    for seed in [1u64, 2] {
+        let d = diagnosed(&data(None, seed), seed);
+        let table = d.table();
+        println!("nominal seed {seed}\n{table}");
+        assert!(d.effects.is_empty(), "{table}");
+        let disc = d.discovery.as_ref().expect("the term search runs");
+        assert!(
+            disc.terms
+                .iter()
+                .all(|t| !(t.significant && GRAIN.contains(&t.feature.as_str()))),
+            "{table}"
+        );
+    }
+}
