@@ -11,7 +11,7 @@
 
 use dynlab_diagnose::diagnosis::simdata::{push_dataset_with, push_scenario};
 use dynlab_diagnose::diagnosis::{DiagnoseConfig, Diagnosis, diagnose};
-use dynlab_learn::dynamics::physics::PhysicsModel;
+use dynlab_learn::dynamics::physics::{CustomEffect, PhysicsModel};
 use dynlab_learn::train::default_physics_solver;
 use dynlab_learn::{Dataset, Model, ModelKind, World};
 use dynlab_sim::PushExplorer;
@@ -82,9 +82,14 @@ fn anisotropic_friction_is_found_beyond_the_library() {
             }
         }
         assert!(disc.error_reduction >= 0.4, "{table}");
-        // the custom effect file holds the term
+        // the custom effect file holds the term and reads back as the same effect (what
+        // `dynlab train --effects-file` reads)
         let toml = disc.effect_toml.as_ref().expect("an effect file");
         assert!(toml.contains(&found[0].feature), "{toml}");
+        assert_eq!(
+            CustomEffect::from_toml(toml).unwrap(),
+            *disc.effect.as_ref().unwrap()
+        );
     }
 }
 
