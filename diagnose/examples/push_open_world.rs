@@ -211,7 +211,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 .map(|(s, f, c, sd, r)| {
                     let sym = dynlab_learn::dynamics::physics::features::Feature::parse(f)
                         .map_or(f.clone(), |x| x.symbol());
-                    format!("{} += {c:+.4}±{sd:.4}·{sym} ({:.0} %)", name(s), 100.0 * r)
+                    format!("{} += {c:+.4}±{sd:.1e}·{sym} ({:.0} %)", name(s), 100.0 * r)
                 })
                 .collect();
             let coef = |feature: &str| {
