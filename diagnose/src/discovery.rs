@@ -689,108 +689,123 @@ pub fn discover_terms_split(
     let mut prev_test = base_test.clone();
     let mut final_fit: Option<(CustomEffect, Vec<f64>, Vec<f64>)> = None;
     let mut out_terms: Vec<DiscoveredTerm> = Vec::new();
+    // each round tries the best term that holds everywhere first and a region's term (a feature
+    // of the position) only when that one is not significant: a bump times a slip angle fitted
+    // the fit half of `bags/car_steering_gain` better than `tanh(α_f/α₀)` and removed half as
+    // much of the held-out error (21 % against 39 %)
     for round in 0..cfg.max_terms {
         let base_m = with_terms(accepted.clone())?;
         let mut r0 = Vec::new();
         ctx.errors(&base_m, fit_w, Some(&mut r0));
-        let mut best: Option<(f64, usize)> = None;
-        for (pi, pick) in picks.iter().enumerate() {
-            if used.contains(&pi)
-                || accepted
-                    .iter()
-                    .any(|t| t.target == pick.target && t.feature == feats[pick.feature])
-            {
-                continue;
+        let mut added = false;
+        for positional in [false, true] {
+            let mut best: Option<(f64, usize)> = None;
+            for (pi, pick) in picks.iter().enumerate() {
+                if used.contains(&pi)
+                    || feats[pick.feature].depends_on_position() != positional
+                    || accepted
+                        .iter()
+                        .any(|t| t.target == pick.target && t.feature == feats[pick.feature])
+                {
+                    continue;
+                }
+                let h = if pick.slope != 0.0 { pick.slope } else { 1.0 };
+                let mut trial = accepted.clone();
+                trial.push(CustomTerm {
+                    target: pick.target,
+                    feature: feats[pick.feature].clone(),
+                    coefficient: h.clamp(-COEFFICIENT_BOUND, COEFFICIENT_BOUND),
+                });
+                let m = with_terms(trial)?;
+                let mut r1 = Vec::new();
+                ctx.errors(&m, fit_w, Some(&mut r1));
+                if r1.len() != r0.len() {
+                    continue;
+                }
+                // secant column J = (r(h) − r(0))/h; GN gain (Jᵀr₀)²/(JᵀJ)
+                let (mut jr, mut jj) = (0.0, 0.0);
+                for (a, b) in r1.iter().zip(&r0) {
+                    let jcol = (a - b) / h;
+                    jr += jcol * b;
+                    jj += jcol * jcol;
+                }
+                let gain = if jj > 0.0 { jr * jr / jj } else { 0.0 };
+                if gain.is_finite() && gain > best.map_or(0.0, |b| b.0) {
+                    best = Some((gain, pi));
+                }
             }
-            let h = if pick.slope != 0.0 { pick.slope } else { 1.0 };
+            let Some((_, pi)) = best else { continue };
+            used.push(pi);
+            let pick = &picks[pi];
+            let feature = feats[pick.feature].clone();
             let mut trial = accepted.clone();
             trial.push(CustomTerm {
                 target: pick.target,
-                feature: feats[pick.feature].clone(),
-                coefficient: h.clamp(-COEFFICIENT_BOUND, COEFFICIENT_BOUND),
+                feature: feature.clone(),
+                coefficient: pick.slope.clamp(-COEFFICIENT_BOUND, COEFFICIENT_BOUND),
             });
-            let m = with_terms(trial)?;
-            let mut r1 = Vec::new();
-            ctx.errors(&m, fit_w, Some(&mut r1));
-            if r1.len() != r0.len() {
+            let effect = CustomEffect::new(&name, trial)
+                .map_err(|e| DiscoveryError::Physics(ModelError::Custom(e)))?;
+            let (theta, std) = fit_effect(physics, &effect, &ctx, fit_w, cfg.iterations)?;
+            let fitted = effect.with_coefficients(&theta);
+            let mut m = physics.clone();
+            m.add_custom(fitted.clone())?;
+            let test = ctx.errors(&m, test_w, None);
+            let e_new = sum(&test);
+            let e_prev = sum(&prev_test);
+            let reduction = if e0 > 0.0 { (e_prev - e_new) / e0 } else { 0.0 };
+            let lower = bootstrap_lower(
+                test_w,
+                &prev_test,
+                &test,
+                cfg.bootstrap,
+                alpha,
+                cfg.seed
+                    ^ (round as u64 + 1 + 1000 * u64::from(positional))
+                        .wrapping_mul(0x9E37_79B9_7F4A_7C15),
+            );
+            let j = theta.len() - 1;
+            let t_ok = (theta[j] / std[j]).abs() > z;
+            let significant = reduction >= cfg.min_reduction && lower > 0.0 && t_ok;
+            let unit_time = time_unit(robot);
+            out_terms.push(DiscoveredTerm {
+                state: pick.target.name().to_string(),
+                feature: feature.name(),
+                symbol: feature.symbol(),
+                coefficient: theta[j],
+                std: std[j],
+                unit: fitted.terms()[j].coefficient_unit().format(unit_time),
+                equation: fitted.term_equation(j, theta[j], Some(std[j])),
+                error_reduction: reduction,
+                ci_lower: lower,
+                significant,
+                one_step_t: pick.t,
+                one_step_share: pick.share,
+                plot: term_plot(
+                    &regs,
+                    pick.target,
+                    &feature,
+                    &x,
+                    nf,
+                    pick.feature,
+                    pick.slope,
+                    cfg.bins,
+                    unit_time,
+                ),
+            });
+            if !significant {
                 continue;
             }
-            // secant column J = (r(h) − r(0))/h; GN gain (Jᵀr₀)²/(JᵀJ)
-            let (mut jr, mut jj) = (0.0, 0.0);
-            for (a, b) in r1.iter().zip(&r0) {
-                let jcol = (a - b) / h;
-                jr += jcol * b;
-                jj += jcol * jcol;
-            }
-            let gain = if jj > 0.0 { jr * jr / jj } else { 0.0 };
-            if gain.is_finite() && gain > best.map_or(0.0, |b| b.0) {
-                best = Some((gain, pi));
-            }
-        }
-        let Some((_, pi)) = best else { break };
-        used.push(pi);
-        let pick = &picks[pi];
-        let feature = feats[pick.feature].clone();
-        let mut trial = accepted.clone();
-        trial.push(CustomTerm {
-            target: pick.target,
-            feature: feature.clone(),
-            coefficient: pick.slope.clamp(-COEFFICIENT_BOUND, COEFFICIENT_BOUND),
-        });
-        let effect = CustomEffect::new(&name, trial)
-            .map_err(|e| DiscoveryError::Physics(ModelError::Custom(e)))?;
-        let (theta, std) = fit_effect(physics, &effect, &ctx, fit_w, cfg.iterations)?;
-        let fitted = effect.with_coefficients(&theta);
-        let mut m = physics.clone();
-        m.add_custom(fitted.clone())?;
-        let test = ctx.errors(&m, test_w, None);
-        let e_new = sum(&test);
-        let e_prev = sum(&prev_test);
-        let reduction = if e0 > 0.0 { (e_prev - e_new) / e0 } else { 0.0 };
-        let lower = bootstrap_lower(
-            test_w,
-            &prev_test,
-            &test,
-            cfg.bootstrap,
-            alpha,
-            cfg.seed ^ (round as u64 + 1).wrapping_mul(0x9E37_79B9_7F4A_7C15),
-        );
-        let j = theta.len() - 1;
-        let t_ok = (theta[j] / std[j]).abs() > z;
-        let significant = reduction >= cfg.min_reduction && lower > 0.0 && t_ok;
-        let unit_time = time_unit(robot);
-        out_terms.push(DiscoveredTerm {
-            state: pick.target.name().to_string(),
-            feature: feature.name(),
-            symbol: feature.symbol(),
-            coefficient: theta[j],
-            std: std[j],
-            unit: fitted.terms()[j].coefficient_unit().format(unit_time),
-            equation: fitted.term_equation(j, theta[j], Some(std[j])),
-            error_reduction: reduction,
-            ci_lower: lower,
-            significant,
-            one_step_t: pick.t,
-            one_step_share: pick.share,
-            plot: term_plot(
-                &regs,
-                pick.target,
-                &feature,
-                &x,
-                nf,
-                pick.feature,
-                pick.slope,
-                cfg.bins,
-                unit_time,
-            ),
-        });
-        if !significant {
+            accepted = fitted.terms().to_vec();
+            accepted_idx.push(out_terms.len() - 1);
+            prev_test = test;
+            final_fit = Some((fitted, theta, std));
+            added = true;
             break;
         }
-        accepted = fitted.terms().to_vec();
-        accepted_idx.push(out_terms.len() - 1);
-        prev_test = test;
-        final_fit = Some((fitted, theta, std));
+        if !added {
+            break;
+        }
     }
     // accepted terms report the coefficients of the final fit
     if let Some((eff, theta, std)) = &final_fit {

@@ -121,10 +121,17 @@ fn a_pair_of_library_effects_is_named_by_forward_selection() {
     let mut named = d.effects.clone();
     named.sort();
     assert_eq!(named, ["aero_drag", "steering_offset"], "{table}");
-    assert_eq!(d.selection.len(), 3, "two effects added, then none: {table}");
+    assert_eq!(
+        d.selection.len(),
+        3,
+        "two effects added, then none: {table}"
+    );
     let joint = d.joint.as_ref().expect("a joint fit");
     assert!(joint.reduction_vs_model >= 0.5, "{table}");
-    assert!((joint.params["aero_drag.c"] - 0.01).abs() <= 0.002, "{table}");
+    assert!(
+        (joint.params["aero_drag.c"] - 0.01).abs() <= 0.002,
+        "{table}"
+    );
     assert!(
         (joint.params["steering_offset.delta0"] - 0.03).abs() <= 0.005,
         "{table}"

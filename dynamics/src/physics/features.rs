@@ -575,6 +575,14 @@ impl Feature {
         &self.factors
     }
 
+    /// Whether the feature depends on where the robot is (`x`, `y` or a Gaussian bump): a
+    /// region's term, which the term search tries only after the terms that hold everywhere.
+    pub fn depends_on_position(&self) -> bool {
+        self.factors
+            .iter()
+            .any(|a| matches!(a, Atom::X | Atom::Y | Atom::Gauss { .. }))
+    }
+
     /// Name used in files: the atoms joined by `*`.
     pub fn name(&self) -> String {
         self.factors
@@ -708,12 +716,19 @@ pub fn library(robot: Robot, area: Option<Area>, grid: usize) -> Vec<Feature> {
                     cy,
                     r: round(r),
                 };
-                let f = match robot {
+                match robot {
                     // a quasi-static block moves only while pushed
-                    Robot::Pushing => vec![Atom::PushLength, g],
-                    Robot::Car => vec![g],
-                };
-                v.push(Feature { factors: f });
+                    Robot::Pushing => v.push(Feature {
+                        factors: vec![Atom::PushLength, g],
+                    }),
+                    // a region of other grip scales the tire forces there: the bump times the
+                    // saturating slip of each axle (the sign of the force goes with the slip)
+                    Robot::Car => {
+                        for f in [vec![g], vec![g, Atom::SatAlphaF], vec![g, Atom::SatAlphaR]] {
+                            v.push(Feature { factors: f });
+                        }
+                    }
+                }
             }
         }
     }
