@@ -30,7 +30,7 @@ use std::time::Instant;
 
 use dynlab_control::racing::true_car_model;
 use dynlab_diagnose::diagnosis::simdata::car_dataset;
-use dynlab_diagnose::diagnosis::{DiagnoseConfig, diagnose, diagnose_on_windows_of};
+use dynlab_diagnose::diagnosis::{DiagnoseConfig, diagnose};
 use dynlab_learn::dynamics::physics::{Effect, Target};
 use dynlab_learn::train::{KindDefaults, TrainConfig, train};
 use dynlab_learn::{Model, ModelKind, World};
@@ -306,7 +306,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                         discover: false,
                         ..cfg.clone()
                     };
-                    Some(diagnose_on_windows_of(&m, &model, &data, &tcfg)?.baseline_error)
+                    Some(diagnose(&m, &data, &tcfg)?.baseline_error)
                 }
                 None => None,
             };

@@ -23,10 +23,7 @@
 //! of the fit half, and the candidate is scored on the held-out half: `error_reduction =
 //! 1 − E_after/E_before` of the k-step error `E` (the squared error of every state dimension over
 //! k steps, each dimension divided by the RMS k-step change of that dimension in the data, so
-//! the scale is the error of the "nothing moves" model). Held-out windows whose rollout under a
-//! physics model goes through a spin (more than [`SENSITIVITY_LIMIT`] times as sensitive to the
-//! model's parameters as the median window) are left out of every score
-//! ([`Diagnosis::spin_windows`] counts them). A candidate is **significant** when the
+//! the scale is the error of the "nothing moves" model). A candidate is **significant** when the
 //! reduction is at least [`DiagnoseConfig::min_reduction`] *and* the lower end of a one-sided
 //! bootstrap confidence interval over held-out segments (resampled whole, seeded) is above zero.
 //! The interval's error probability is divided by the number of candidates tested
@@ -53,9 +50,7 @@ use dynlab_learn::dynamics::data::{
     DataError, Split, SplitMix64, StateTrajectory, Window, split_trajectories, windows,
 };
 use dynlab_learn::dynamics::physics::{Effect, ModelError, PhysicsModel};
-use dynlab_learn::fit::{
-    SENSITIVITY_LIMIT, bounded_least_squares, calm_windows, cluster_std, initial_state_after,
-};
+use dynlab_learn::fit::{bounded_least_squares, calm_windows, cluster_std, initial_state_after};
 use dynlab_learn::train::{segment, segment_origins};
 use dynlab_learn::{Dataset, LearnError, Model, World};
 
@@ -443,11 +438,6 @@ pub struct Diagnosis {
     pub segments: [usize; 2],
     /// Windows used to fit and to score.
     pub windows: [usize; 2],
-    /// Held-out windows left out of every score because their k-step rollout goes through a
-    /// spin (more than [`SENSITIVITY_LIMIT`] times as sensitive to the model's parameters as
-    /// the median window; physics models only).
-    #[serde(default)]
-    pub spin_windows: usize,
     /// The held-out k-step error of the baseline (normalised units): the model, or the model
     /// with its nominal parameters refitted on the fit half (see `nominal_refit`).
     pub baseline_error: f64,
@@ -1091,19 +1081,6 @@ pub fn diagnose(
     data: &Dataset,
     cfg: &DiagnoseConfig,
 ) -> Result<Diagnosis, DiagnosisError> {
-    diagnose_on_windows_of(model, model, data, cfg)
-}
-
-/// [`diagnose`], with the held-out windows that roll out through a spin chosen by the
-/// physics model `windows_of` instead of `model`'s: two physics models diagnosed with the same
-/// `windows_of`, data and settings are scored on the same windows (an evaluation's true model
-/// beside the fitted one).
-pub fn diagnose_on_windows_of(
-    model: &Model,
-    windows_of: &Model,
-    data: &Dataset,
-    cfg: &DiagnoseConfig,
-) -> Result<Diagnosis, DiagnosisError> {
     cfg.validate()?;
     let world = model.world();
     if data.world != world {
@@ -1216,7 +1193,7 @@ pub fn diagnose_on_windows_of(
             [t.s[w.start * ds], t.s[w.start * ds + 1]]
         })
         .collect();
-    let mut ctx = Ctx {
+    let ctx = Ctx {
         model,
         cfg,
         d: Data {
@@ -1238,12 +1215,6 @@ pub fn diagnose_on_windows_of(
         test_segments: split.validation.len(),
         positions,
     };
-    // held-out windows that roll out through a spin are left out of every score
-    let held_out = ctx.test_w.len();
-    if pure_physics && let Some(p) = windows_of.physics() {
-        ctx.test_w = spin_free_windows(&ctx, p);
-    }
-    let spin_windows = held_out - ctx.test_w.len();
     // the baseline: the model as given, or with its nominal parameters refitted on the fit half
     let mut cur = Current {
         physics: base.clone(),
@@ -1460,7 +1431,6 @@ pub fn diagnose_on_windows_of(
         steps: k,
         segments: [split.train.len(), split.validation.len()],
         windows: [ctx.fit_w.len(), ctx.test_w.len()],
-        spin_windows,
         baseline_error,
         nominal_refit,
         correlations,
@@ -1616,30 +1586,6 @@ pub(crate) fn robust_windows(
         .zip(calm_windows(&sens, limit))
         .filter_map(|(w, k)| k.then_some(*w))
         .collect()
-}
-
-/// The held-out windows without those whose k-step rollout under the model goes through a
-/// spin: more than [`SENSITIVITY_LIMIT`] times as sensitive to the model's parameters as the
-/// median window. A spinning rollout changes wholesale with a tiny change of any parameter, so
-/// its error says nothing about an effect. On perturbed cars with drag and a steering offset
-/// hidden, a few per cent of the held-out windows held enough error to put the bootstrap bound
-/// of a right effect below 0 (an offset fitted within 0.002 rad of the truth, not counted).
-fn spin_free_windows(ctx: &Ctx, physics: &PhysicsModel) -> Vec<Window> {
-    let theta0 = physics.params().to_vec();
-    robust_windows(
-        &ctx.test_w,
-        ctx.d.ds,
-        &theta0,
-        &|c: usize| 1e-4 * theta0[c].abs(),
-        &|th: &[f64], r: &mut Vec<f64>| {
-            let mut m = physics.clone();
-            m.set_params(th).is_ok() && {
-                ctx.errors(m, &ctx.test_w, Some(r));
-                true
-            }
-        },
-        SENSITIVITY_LIMIT,
-    )
 }
 
 /// One-sided lower bootstrap bound (error probability `alpha`) of the error reduction
@@ -1817,7 +1763,7 @@ impl Diagnosis {
         let mut o = String::new();
         let _ = writeln!(
             o,
-            "diagnosis of a {} {} model{} over {} held-out segments ({} windows of {} steps{}); baseline error {:.4}",
+            "diagnosis of a {} {} model{} over {} held-out segments ({} windows of {} steps); baseline error {:.4}",
             self.world,
             self.model_kind,
             if self.model_effects.is_empty() {
@@ -1828,11 +1774,6 @@ impl Diagnosis {
             self.segments[1],
             self.windows[1],
             self.steps,
-            if self.spin_windows > 0 {
-                format!(", {} through a spin left out", self.spin_windows)
-            } else {
-                String::new()
-            },
             self.baseline_error
         );
         if !self.nominal_refit.is_empty() {

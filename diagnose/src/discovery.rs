@@ -15,12 +15,15 @@
 //!    feature of the *estimated* state such as the slip angle `α_f` correlates with the
 //!    state-estimation noise that the stiff tire dynamics amplify, and wins the one-step fit
 //!    against the true term.) Pairs with the shape of a nominal parameter's own term
-//!    ([`Target::nominal_parameter`]: the car's `v̇ₓ` on `d`, `d·vₓ`, `1`, `vₓ²`) are not tried:
-//!    such a term is a change of that parameter, which training fits, not a missing effect.
+//!    ([`Target::nominal_parameter`]: the car's `v̇ₓ` on `d`, `d·vₓ`, `1`, `vₓ²`; pushing `ẋ_b`
+//!    on `ℓ·cos φ`, `θ̇` on `ℓ·sin φ`, `ℓ·p`) are not tried: such a term is a change of that
+//!    parameter, not a missing effect.
 //! 3. **Sparse forward selection on the k-step error**: each round scores every screened pair by
 //!    its Gauss–Newton gain on the fit half's k-step open-loop error (the error each state
 //!    dimension divided by its RMS k-step change, as in the [diagnosis](crate::diagnosis)), with
-//!    the terms chosen so far in the model. The best becomes, with those, a [`CustomEffect`]
+//!    the terms chosen so far in the model; terms that hold everywhere first, and a region's
+//!    term (a feature of the position, [`Feature::depends_on_position`]) only when the best of
+//!    those is not significant. The best becomes, with those, a [`CustomEffect`]
 //!    whose coefficients are refitted on the fit half (bounded Levenberg–Marquardt) and scored
 //!    on the held-out half. It is **significant** when it removes at least
 //!    [`DiscoveryConfig::min_reduction`] of the baseline error, the lower end of a one-sided

@@ -33,7 +33,7 @@ pub fn diagnosis_html(d: &Diagnosis) -> String {
     );
     let _ = writeln!(
         o,
-        "<p>{} {} model{}; {}-step open-loop error on {} held-out segments ({} windows{}), candidates fitted on {} other segments. Baseline error {} (normalised: 1 = the error of a model that predicts no motion).</p>",
+        "<p>{} {} model{}; {}-step open-loop error on {} held-out segments ({} windows), candidates fitted on {} other segments. Baseline error {} (normalised: 1 = the error of a model that predicts no motion).</p>",
         d.world,
         esc(&d.model_kind),
         if d.model_effects.is_empty() {
@@ -44,14 +44,6 @@ pub fn diagnosis_html(d: &Diagnosis) -> String {
         d.steps,
         d.segments[1],
         d.windows[1],
-        if d.spin_windows > 0 {
-            format!(
-                "; {} whose rollout goes through a spin left out of every score",
-                d.spin_windows
-            )
-        } else {
-            String::new()
-        },
         d.segments[0],
         g4(d.baseline_error)
     );
