@@ -17,7 +17,17 @@ fn run_car(effect: Option<Effect>, seed: u64) -> Diagnosis {
 }
 
 fn run_car_with(effect: Option<Effect>, seed: u64, effects: Option<Vec<Effect>>) -> Diagnosis {
-    let data = car_dataset(&car_scenario(effect, 1.0), 3, 15.0, 300 + seed, 2).unwrap();
+    run_scenario(&car_scenario(effect, 1.0), 300 + seed, seed, effects)
+}
+
+/// The nominal physics model at its documented values diagnosed on 3 × 15 s of `scenario`.
+fn run_scenario(
+    scenario: &dynlab_sim::CarScenario,
+    data_seed: u64,
+    seed: u64,
+    effects: Option<Vec<Effect>>,
+) -> Diagnosis {
+    let data = car_dataset(scenario, 3, 15.0, data_seed, 2).unwrap();
     let model = Model::new(
         ModelKind::Physics,
         World::Car,
@@ -98,25 +108,7 @@ fn a_pair_of_library_effects_is_named_by_forward_selection() {
     // drag and a steering offset at once: both added, one step each, both recovered
     let mut scenario = car_scenario(Some(Effect::AeroDrag), 1.0);
     scenario.effects.steering_offset = Some(dynlab_sim::car::SteeringOffset::default());
-    let data = car_dataset(&scenario, 3, 15.0, 310, 2).unwrap();
-    let model = Model::new(
-        ModelKind::Physics,
-        World::Car,
-        data.pose_dt_s,
-        None,
-        None,
-        Some(PhysicsModel::car(&[]).unwrap()),
-        default_physics_solver(World::Car),
-    )
-    .unwrap();
-    let cfg = DiagnoseConfig {
-        seed: 7,
-        fit_windows: 400,
-        score_windows: 1500,
-        bootstrap: 500,
-        ..DiagnoseConfig::default()
-    };
-    let d = diagnose(&model, &data, &cfg).unwrap();
+    let d = run_scenario(&scenario, 310, 7, None);
     let table = d.table();
     let mut named = d.effects.clone();
     named.sort();
