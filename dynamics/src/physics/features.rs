@@ -783,6 +783,29 @@ mod tests {
     }
 
     #[test]
+    fn region_features_are_told_from_global_ones() {
+        let area = Area {
+            lo: [-1.0, -1.0],
+            hi: [1.0, 1.0],
+        };
+        let lib = library(Robot::Car, Some(area), 3);
+        let region: Vec<&Feature> = lib.iter().filter(|f| f.depends_on_position()).collect();
+        // x, y and each of the 9 bumps alone and times the slip of each axle
+        assert_eq!(region.len(), 2 + 27);
+        for axle in [Atom::SatAlphaF, Atom::SatAlphaR] {
+            let n = region
+                .iter()
+                .filter(|f| f.factors().contains(&axle))
+                .count();
+            assert_eq!(n, 9);
+        }
+        let f = Feature::parse("gauss(0.5,0,0.3)*sat_alpha_f").unwrap();
+        assert!(f.depends_on_position());
+        assert!(!Feature::parse("delta*vx").unwrap().depends_on_position());
+        assert!(!Feature::parse("sat_alpha_r").unwrap().depends_on_position());
+    }
+
+    #[test]
     fn doubled_heading_has_no_sign() {
         // a grain has no sign: the heading θ and its reverse θ + π give the same value, and
         // a·sin 2θ + b·cos 2θ is A·sin 2(θ − γ) for the grain angle γ
