@@ -700,8 +700,12 @@ pub fn discover_terms_split(
         let base_m = with_terms(accepted.clone())?;
         let mut r0 = Vec::new();
         ctx.errors(&base_m, fit_w, Some(&mut r0));
-        let mut added = false;
-        for positional in [false, true] {
+        // the screened pair of the given kind with the largest Gauss–Newton gain on the fit
+        // half: secant column J = (r(h) − r(0))/h, gain (Jᵀr₀)²/(JᵀJ)
+        let best_pick = |positional: bool,
+                         used: &[usize],
+                         accepted: &[CustomTerm]|
+         -> Result<Option<usize>, DiscoveryError> {
             let mut best: Option<(f64, usize)> = None;
             for (pi, pick) in picks.iter().enumerate() {
                 if used.contains(&pi)
@@ -713,7 +717,7 @@ pub fn discover_terms_split(
                     continue;
                 }
                 let h = if pick.slope != 0.0 { pick.slope } else { 1.0 };
-                let mut trial = accepted.clone();
+                let mut trial = accepted.to_vec();
                 trial.push(CustomTerm {
                     target: pick.target,
                     feature: feats[pick.feature].clone(),
@@ -725,7 +729,6 @@ pub fn discover_terms_split(
                 if r1.len() != r0.len() {
                     continue;
                 }
-                // secant column J = (r(h) − r(0))/h; GN gain (Jᵀr₀)²/(JᵀJ)
                 let (mut jr, mut jj) = (0.0, 0.0);
                 for (a, b) in r1.iter().zip(&r0) {
                     let jcol = (a - b) / h;
@@ -737,7 +740,13 @@ pub fn discover_terms_split(
                     best = Some((gain, pi));
                 }
             }
-            let Some((_, pi)) = best else { continue };
+            Ok(best.map(|b| b.1))
+        };
+        let mut added = false;
+        for positional in [false, true] {
+            let Some(pi) = best_pick(positional, &used, &accepted)? else {
+                continue;
+            };
             used.push(pi);
             let pick = &picks[pi];
             let feature = feats[pick.feature].clone();
