@@ -95,7 +95,8 @@ fn anisotropic_friction_is_found_beyond_the_library() {
 
 /// Nominal data of the same kind: nothing named, and no term on the grain's features. (With
 /// 1000 pushes the nominal model's own structural error can show as a term on other features —
-/// `θ̇` on `ℓ·sin φ`, the under-turning of angled pushes; that is the model, not a grain.)
+/// `ẏ_b` on `ℓ·sin φ`, the block sliding sideways under an angled push more than the model
+/// predicts; that is the model, not a grain.)
 #[test]
 fn nominal_pushing_data_have_no_grain_term() {
     for seed in [1u64, 2] {
