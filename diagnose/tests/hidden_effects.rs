@@ -6,11 +6,10 @@
 //!
 //! Data are generated in process (seeded), small but sufficient: 3 episodes of 15 s at 100 Hz.
 
-use dynlab_diagnose::diagnosis::simdata::{car_dataset, car_scenario};
+use dynlab_diagnose::diagnosis::simdata::{car_dataset, car_scenario, nominal_model};
 use dynlab_diagnose::diagnosis::{DiagnoseConfig, Diagnosis, diagnose};
-use dynlab_learn::dynamics::physics::{Effect, PhysicsModel};
-use dynlab_learn::train::default_physics_solver;
-use dynlab_learn::{Model, ModelKind, World};
+use dynlab_learn::World;
+use dynlab_learn::dynamics::physics::Effect;
 
 fn run_car(effect: Option<Effect>, seed: u64) -> Diagnosis {
     run_car_with(effect, seed, None)
@@ -28,16 +27,7 @@ fn run_scenario(
     effects: Option<Vec<Effect>>,
 ) -> Diagnosis {
     let data = car_dataset(scenario, 3, 15.0, data_seed, 2).unwrap();
-    let model = Model::new(
-        ModelKind::Physics,
-        World::Car,
-        data.pose_dt_s,
-        None,
-        None,
-        Some(PhysicsModel::car(&[]).unwrap()),
-        default_physics_solver(World::Car),
-    )
-    .unwrap();
+    let model = nominal_model(World::Car, data.pose_dt_s).unwrap();
     let cfg = DiagnoseConfig {
         seed,
         fit_windows: 400,

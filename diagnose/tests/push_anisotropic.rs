@@ -9,11 +9,10 @@
 //! the error), noise ×2; the model is the nominal pushing physics model, whose `c` and `κ` the
 //! diagnosis refits. Everything is seeded.
 
-use dynlab_diagnose::diagnosis::simdata::{push_dataset_with, push_scenario};
+use dynlab_diagnose::diagnosis::simdata::{nominal_model, push_dataset_with, push_scenario};
 use dynlab_diagnose::diagnosis::{DiagnoseConfig, Diagnosis, diagnose};
-use dynlab_learn::dynamics::physics::{CustomEffect, PhysicsModel};
-use dynlab_learn::train::default_physics_solver;
-use dynlab_learn::{Dataset, Model, ModelKind, World};
+use dynlab_learn::dynamics::physics::CustomEffect;
+use dynlab_learn::{Dataset, World};
 use dynlab_sim::PushExplorer;
 use dynlab_sim::push::AnisotropicFriction;
 
@@ -40,16 +39,7 @@ fn data(grain: Option<f64>, seed: u64) -> Dataset {
 }
 
 fn diagnosed(data: &Dataset, seed: u64) -> Diagnosis {
-    let model = Model::new(
-        ModelKind::Physics,
-        World::Push,
-        data.pose_dt_s,
-        None,
-        None,
-        Some(PhysicsModel::pushing(&[]).unwrap()),
-        default_physics_solver(World::Push),
-    )
-    .unwrap();
+    let model = nominal_model(World::Push, data.pose_dt_s).unwrap();
     let cfg = DiagnoseConfig {
         seed,
         ..DiagnoseConfig::default()

@@ -6,7 +6,7 @@
 //! Data are generated in process (seeded, the simulator's scenarios of
 //! `diagnosis::simdata::push_scenario`): 20 episodes × 10 pushes, a few seconds per test.
 
-use dynlab_diagnose::diagnosis::simdata::{push_dataset, push_scenario};
+use dynlab_diagnose::diagnosis::simdata::{nominal_model, push_dataset, push_scenario};
 use dynlab_diagnose::diagnosis::{DiagnoseConfig, Diagnosis, diagnose};
 use dynlab_learn::dynamics::conventions::wrap_angle;
 use dynlab_learn::dynamics::ode;
@@ -130,16 +130,7 @@ fn pusher_friction_term_matches_the_simulator() {
 
 fn run(effect: Option<Effect>, seed: u64) -> Diagnosis {
     let d = data(effect, 1.0, 20, 400 + seed);
-    let model = Model::new(
-        ModelKind::Physics,
-        World::Push,
-        d.pose_dt_s,
-        None,
-        None,
-        Some(PhysicsModel::pushing(&[]).unwrap()),
-        default_physics_solver(World::Push),
-    )
-    .unwrap();
+    let model = nominal_model(World::Push, d.pose_dt_s).unwrap();
     let cfg = DiagnoseConfig {
         seed,
         ..DiagnoseConfig::default()

@@ -3,12 +3,32 @@
 //! commands → [`Dataset::from_samples`]).
 
 use dynlab_learn::dynamics::data::{CommandSample, PoseSample, SavGol};
-use dynlab_learn::dynamics::physics::Effect;
-use dynlab_learn::{Dataset, World};
+use dynlab_learn::dynamics::physics::{Effect, PhysicsModel};
+use dynlab_learn::train::default_physics_solver;
+use dynlab_learn::{Dataset, Model, ModelKind, World};
 use dynlab_sim::episode::{Record, concatenate, generate_car_episodes, generate_push_episodes};
 use dynlab_sim::{CarExplorer, CarScenario, PushExplorer, PushScenario, Region, RegionShape};
 
 use super::DiagnosisError;
+
+/// The nominal physics model of `world` at its documented values (the simulator's nominal
+/// world), stepping `dt` \[s\] with the default solver: the model the diagnosis tests hold
+/// against simulator data.
+pub fn nominal_model(world: World, dt: f64) -> Result<Model, DiagnosisError> {
+    let physics = match world {
+        World::Car => PhysicsModel::car(&[])?,
+        World::Push => PhysicsModel::pushing(&[])?,
+    };
+    Ok(Model::new(
+        ModelKind::Physics,
+        world,
+        dt,
+        None,
+        None,
+        Some(physics),
+        default_physics_solver(world),
+    )?)
+}
 
 /// Gap between episodes on the time line \[ns\] (splits them into trajectories).
 const GAP_NS: u64 = 1_000_000_000;
