@@ -398,8 +398,63 @@ impl Ctx<'_> {
 /// The one-step regression data of one target.
 struct Regression {
     target: Target,
-    /// Residual of the derivative per transition.
+    /// Rows per transition: 1, or for the car's steering angle `δ` the three velocity
+    /// derivatives it acts on.
+    rows: usize,
+    /// The residual per row (`n × rows`; for `δ` each derivative divided by its RMS residual).
     y: Vec<f64>,
+    /// Per row, what a unit of the target adds to `y` (1, or for `δ` the derivative's
+    /// sensitivity to the steering angle on the same scale): a term's column is this times the
+    /// feature.
+    gain: Vec<f64>,
+    /// Per transition, the residual in the target's units and its weight, for the plot (for
+    /// `δ` the steering-angle error the three residuals imply, weighted by its sensitivity).
+    point: Vec<(f64, f64)>,
+}
+
+impl Regression {
+    /// A derivative's residual `y`, one row per transition.
+    fn direct(target: Target, y: Vec<f64>) -> Self {
+        Self {
+            target,
+            rows: 1,
+            gain: vec![1.0; y.len()],
+            point: y.iter().map(|&v| (v, 1.0)).collect(),
+            y,
+        }
+    }
+
+    /// The steering angle's regression from the velocity derivatives' residuals `r` and their
+    /// sensitivities `g = ∂(v̇ₓ, v̇_y, ω̇)/∂δ` (both `n × 3`), each derivative divided by its
+    /// RMS residual.
+    fn steering(r: &[f64], g: &[f64]) -> Self {
+        let n = r.len() / 3;
+        let w: Vec<f64> = (0..3)
+            .map(|c| {
+                let ms = (0..n).map(|i| r[i * 3 + c].powi(2)).sum::<f64>() / n.max(1) as f64;
+                if ms > 0.0 { 1.0 / ms.sqrt() } else { 0.0 }
+            })
+            .collect();
+        let y: Vec<f64> = r.iter().enumerate().map(|(j, v)| v * w[j % 3]).collect();
+        let gain: Vec<f64> = g.iter().enumerate().map(|(j, v)| v * w[j % 3]).collect();
+        let point = (0..n)
+            .map(|i| {
+                let (mut gy, mut gg) = (0.0, 0.0);
+                for j in i * 3..i * 3 + 3 {
+                    gy += gain[j] * y[j];
+                    gg += gain[j] * gain[j];
+                }
+                if gg > 0.0 { (gy / gg, gg) } else { (0.0, 0.0) }
+            })
+            .collect();
+        Self {
+            target: Target::Delta,
+            rows: 3,
+            y,
+            gain,
+            point,
+        }
+    }
 }
 
 /// Searches the feature library for terms the model of `model` misses on `data`; see the
@@ -552,36 +607,41 @@ pub fn discover_terms_split(
     let mut pred = vec![0.0; n * dp];
     physics.integrate_step(solver, n, &s0, &u0, h, &mut pred);
     let targets = Target::all(robot);
-    let regs: Vec<Regression> = targets
-        .iter()
-        .map(|&target| {
-            let y = trans
-                .iter()
-                .enumerate()
-                .map(|(i, &(ti, a))| {
-                    let t = &trajs[ti];
-                    let meas = &t.s[(a + 1) * ds..(a + 2) * ds];
-                    let d = |c: usize| {
-                        let e = meas[c] - pred[i * dp + c];
-                        if c == angle { wrap_angle(e) } else { e }
-                    };
-                    let th = s0[i * dp + 2];
-                    let v = match target {
-                        Target::Vx => d(3),
-                        Target::Vy => d(4),
-                        Target::Omega => d(5),
-                        Target::X => d(0),
-                        Target::Y => d(1),
-                        Target::Theta => d(2),
-                        Target::BlockX => th.cos() * d(0) + th.sin() * d(1),
-                        Target::BlockY => -th.sin() * d(0) + th.cos() * d(1),
-                    };
-                    v / h
-                })
+    // the residual of a derivative at transition i
+    let residual = |i: usize, target: Target| -> f64 {
+        let (ti, a) = trans[i];
+        let meas = &trajs[ti].s[(a + 1) * ds..(a + 2) * ds];
+        let d = |c: usize| {
+            let e = meas[c] - pred[i * dp + c];
+            if c == angle { wrap_angle(e) } else { e }
+        };
+        let th = s0[i * dp + 2];
+        let v = match target {
+            Target::Vx => d(3),
+            Target::Vy => d(4),
+            Target::Omega => d(5),
+            Target::X => d(0),
+            Target::Y => d(1),
+            Target::Theta => d(2),
+            Target::BlockX => th.cos() * d(0) + th.sin() * d(1),
+            Target::BlockY => -th.sin() * d(0) + th.cos() * d(1),
+            // not a derivative: see `Regression::steering`
+            Target::Delta => 0.0,
+        };
+        v / h
+    };
+    let mut regs: Vec<Regression> = Vec::new();
+    for &target in &targets {
+        regs.push(if target == Target::Delta {
+            let velocities = [Target::Vx, Target::Vy, Target::Omega];
+            let r: Vec<f64> = (0..n)
+                .flat_map(|i| velocities.map(|t| residual(i, t)))
                 .collect();
-            Regression { target, y }
-        })
-        .collect();
+            Regression::steering(&r, &steering_sensitivity(physics, &s0, &u0)?)
+        } else {
+            Regression::direct(target, (0..n).map(|i| residual(i, target)).collect())
+        });
+    }
     // features
     let area = {
         let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
@@ -595,8 +655,10 @@ pub fn discover_terms_split(
     };
     let feats: Vec<Feature> = library(robot, Some(area), cfg.grid);
     // (target, feature) pairs with the shape of a nominal parameter's own term are that
-    // parameter, not an effect: not tried
-    let tried = |t: Target, f: usize| t.nominal_parameter(&feats[f]).is_none();
+    // parameter, not an effect, and the steering angle takes only an input's shapes: not tried
+    let tried = |t: Target, f: usize| {
+        t.searched_with(&feats[f]) && t.nominal_parameter(&feats[f]).is_none()
+    };
     let nf = feats.len();
     let params = physics.params();
     let mut x = vec![0.0; n * nf];
@@ -630,21 +692,31 @@ pub fn discover_terms_split(
         if yy <= 0.0 {
             continue;
         }
+        let clusters: Vec<usize> = cluster
+            .iter()
+            .flat_map(|&c| std::iter::repeat_n(c, reg.rows))
+            .collect();
         for f in (0..nf).filter(|&f| tried(reg.target, f)) {
-            let Some((b, rss)) = least_squares(&x, nf, &reg.y, &[f]) else {
+            // the term's column, fitted alone
+            let jac: Vec<f64> = (0..n * reg.rows)
+                .map(|j| reg.gain[j] * x[(j / reg.rows) * nf + f])
+                .collect();
+            let jj: f64 = jac.iter().map(|v| v * v).sum();
+            if !(jj > 0.0) {
                 continue;
-            };
-            let jac: Vec<f64> = (0..n).map(|i| x[i * nf + f]).collect();
-            let r: Vec<f64> = (0..n).map(|i| b[0] * jac[i] - reg.y[i]).collect();
-            let sd = cluster_std(&jac, &r, 1, &[true], &cluster);
-            let t = (b[0] / sd[0]).abs();
+            }
+            let b = jac.iter().zip(&reg.y).map(|(a, y)| a * y).sum::<f64>() / jj;
+            let r: Vec<f64> = jac.iter().zip(&reg.y).map(|(a, y)| b * a - y).collect();
+            let rss: f64 = r.iter().map(|v| v * v).sum();
+            let sd = cluster_std(&jac, &r, 1, &[true], &clusters);
+            let t = (b / sd[0]).abs();
             if t.is_finite() && t > z {
                 picks.push(Pick {
                     target: reg.target,
                     feature: f,
                     share: (yy - rss) / yy,
                     t,
-                    slope: b[0],
+                    slope: b,
                 });
             }
         }
@@ -980,74 +1052,39 @@ fn fit_effect(
     Ok((res.theta, std))
 }
 
-/// Least squares of `y` on the columns `cols` of `x` (`n × nf`): coefficients and residual sum
-/// of squares, `None` when singular.
-fn least_squares(x: &[f64], nf: usize, y: &[f64], cols: &[usize]) -> Option<(Vec<f64>, f64)> {
-    let m = cols.len();
-    let mut a = vec![0.0; m * m];
-    let mut b = vec![0.0; m];
-    for (i, yi) in y.iter().enumerate() {
-        let row = &x[i * nf..(i + 1) * nf];
-        for p in 0..m {
-            let vp = row[cols[p]];
-            b[p] += vp * yi;
-            for q in p..m {
-                a[p * m + q] += vp * row[cols[q]];
-            }
-        }
+/// `∂(v̇ₓ, v̇_y, ω̇)/∂δ` of `physics` at each state of `s` (`n × dim_state`) and input of `u`
+/// (`n × dim_u`): the derivatives' change per radian of a `δ` term (through the servo's lag when the
+/// model has one), `n × 3`.
+fn steering_sensitivity(
+    physics: &PhysicsModel,
+    s: &[f64],
+    u: &[f64],
+) -> Result<Vec<f64>, DiscoveryError> {
+    const EPS: f64 = 1e-6;
+    let one = Feature::parse("1").expect("the constant feature parses");
+    let probe = CustomEffect::new(
+        "steering_probe",
+        vec![CustomTerm {
+            target: Target::Delta,
+            feature: one,
+            coefficient: EPS,
+        }],
+    )
+    .map_err(|e| DiscoveryError::Physics(ModelError::Custom(e)))?;
+    let mut moved = physics.clone();
+    moved.add_custom(probe)?;
+    let dp = physics.dim_state();
+    let n = s.len() / dp.max(1);
+    let du = u.len() / n.max(1);
+    let (mut f0, mut f1) = (vec![0.0; dp], vec![0.0; dp]);
+    let mut g = Vec::with_capacity(n * 3);
+    for i in 0..n {
+        let (si, ui) = (&s[i * dp..(i + 1) * dp], &u[i * du..(i + 1) * du]);
+        physics.eval_one(si, ui, &mut f0);
+        moved.eval_one(si, ui, &mut f1);
+        g.extend((3..6).map(|c| (f1[c] - f0[c]) / EPS));
     }
-    for p in 0..m {
-        for q in 0..p {
-            a[p * m + q] = a[q * m + p];
-        }
-    }
-    let diag_max = (0..m).map(|p| a[p * m + p]).fold(0.0, f64::max);
-    if (0..m).any(|p| a[p * m + p] <= 1e-12 * diag_max.max(1e-300)) {
-        return None;
-    }
-    let coef = solve(&a, &b, m)?;
-    let mut rss = 0.0;
-    for (i, yi) in y.iter().enumerate() {
-        let row = &x[i * nf..(i + 1) * nf];
-        let f: f64 = cols.iter().zip(&coef).map(|(&c, k)| row[c] * k).sum();
-        rss += (yi - f) * (yi - f);
-    }
-    Some((coef, rss))
-}
-
-/// Gaussian elimination with partial pivoting; `None` when (nearly) singular.
-fn solve(a: &[f64], b: &[f64], n: usize) -> Option<Vec<f64>> {
-    let mut m = a.to_vec();
-    let mut x = b.to_vec();
-    let scale = (0..n).map(|i| m[i * n + i].abs()).fold(0.0, f64::max);
-    for col in 0..n {
-        let piv =
-            (col..n).max_by(|&i, &j| m[i * n + col].abs().total_cmp(&m[j * n + col].abs()))?;
-        if m[piv * n + col].abs() <= 1e-10 * scale {
-            return None;
-        }
-        if piv != col {
-            for c in 0..n {
-                m.swap(piv * n + c, col * n + c);
-            }
-            x.swap(piv, col);
-        }
-        for r in col + 1..n {
-            let f = m[r * n + col] / m[col * n + col];
-            for c in col..n {
-                m[r * n + c] -= f * m[col * n + c];
-            }
-            x[r] -= f * x[col];
-        }
-    }
-    for col in (0..n).rev() {
-        let mut s = x[col];
-        for c in col + 1..n {
-            s -= m[col * n + c] * x[c];
-        }
-        x[col] = s / m[col * n + col];
-    }
-    x.iter().all(|v| v.is_finite()).then_some(x)
+    Ok(g)
 }
 
 /// The standard normal quantile `Φ⁻¹(p)` (bisection on `erfc`, to ~1e-9).
@@ -1096,12 +1133,12 @@ fn term_plot(
     bins: usize,
     time: &str,
 ) -> TermPlot {
-    let y = &regs
+    let pts = &regs
         .iter()
         .find(|r| r.target == target)
         .expect("a regression per target")
-        .y;
-    let mut idx: Vec<usize> = (0..y.len()).collect();
+        .point;
+    let mut idx: Vec<usize> = (0..pts.len()).collect();
     idx.sort_by(|&a, &b| x[a * nf + f].total_cmp(&x[b * nf + f]));
     let nb = bins.max(1).min(idx.len().max(1));
     let mut out = Vec::new();
@@ -1110,10 +1147,22 @@ fn term_plot(
         if chunk.is_empty() {
             continue;
         }
-        let m = chunk.len() as f64;
-        let xm = chunk.iter().map(|&i| x[i * nf + f]).sum::<f64>() / m;
-        let ym = chunk.iter().map(|&i| y[i]).sum::<f64>() / m;
-        let var = chunk.iter().map(|&i| (y[i] - ym).powi(2)).sum::<f64>() / (m - 1.0).max(1.0);
+        // weighted (the weights are 1 except for the steering angle's implied error)
+        let sw: f64 = chunk.iter().map(|&i| pts[i].1).sum();
+        let sw2: f64 = chunk.iter().map(|&i| pts[i].1 * pts[i].1).sum();
+        if !(sw > 0.0) {
+            continue;
+        }
+        let xm = chunk.iter().map(|&i| pts[i].1 * x[i * nf + f]).sum::<f64>() / sw;
+        let ym = chunk.iter().map(|&i| pts[i].1 * pts[i].0).sum::<f64>() / sw;
+        let var = chunk
+            .iter()
+            .map(|&i| pts[i].1 * (pts[i].0 - ym).powi(2))
+            .sum::<f64>()
+            / sw;
+        // effective sample size of the weights (the chunk's size when they are equal)
+        let m = sw * sw / sw2;
+        let var = var * m / (m - 1.0).max(1.0);
         out.push(Bin {
             x: xm,
             mean: ym,
@@ -1307,15 +1356,5 @@ mod tests {
         assert!((normal_quantile(0.975) - 1.959_964).abs() < 1e-5);
         assert!((normal_quantile(0.5)).abs() < 1e-6);
         assert!((normal_quantile(1.0 - 1e-4) - 3.719_016).abs() < 1e-4);
-    }
-
-    #[test]
-    fn least_squares_recovers_a_line() {
-        let n = 50;
-        let x: Vec<f64> = (0..n).flat_map(|i| [i as f64, 1.0]).collect();
-        let y: Vec<f64> = (0..n).map(|i| 2.0 * i as f64 - 1.0).collect();
-        let (b, rss) = least_squares(&x, 2, &y, &[0, 1]).unwrap();
-        assert!((b[0] - 2.0).abs() < 1e-9 && (b[1] + 1.0).abs() < 1e-9 && rss < 1e-12);
-        assert!(least_squares(&x, 2, &y, &[0, 0]).is_none());
     }
 }

@@ -13,7 +13,7 @@ use dynlab_diagnose::discovery::{Discovery, DiscoveryConfig, discover_terms, dis
 use dynlab_learn::dynamics::data::{CommandSample, PoseSample, SavGol, SplitMix64};
 use dynlab_learn::dynamics::ode::Solver;
 use dynlab_learn::dynamics::physics::features::library;
-use dynlab_learn::dynamics::physics::{CustomEffect, PhysicsModel, Robot};
+use dynlab_learn::dynamics::physics::{CustomEffect, PhysicsModel, Robot, Target};
 use dynlab_learn::train::default_physics_solver;
 use dynlab_learn::{Dataset, Model, ModelKind, TrainConfig, World, load_model, save_model, train};
 
@@ -239,7 +239,19 @@ fn a_nominal_parameter_change_is_not_reported_as_a_term() {
     let grid = DiscoveryConfig::default().grid;
     // each bump alone and times the saturating slip of each axle
     let features = library(Robot::Car, None, 0).len() + 3 * grid * grid;
-    assert_eq!(d.pairs_tried, 3 * features - shaped.len(), "{}", d.table());
+    // the steering angle takes features of the commands and the speed, but not `1` (the
+    // library's steering offset)
+    let steering = library(Robot::Car, None, 0)
+        .iter()
+        .filter(|f| Target::Delta.searched_with(f) && Target::Delta.nominal_parameter(f).is_none())
+        .count();
+    assert!(steering >= 5, "δ·vₓ, δ·vₓ², δ·|v|, … are tried on δ");
+    assert_eq!(
+        d.pairs_tried,
+        3 * features - shaped.len() + steering,
+        "{}",
+        d.table()
+    );
 }
 
 /// `train` with the discovered custom effect (the `--effects-file` path) lowers the held-out

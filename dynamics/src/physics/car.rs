@@ -178,13 +178,15 @@ pub(crate) fn disc<R: Real>(x: R, y: R, cx: R, cy: R, r: R, w: R) -> R {
     ((r - dist) / w).sigmoid()
 }
 
-/// The car vector field with the effects in `slots` whose `active` flag is set.
+/// The car vector field with the effects in `slots` whose `active` flag is set; `steer` is
+/// added to the steering angle the tires see (custom `δ` terms).
 pub(crate) fn rhs<R: Real>(
     p: &[R],
     slots: &[Slot],
     active: &[bool],
     s: &[R],
     u: &[R],
+    steer: R,
     out: &mut [R],
 ) {
     let [
@@ -223,6 +225,8 @@ pub(crate) fn rhs<R: Real>(
             _ => {}
         }
     }
+    // custom `δ` terms correct the angle the tires see
+    let delta = delta + steer;
     let (sd, cd) = (delta.sin(), delta.cos());
     let vyf = vy + lf * om;
     let v_long_f = cd * vx + sd * vyf;

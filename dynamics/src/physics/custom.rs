@@ -10,7 +10,10 @@
 //! ```
 //!
 //! **Targets.** Car (time in seconds): `vx`, `vy` (`v̇ₓ`, `v̇_y` in m/s²) and `omega` (`ω̇` in
-//! 1/s²); the pose kinematics stay as they are. Pushing (time in pushes, one push integrates
+//! 1/s²); the pose kinematics stay as they are. `delta` (`δ` in rad) is not a derivative: it
+//! corrects the **effective steering angle** the tires see (after the servo's lag, when the model
+//! has one), so one term acts on `v̇_y` and `ω̇` through the tire model the way an input
+//! nonlinearity does (a steering gain that changes with speed, `δ += θ·δ·vₓ²`). Pushing (time in pushes, one push integrates
 //! normalised time over `[0, 1]`): `x`, `y`, `theta` add a rate in the **world (table) frame**,
 //! so a term constant over the push moves the block by `θ·feature` per push; `bx`, `by` add it
 //! in the **block frame** (rotated by the block's current heading `θ`), for effects that move
@@ -40,6 +43,8 @@ pub enum Target {
     Vy,
     /// Car: `ω̇`.
     Omega,
+    /// Car: the effective steering angle `δ` (an input correction, not a derivative).
+    Delta,
     /// Pushing: world `ẋ` (per push).
     X,
     /// Pushing: world `ẏ` (per push).
@@ -52,10 +57,11 @@ pub enum Target {
     BlockY,
 }
 
-const TARGETS: [(Target, &str, &str, Unit, Robot); 8] = [
+const TARGETS: [(Target, &str, &str, Unit, Robot); 9] = [
     (Target::Vx, "vx", "v̇ₓ", Unit::new(1, -2), Robot::Car),
     (Target::Vy, "vy", "v̇_y", Unit::new(1, -2), Robot::Car),
     (Target::Omega, "omega", "ω̇", Unit::new(0, -2), Robot::Car),
+    (Target::Delta, "delta", "δ", Unit::new(0, 0), Robot::Car),
     (Target::X, "x", "ẋ", Unit::new(1, -1), Robot::Pushing),
     (Target::Y, "y", "ẏ", Unit::new(1, -1), Robot::Pushing),
     (
@@ -92,11 +98,11 @@ impl Target {
     pub fn name(self) -> &'static str {
         self.entry().1
     }
-    /// Symbol of the derivative (`ω̇`, `ẋ_b`).
+    /// Symbol of the derivative (`ω̇`, `ẋ_b`), or of the input (`δ`).
     pub fn symbol(self) -> &'static str {
         self.entry().2
     }
-    /// Unit of the derivative.
+    /// Unit of the derivative (of the input for `δ`).
     pub fn unit(self) -> Unit {
         self.entry().3
     }
@@ -123,17 +129,34 @@ impl Target {
     /// length `L` (a block or finger a few per cent off its nominal size); it turns by the
     /// off-centre part of the push over the limit-surface ratio, so `θ̇` on `ℓ·sin φ`, `ℓ·φ`
     /// or `ℓ·p` is a change of `c` (on perturbed nominal worlds such terms passed in 5 of 10
-    /// seeds of 1000 pushes).
+    /// seeds of 1000 pushes). `δ` on `1` is the library's `steering_offset` (`delta0`).
     pub fn nominal_parameter(self, feature: &Feature) -> Option<&'static str> {
         match (self, feature.name().as_str()) {
             (Target::Vx, "d") => Some("Cm1"),
             (Target::Vx, "d*vx" | "d*|vx|") => Some("Cm2"),
             (Target::Vx, "1") => Some("Cr0"),
             (Target::Vx, "vx*vx" | "vx*|vx|") => Some("Cr2"),
+            (Target::Delta, "1") => Some("steering_offset.delta0"),
             (Target::BlockX, "l" | "l*cos_phi") => Some("L"),
             (Target::Theta, "l*sin_phi" | "l*phi" | "l*p") => Some("c"),
             _ => None,
         }
+    }
+
+    /// Whether the term search tries `feature` on this target: every feature on a derivative;
+    /// on the steering angle `δ` only features of the commands and the speed (`δ`, `d`, `vₓ`,
+    /// `|vₓ|`, `|v|`), the shapes of an input's nonlinearity. With a slip angle, `ω`, `v_y` or
+    /// a position in it a `δ` term is a change of the tire model (on a car whose tires were
+    /// 10 % off the model's, `δ += 0.48·α_r·vₓ` passed the search's test). A custom effect file
+    /// may still put any feature on `δ`.
+    pub fn searched_with(self, feature: &Feature) -> bool {
+        self != Target::Delta
+            || feature.factors().iter().all(|a| {
+                matches!(
+                    a,
+                    Atom::Delta | Atom::Throttle | Atom::Vx | Atom::AbsVx | Atom::Speed
+                )
+            })
     }
 
     /// Looks a target up by name.
@@ -145,7 +168,7 @@ impl Target {
             .ok_or_else(|| CustomError::UnknownState {
                 name: name.to_string(),
                 known:
-                    "car: vx, vy, omega; pushing: x, y, theta (world frame), bx, by (block frame)"
+                    "car: vx, vy, omega, delta (the effective steering angle); pushing: x, y, theta (world frame), bx, by (block frame)"
                         .into(),
             })
     }
@@ -415,12 +438,26 @@ impl CustomEffect {
         )
     }
 
+    /// The correction of the effective steering angle: the sum of the `δ` terms with
+    /// coefficients `theta` (0 without such terms).
+    pub(crate) fn steering<R: Real>(&self, theta: &[R], p: &[R], s: &[R], u: &[R]) -> R {
+        let mut d = R::cst(0.0);
+        for (t, &c) in self.terms.iter().zip(theta) {
+            if t.target == Target::Delta {
+                d = d + c * t.feature.eval(self.robot, p, s, u);
+            }
+        }
+        d
+    }
+
     /// Adds the terms with coefficients `theta` to the vector field `out` at state `s`, input
     /// `u` (`p`: the model's nominal parameters, for the slip-angle atoms).
     pub(crate) fn add_to<R: Real>(&self, theta: &[R], p: &[R], s: &[R], u: &[R], out: &mut [R]) {
         for (t, &c) in self.terms.iter().zip(theta) {
             let v = c * t.feature.eval(self.robot, p, s, u);
             match t.target {
+                // an input correction: `steering`
+                Target::Delta => {}
                 Target::Vx => out[3] = out[3] + v,
                 Target::Vy => out[4] = out[4] + v,
                 Target::Omega => out[5] = out[5] + v,

@@ -477,7 +477,10 @@ impl PhysicsModel {
     /// whose `active` flag is set.
     pub fn eval_generic<R: Real>(&self, p: &[R], active: &[bool], s: &[R], u: &[R], out: &mut [R]) {
         match self.robot {
-            Robot::Car => car::rhs(p, &self.slots, active, s, u, out),
+            Robot::Car => {
+                let steer = self.custom_steering(p, s, u);
+                car::rhs(p, &self.slots, active, s, u, steer, out)
+            }
             Robot::Pushing => push::rhs(p, &self.slots, active, s, u, out),
         }
         self.add_custom_terms(p, s, u, out);
@@ -491,6 +494,18 @@ impl PhysicsModel {
             c.add_to(&p[off..off + n], p, s, u, out);
             off += n;
         }
+    }
+
+    /// The custom effects' correction of the effective steering angle (`δ` terms).
+    fn custom_steering<R: Real>(&self, p: &[R], s: &[R], u: &[R]) -> R {
+        let mut off = self.custom_start();
+        let mut d = R::cst(0.0);
+        for c in &self.custom {
+            let n = c.terms().len();
+            d = d + c.steering(&p[off..off + n], p, s, u);
+            off += n;
+        }
+        d
     }
 
     fn all_active(&self) -> Vec<bool> {
