@@ -507,26 +507,8 @@ impl Augmented<'_> {
     /// Per-window normalised squared error over k steps, capped at `d.cap` (`n_windows × k × ds`
     /// uncapped residuals when
     /// `resid` is given).
-    fn errors(&self, d: &Data, ws: &[Window], resid: Option<&mut Vec<f64>>) -> Vec<f64> {
-        self.errors_from(d, ws, None, resid)
-    }
-
-    /// [`errors`](Self::errors) with every window's initial state moved by `shift` (one value
-    /// per state dimension).
-    fn errors_from(
-        &self,
-        d: &Data,
-        ws: &[Window],
-        shift: Option<&[f64]>,
-        mut resid: Option<&mut Vec<f64>>,
-    ) -> Vec<f64> {
+    fn errors(&self, d: &Data, ws: &[Window], mut resid: Option<&mut Vec<f64>>) -> Vec<f64> {
         let (ds, du, k) = (d.ds, d.du, d.k);
-        let moved = |mut v: Vec<f64>| {
-            if let Some(h) = shift {
-                v.iter_mut().zip(h).for_each(|(x, dx)| *x += dx);
-            }
-            v
-        };
         let n = ws.len();
         let mut s = vec![0.0; n * ds];
         let mut u = vec![0.0; n * du];
@@ -545,14 +527,13 @@ impl Augmented<'_> {
         let dw = with.map_or(0, |p| p.dim_state());
         for (i, w) in ws.iter().enumerate() {
             let t = &d.trajs[w.trajectory];
-            s[i * ds..(i + 1) * ds]
-                .copy_from_slice(&moved(t.s[w.start * ds..(w.start + 1) * ds].to_vec()));
+            s[i * ds..(i + 1) * ds].copy_from_slice(&t.s[w.start * ds..(w.start + 1) * ds]);
             let h = &d.history[w.trajectory];
             if !self.pure_physics {
-                sb.extend(moved(initial_state_after(&self.base, h, t, w.start)));
+                sb.extend(initial_state_after(&self.base, h, t, w.start));
             }
             if let Some(p) = with {
-                sw.extend(moved(initial_state_after(p, h, t, w.start)));
+                sw.extend(initial_state_after(p, h, t, w.start));
             }
         }
         let mut err = vec![0.0; n];
@@ -748,22 +729,48 @@ impl Ctx<'_> {
         self.augmented(with).errors(&self.d, ws, resid)
     }
 
-    /// Per held-out window: whether the model augmented with `with` rolls it out without chaos,
-    /// i.e. its k-step residuals move at most [`CHAOS_LIMIT`] times as much as the median
-    /// window's when every initial state moves by 10⁻⁴ of its dimension's scale.
+    /// Per held-out window: whether the model augmented with `with` rolls it out without chaos:
+    /// its k-step residuals' sensitivity to the model's parameters (relative changes of
+    /// 10⁻⁴ along [`CHAOS_DIRECTIONS`] seeded random sign patterns, whose mean square
+    /// estimates the sum over the parameters) is at most [`CHAOS_LIMIT`] times the median
+    /// window's.
     fn calm(&self, with: PhysicsModel) -> Vec<bool> {
         const H: f64 = 1e-4;
-        let a = self.augmented(with);
-        let shift: Vec<f64> = self.d.scale.iter().map(|s| H * s).collect();
-        let (mut r0, mut r1) = (Vec::new(), Vec::new());
-        a.errors_from(&self.d, &self.test_w, None, Some(&mut r0));
-        a.errors_from(&self.d, &self.test_w, Some(&shift), Some(&mut r1));
+        let p0 = with.params().to_vec();
+        let specs = with.param_specs();
+        let mut r0 = Vec::new();
+        self.errors(with.clone(), &self.test_w, Some(&mut r0));
         let n = self.test_w.len().max(1);
         let mut sens = vec![0.0; self.test_w.len()];
-        // residual rows are step-major: (step, window, dimension)
-        for (row, (x, y)) in r1.iter().zip(&r0).enumerate() {
-            let dz = (x - y) / H;
-            sens[(row / self.d.ds) % n] += dz * dz;
+        let mut rng = SplitMix64::new(self.cfg.seed ^ 0x2545_F491_4F6C_DD1D);
+        for _ in 0..CHAOS_DIRECTIONS {
+            // each parameter up or down by H of its value, inwards at a bound
+            let p: Vec<f64> = p0
+                .iter()
+                .zip(&specs)
+                .map(|(&v, (_, spec))| {
+                    let (up, down) = (v + H * v.abs(), v - H * v.abs());
+                    if (rng.next_u64() % 2 == 0 && up <= spec.upper) || down < spec.lower {
+                        up
+                    } else {
+                        down
+                    }
+                })
+                .collect();
+            let mut m = with.clone();
+            if m.set_params(&p).is_err() {
+                continue;
+            }
+            let mut r1 = Vec::new();
+            self.errors(m, &self.test_w, Some(&mut r1));
+            if r1.len() != r0.len() {
+                continue;
+            }
+            // residual rows are step-major: (step, window, dimension)
+            for (row, (x, y)) in r1.iter().zip(&r0).enumerate() {
+                let dz = (x - y) / H;
+                sens[(row / self.d.ds) % n] += dz * dz;
+            }
         }
         calm_windows(&sens, CHAOS_LIMIT)
     }
@@ -1631,7 +1638,11 @@ pub(crate) fn split_windows(
 /// within 0.1 m and 0.02 of the truth).
 const EFFECT_FIT_SENSITIVITY_LIMIT: f64 = 1e4;
 
-/// How many times the median held-out window's sensitivity to its initial state a window's
+/// Random directions in parameter space along which [`Ctx::calm`] measures a held-out window's
+/// sensitivity.
+const CHAOS_DIRECTIONS: usize = 4;
+
+/// How many times the median held-out window's sensitivity to the model's parameters a window's
 /// rollout may have before it counts as going through a spin ([`Ctx::calm`]). A held-out window
 /// is left out of a candidate's scores only when the rollouts of both models compared (the
 /// model before the step and with the candidate) spin there: neither predicts it, and its

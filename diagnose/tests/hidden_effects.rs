@@ -124,6 +124,33 @@ fn a_pair_of_library_effects_is_named_by_forward_selection() {
 }
 
 #[test]
+fn a_steering_gain_falling_with_speed_gets_no_library_name_and_a_steering_term() {
+    // outside the library: the simulator's steering angle times 1/(1 + (vₓ/v₀)²), v₀ = 2 m/s
+    for seed in [8, 9] {
+        let mut scenario = car_scenario(None, 1.0);
+        scenario.effects.steering_gain_speed = Some(dynlab_sim::car::SteeringGainSpeed {
+            enabled: true,
+            v0: 2.0,
+        });
+        let d = run_scenario(&scenario, 320 + seed, seed, None);
+        let table = d.table();
+        assert!(d.effects.is_empty(), "no library effect: {table}");
+        let disc = d.discovery.as_ref().expect("the term search ran");
+        let found: Vec<_> = disc.terms.iter().filter(|t| t.significant).collect();
+        assert!(!found.is_empty(), "{table}");
+        // the steering the tires see shrinks with speed: δ += c·δ·vₓ² (or |v|, vₓ) with c < 0
+        let t = found[0];
+        assert_eq!(t.state, "delta", "{table}");
+        assert!(
+            t.feature.starts_with("delta*") && t.feature.contains('v'),
+            "{table}"
+        );
+        assert!(t.coefficient < 0.0, "{table}");
+        assert!(disc.error_reduction >= 0.4, "{table}");
+    }
+}
+
+#[test]
 fn diagnosis_is_deterministic_and_json_has_the_contract_keys() {
     let few = Some(vec![Effect::SteeringOffset, Effect::AeroDrag]);
     let a = run_car_with(Some(Effect::SteeringOffset), 6, few.clone());

@@ -668,3 +668,43 @@ fn bad_model_configurations_get_clear_errors() {
         }
     ));
 }
+
+/// A custom term on the steering angle `δ` acts where the steering does: `δ += c·δ·vₓ²` on the
+/// car gives the field of the model without it at the steering command `(1 + c·vₓ²)·δ`, through
+/// the servo's lag when the model has one; its Jacobians (the coefficient's included) match
+/// finite differences.
+#[test]
+fn a_steering_angle_term_is_a_change_of_the_steering_the_tires_see() {
+    let c = -0.16;
+    let term = CustomEffect::from_toml(&format!(
+        "name = \"gain\"\n[[term]]\nstate = \"delta\"\nfeature = \"delta*vx*vx\"\ncoefficient = {c}\n"
+    ))
+    .unwrap();
+    let plain = PhysicsModel::car(&[]).unwrap();
+    let mut with = plain.clone();
+    with.add_custom(term.clone()).unwrap();
+    let (s, u) = (&CAR_S[..6], CAR_U);
+    let mut want = vec![0.0; 6];
+    plain.eval_one(s, &[(1.0 + c * s[3] * s[3]) * u[0], u[1]], &mut want);
+    let mut got = vec![0.0; 6];
+    with.eval_one(s, &u, &mut got);
+    assert!(max_rel_diff(&got, &want) < 1e-12, "{got:?} vs {want:?}");
+    assert!(
+        (got[5] - {
+            let mut f = vec![0.0; 6];
+            plain.eval_one(s, &u, &mut f);
+            f[5]
+        })
+        .abs()
+            > 1e-3,
+        "the term changes ω̇"
+    );
+    check_field_jacobians(&with, s, &u);
+    // with the servo's lag the term corrects the servo's output (an effect state)
+    let mut lagged = PhysicsModel::car(&[Effect::SteeringLag]).unwrap();
+    lagged.set_param("steering_lag.rate", 5.0).unwrap();
+    lagged.add_custom(term).unwrap();
+    let mut sl = s.to_vec();
+    sl.resize(lagged.dim_state(), 0.1);
+    check_field_jacobians(&lagged, &sl, &u);
+}
