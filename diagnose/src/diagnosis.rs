@@ -23,7 +23,11 @@
 //! of the fit half, and the candidate is scored on the held-out half: `error_reduction =
 //! 1 − E_after/E_before` of the k-step error `E` (the squared error of every state dimension over
 //! k steps, each dimension divided by the RMS k-step change of that dimension in the data, so
-//! the scale is the error of the "nothing moves" model). A candidate is **significant** when the
+//! the scale is the error of the "nothing moves" model). Held-out windows that both models
+//! compared (the model before the step and the model with the candidate) roll out through a
+//! spin, more than 100 times (`CHAOS_LIMIT`) as sensitive to their parameters as the median window,
+//! are left out of that candidate's scores ([`Candidate::chaotic_windows`]); the joint fit's
+//! reduction counts every held-out window. A candidate is **significant** when the
 //! reduction is at least [`DiagnoseConfig::min_reduction`] *and* the lower end of a one-sided
 //! bootstrap confidence interval over held-out segments (resampled whole, seeded) is above zero.
 //! The interval's error probability is divided by the number of candidates tested
@@ -331,7 +335,7 @@ pub struct Candidate {
     pub raw_reduction: f64,
     /// Held-out windows left out of this candidate's scores because both models compared (the
     /// model before this step and the model with the candidate) roll them out through a spin
-    /// (see [`CHAOS_LIMIT`]).
+    /// (more than 100 times as sensitive to the parameters as the median window).
     #[serde(default)]
     pub chaotic_windows: usize,
     /// Lower end of the one-sided bootstrap interval of the reduction.

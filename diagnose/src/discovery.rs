@@ -7,7 +7,11 @@
 //!
 //! 1. **One-step residual of each state derivative** on the fit half: `r = (s_meas(t + h) −
 //!    Φ(s(t), u))/h` for the targets of the robot (car: `vx`, `vy`, `omega`; pushing: `x`, `y`,
-//!    `theta` in the world frame and `bx`, `by` in the block frame, per push).
+//!    `theta` in the world frame and `bx`, `by` in the block frame, per push). The car's
+//!    steering angle `delta` is a target too, a correction of the angle the tires see: its
+//!    rows are the three velocity residuals, each divided by its RMS, and a term's column is
+//!    the feature times the derivatives' sensitivity to `δ`; it
+//!    takes only features of the commands and the speed ([`Target::searched_with`]).
 //! 2. **Screen** per target: every feature regressed alone on the residual; a (target, feature)
 //!    pair passes when its coefficient's t-value (standard error clustered by trajectory,
 //!    [`cluster_std`]) clears the Bonferroni threshold for the `M` pairs tried; the strongest
@@ -15,8 +19,9 @@
 //!    feature of the *estimated* state such as the slip angle `α_f` correlates with the
 //!    state-estimation noise that the stiff tire dynamics amplify, and wins the one-step fit
 //!    against the true term.) Pairs with the shape of a nominal parameter's own term
-//!    ([`Target::nominal_parameter`]: the car's `v̇ₓ` on `d`, `d·vₓ`, `1`, `vₓ²`; pushing `ẋ_b`
-//!    on `ℓ·cos φ`, `θ̇` on `ℓ·sin φ`, `ℓ·p`) are not tried: such a term is a change of that
+//!    ([`Target::nominal_parameter`]: the car's `v̇ₓ` on `d`, `d·vₓ`, `1`, `vₓ²`, `δ` on `1` (the
+//!    library's steering offset); pushing `ẋ_b` on `ℓ·cos φ`, `θ̇` on `ℓ·sin φ`, `ℓ·p`) are
+//!    not tried: such a term is a change of that
 //!    parameter, not a missing effect.
 //! 3. **Sparse forward selection on the k-step error**: each round scores every screened pair by
 //!    its Gauss–Newton gain on the fit half's k-step open-loop error (the error each state

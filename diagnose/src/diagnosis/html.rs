@@ -139,7 +139,7 @@ fn candidate_table(cands: &[Candidate], added: Option<&str>) -> String {
     let mut o = String::new();
     let _ = writeln!(
         o,
-        "<table style=\"border-collapse:collapse\"><tr><th align=left>effect</th><th align=left>held-out error removed</th><th>bootstrap lower bound</th><th>significant</th><th align=left>fitted parameters (± std)</th></tr>"
+        "<table style=\"border-collapse:collapse\"><tr><th align=left>effect</th><th align=left>held-out error removed</th><th>bootstrap lower bound</th><th>significant</th><th title=\"held-out windows both models roll out through a spin, left out of this candidate's scores\">spins left out</th><th align=left>fitted parameters (± std)</th></tr>"
     );
     for c in cands {
         let w = (c.error_reduction * 200.0).round();
@@ -163,19 +163,20 @@ fn candidate_table(cands: &[Candidate], added: Option<&str>) -> String {
         };
         let _ = writeln!(
             o,
-            "<tr style=\"{bold}border-top:1px solid #ddd\"><td title=\"{}\">{}</td><td><span style=\"display:inline-block;height:0.8em;width:{w}px;background:{}\"></span> {:.1} %</td><td align=right>{:.1} %</td><td align=center>{}</td><td>{}</td></tr>",
+            "<tr style=\"{bold}border-top:1px solid #ddd\"><td title=\"{}\">{}</td><td><span style=\"display:inline-block;height:0.8em;width:{w}px;background:{}\"></span> {:.1} %</td><td align=right>{:.1} %</td><td align=center>{}</td><td align=right>{}</td><td>{}</td></tr>",
             esc(&c.description),
             esc(&c.effect),
             if c.significant { "#1a7f37" } else { "#aaa" },
             100.0 * c.error_reduction,
             100.0 * c.ci_lower.max(-9.99),
             if c.significant { "yes" } else { "no" },
+            c.chaotic_windows,
             params.join(", ")
         );
         if let Some(n) = &c.note {
             let _ = writeln!(
                 o,
-                "<tr><td></td><td colspan=4 style=\"color:#9a6700\">not counted: {}</td></tr>",
+                "<tr><td></td><td colspan=5 style=\"color:#9a6700\">not counted: {}</td></tr>",
                 esc(n)
             );
         }

@@ -13,9 +13,10 @@
 //! 1/s²); the pose kinematics stay as they are. `delta` (`δ` in rad) is not a derivative: it
 //! corrects the **effective steering angle** the tires see (after the servo's lag, when the model
 //! has one), so one term acts on `v̇_y` and `ω̇` through the tire model the way an input
-//! nonlinearity does (a steering gain that changes with speed, `δ += θ·δ·vₓ²`). Pushing (time in pushes, one push integrates
-//! normalised time over `[0, 1]`): `x`, `y`, `theta` add a rate in the **world (table) frame**,
-//! so a term constant over the push moves the block by `θ·feature` per push; `bx`, `by` add it
+//! nonlinearity does (a steering gain that changes with speed, `δ += θ·δ·vₓ²`). Pushing (time
+//! in pushes, one push integrates normalised time over `[0, 1]`): `x`, `y`, `theta` add a rate
+//! in the **world (table) frame**, so a term constant over the push moves the block by
+//! `θ·feature` per push; `bx`, `by` add it
 //! in the **block frame** (rotated by the block's current heading `θ`), for effects that move
 //! with the block (an offset load, a skewed contact). A quasi-static block moves only while
 //! pushed: multiply pushing features by `l` (`ℓ`) unless the term should act without a push.
