@@ -3,7 +3,7 @@
 //! With one model, each figure shows that model. With a baseline, every figure that exists for
 //! both models overlays them: the error over time, the error binned against each cause and the
 //! residual correlations as two series on one set of axes per state dimension ("before:
-//! <baseline>", "after: <model>"), the position map as two panels on one colour scale.
+//! `<baseline>`", "after: `<model>`"), the position map as two panels on one colour scale.
 
 use crate::report::{Chart, Heatmap, HeatmapPanels, LineChart, Report, Series, Table};
 

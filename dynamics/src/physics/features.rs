@@ -5,7 +5,7 @@
 //! A [`Feature`] is a product of one or more [`Atom`]s, written in files as the atoms' names
 //! joined by `*` (`delta*vx`, `delta*vx*vx`, `vx*|vx|`) and printed with their symbols
 //! (`δ·vₓ`, `δ·vₓ²`, `vₓ·|vₓ|`). Every atom is written once, generically over
-//! [`Real`](crate::real::Real), so a model with custom terms keeps exact Jacobians.
+//! [`Real`], so a model with custom terms keeps exact Jacobians.
 //!
 //! Atoms of the car (state `(x, y, ψ, vx, vy, ω)`, input `(δ, d)`):
 //!
