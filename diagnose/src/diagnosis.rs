@@ -758,7 +758,7 @@ impl Ctx<'_> {
                 .zip(&specs)
                 .map(|(&v, (_, spec))| {
                     let (up, down) = (v + H * v.abs(), v - H * v.abs());
-                    if (rng.next_u64() % 2 == 0 && up <= spec.upper) || down < spec.lower {
+                    if (rng.next_u64().is_multiple_of(2) && up <= spec.upper) || down < spec.lower {
                         up
                     } else {
                         down

@@ -707,7 +707,7 @@ pub fn discover_terms_split(
                 .map(|j| reg.gain[j] * x[(j / reg.rows) * nf + f])
                 .collect();
             let jj: f64 = jac.iter().map(|v| v * v).sum();
-            if !(jj > 0.0) {
+            if jj.is_nan() || jj <= 0.0 {
                 continue;
             }
             let b = jac.iter().zip(&reg.y).map(|(a, y)| a * y).sum::<f64>() / jj;
@@ -1155,7 +1155,7 @@ fn term_plot(
         // weighted (the weights are 1 except for the steering angle's implied error)
         let sw: f64 = chunk.iter().map(|&i| pts[i].1).sum();
         let sw2: f64 = chunk.iter().map(|&i| pts[i].1 * pts[i].1).sum();
-        if !(sw > 0.0) {
+        if sw.is_nan() || sw <= 0.0 {
             continue;
         }
         let xm = chunk.iter().map(|&i| pts[i].1 * x[i * nf + f]).sum::<f64>() / sw;
