@@ -178,6 +178,10 @@ fn true_model(car: &CarScenario, case: &[Hidden], like: &Model) -> Option<Model>
     .ok()
 }
 
+fn mean(v: &[f64]) -> f64 {
+    v.iter().sum::<f64>() / v.len().max(1) as f64
+}
+
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let seeds: u64 = arg("--seeds", 5);
     let nominal_seeds: u64 = arg("--nominal-seeds", 20);
@@ -219,8 +223,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         100.0 * perturb
     );
     println!(
-        "{:<36} {:>9} {:>24}   {:<44} {:>7}",
-        "hidden effects", "recovered", "removed min/mean/max", "fitted strength (truth)", "time/s"
+        "{:<36} {:>9} {:>24} {:>24}   {:<44} {:>7}",
+        "hidden effects",
+        "recovered",
+        "removed min/mean/max",
+        "w/o spins min/mean/max",
+        "fitted strength (truth)",
+        "time/s"
     );
     for case in cases {
         let name = if case.is_empty() {
@@ -245,8 +254,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         };
         let t0 = Instant::now();
         let (mut ok, mut removed, mut strength) = (0, Vec::new(), Vec::new());
-        // share of the error above the true model's that the selected effects remove
-        let mut removable: Vec<f64> = Vec::new();
+        // the same on the held-out windows not both the model and the result spin on
+        let mut removed_calm = Vec::new();
+        // share of the error above the true model's that the selected effects remove (all
+        // held-out windows; without the spins)
+        let (mut removable, mut removable_calm): (Vec<f64>, Vec<f64>) = (Vec::new(), Vec::new());
         let mut wrong: BTreeSet<String> = BTreeSet::new();
         let mut beyond: Vec<f64> = Vec::new();
         let mut terms: std::collections::BTreeMap<String, usize> = Default::default();
@@ -306,20 +318,30 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                         discover: false,
                         ..cfg.clone()
                     };
-                    Some(diagnose(&m, &data, &tcfg)?.baseline_error)
+                    Some(diagnose(&m, &data, &tcfg)?.held_out_errors)
                 }
                 None => None,
             };
-            if let (Some(f), Some(j)) = (floor, &d.joint) {
-                removable.push((j.model_error - j.error_after) / (j.model_error - f).max(1e-12));
+            let share = |before: f64, after: f64, floor: f64| {
+                (before - after) / (before - floor).max(1e-12)
+            };
+            if let (Some(f), Some(j)) = (&floor, &d.joint) {
+                let kept: Vec<f64> = (0..f.len())
+                    .filter(|i| !j.spin_windows.contains(i))
+                    .map(|i| f[i])
+                    .collect();
+                removable.push(share(j.model_error, j.error_after, mean(f)));
+                removable_calm.push(share(j.model_error_calm, j.error_after_calm, mean(&kept)));
             } else if floor.is_some() && !case.is_empty() {
                 removable.push(0.0);
+                removable_calm.push(0.0);
             }
             if verbose {
                 println!("--- {name}, seed {seed}\n{}", d.table());
-                if let Some(f) = floor {
+                if let Some(f) = &floor {
                     println!(
-                        "true model (simulator's parameters and effects): held-out error {f:.4}"
+                        "true model (simulator's parameters and effects): held-out error {:.4}",
+                        mean(f)
                     );
                 }
             }
@@ -345,6 +367,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             }
             if let Some(j) = &d.joint {
                 removed.push(j.reduction_vs_model);
+                removed_calm.push(j.reduction_vs_model_calm);
                 for h in &case {
                     if let Some((_, key, _)) = h.library()
                         && let Some(v) = j.params.get(key)
@@ -354,14 +377,19 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 }
             } else {
                 removed.push(0.0);
+                removed_calm.push(0.0);
             }
         }
-        let (lo, hi) = removed
-            .iter()
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
-                (a.min(v), b.max(v))
-            });
-        let mean = removed.iter().sum::<f64>() / removed.len().max(1) as f64;
+        let spread = |v: &[f64]| {
+            let lo = v.iter().copied().fold(f64::INFINITY, f64::min);
+            let hi = v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+            format!(
+                "{:>7.0}% {:>6.0}% {:>6.0}%",
+                100.0 * lo,
+                100.0 * mean(v),
+                100.0 * hi
+            )
+        };
         let mut fitted = Vec::new();
         for h in &case {
             if let Some((_, key, t)) = h.library() {
@@ -380,12 +408,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             }
         }
         if !removable.is_empty() {
-            let m = removable.iter().sum::<f64>() / removable.len() as f64;
-            let lo = removable.iter().copied().fold(f64::INFINITY, f64::min);
+            let min = |v: &[f64]| v.iter().copied().fold(f64::INFINITY, f64::min);
             fitted.push(format!(
-                "of the error above the true model's: {:.0} % mean, {:.0} % min",
-                100.0 * m,
-                100.0 * lo
+                "of the error above the true model's: {:.0} % mean, {:.0} % min (w/o spins {:.0} %, {:.0} %)",
+                100.0 * mean(&removable),
+                100.0 * min(&removable),
+                100.0 * mean(&removable_calm),
+                100.0 * min(&removable_calm)
             ));
         }
         if !beyond.is_empty() {
@@ -409,13 +438,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             ));
         }
         println!(
-            "{:<36} {:>5}/{:<3} {:>7.0}% {:>6.0}% {:>6.0}%   {:<44} {:>7.1}",
+            "{:<36} {:>5}/{:<3} {} {}   {:<44} {:>7.1}",
             name,
             ok,
             n,
-            100.0 * lo,
-            100.0 * mean,
-            100.0 * hi,
+            spread(&removed),
+            spread(&removed_calm),
             fitted.join(", "),
             t0.elapsed().as_secs_f64()
         );

@@ -303,8 +303,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
 
     if only.is_empty() || only == "nominal" {
         println!(
-            "\n{:<5} {:<16} {:<70} {:>6}",
-            "seed", "library named", "term search", "time/s"
+            "\n{:<5} {:>13} {:<40} {:<70} {:>6}",
+            "seed", "block/mm", "library named", "term search", "time/s"
         );
         let (mut clean, mut sig) = (0, 0);
         for seed in first_seed..first_seed + nominal_seeds {
@@ -318,13 +318,31 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             let terms = terms_of(&d);
             clean += usize::from(d.effects.is_empty());
             sig += usize::from(!terms.is_empty());
+            let [bx, by] = scenario.block.size;
             println!(
-                "{:<5} {:<16} {:<70} {:>6.1}",
+                "{:<5} {:>6.1}×{:<6.1} {:<40} {:<70} {:>6.1}",
                 seed,
+                1e3 * bx,
+                1e3 * by,
                 if d.effects.is_empty() {
                     "—".to_string()
                 } else {
-                    d.effects.join(",")
+                    d.selection
+                        .iter()
+                        .filter_map(|s| {
+                            let c = s
+                                .candidates
+                                .iter()
+                                .find(|c| Some(&c.effect) == s.added.as_ref())?;
+                            let p: Vec<String> = c
+                                .params
+                                .iter()
+                                .map(|(k, v)| format!("{k} {v:.4}"))
+                                .collect();
+                            Some(format!("{} ({})", c.effect, p.join(", ")))
+                        })
+                        .collect::<Vec<_>>()
+                        .join(", ")
                 },
                 d.discovery
                     .as_ref()

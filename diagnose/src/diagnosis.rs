@@ -391,6 +391,20 @@ pub struct JointFit {
     /// `1 − error_after/model_error`: what adding the effects (and refitting) removes from the
     /// model the user has.
     pub reduction_vs_model: f64,
+    /// Held-out windows (indices into the held-out windows, in the order of
+    /// [`Diagnosis::held_out_errors`]) that both the model as given and the model with the
+    /// effects roll out through a spin (the candidates' rule, [`Candidate::chaotic_windows`]).
+    #[serde(default)]
+    pub spin_windows: Vec<usize>,
+    /// `model_error` on the other held-out windows …
+    #[serde(default)]
+    pub model_error_calm: f64,
+    /// … `error_after` on them …
+    #[serde(default)]
+    pub error_after_calm: f64,
+    /// … and `reduction_vs_model` on them.
+    #[serde(default)]
+    pub reduction_vs_model_calm: f64,
     /// Held-out error of the baseline (the nominal parameters refitted, where they are) …
     pub error_before: f64,
     /// … and with all selected effects.
@@ -453,6 +467,18 @@ pub struct Diagnosis {
     /// The baseline's refitted nominal parameters (empty: the model as given).
     #[serde(default)]
     pub nominal_refit: BTreeMap<String, f64>,
+    /// Refitted nominal parameters of the baseline that end on a bound of their range: the
+    /// nominal model cannot follow these data, and an effect found may stand in for a
+    /// parameter the model holds fixed (pushing: a face wider than the block's depth `a` puts
+    /// `κ` on its bound 1, and `com_offset` then takes up part of the missing reach).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub nominal_on_bound: Vec<String>,
+    /// Per held-out window, the baseline's k-step error (normalised units, capped): with
+    /// [`JointFit::spin_windows`], the error of another model on the same windows (a diagnosis
+    /// of it with the same data and seed) on the windows the scores keep. Not written to
+    /// `diagnosis.json` (empty when read back).
+    #[serde(skip)]
+    pub held_out_errors: Vec<f64>,
     /// The strongest correlations of the one-step residual (always computed; what to look at
     /// when there is no verdict).
     pub correlations: Vec<Correlation>,
@@ -496,6 +522,37 @@ struct Fitted {
     /// Per-window held-out and fit-half errors.
     test: Vec<f64>,
     fit: Vec<f64>,
+    /// Per held-out window: rolled out without chaos ([`Ctx::calm`]; empty until measured).
+    calm: Vec<bool>,
+}
+
+impl Fitted {
+    /// `"name = value unit is on its lower/upper bound b"` when the free parameter `i` ends
+    /// within 10⁻³ of its range from a bound.
+    fn on_bound(&self, i: usize) -> Option<String> {
+        if !self.free[i] {
+            return None;
+        }
+        let span = self.upper[i] - self.lower[i];
+        let v = self.theta[i];
+        let (which, b) = if v - self.lower[i] <= 1e-3 * span {
+            ("lower", self.lower[i])
+        } else if self.upper[i] - v <= 1e-3 * span {
+            ("upper", self.upper[i])
+        } else {
+            return None;
+        };
+        let unit = match self.units[i].as_str() {
+            "-" => String::new(),
+            u => format!(" {u}"),
+        };
+        Some(format!(
+            "{} = {}{unit} is on its {which} bound {}",
+            self.names[i],
+            g4(v),
+            g4(b)
+        ))
+    }
 }
 
 /// An augmented predictor: the model plus an effect's contribution.
@@ -794,6 +851,20 @@ impl Ctx<'_> {
         }
     }
 
+    /// A fitted model as a step's model, its chaos mask measured unless it already is.
+    fn current_of(&self, f: &Fitted) -> Current {
+        if f.calm.is_empty() {
+            self.current(f.physics.clone(), f.test.clone(), f.fit.clone())
+        } else {
+            Current {
+                physics: f.physics.clone(),
+                test: f.test.clone(),
+                fit: f.fit.clone(),
+                calm: f.calm.clone(),
+            }
+        }
+    }
+
     /// Fits, on the fit half, the refitted nominal parameters, the candidate `cand`'s and (with
     /// `joint`) those of every effect added so far, starting from `cur`.
     fn fit(
@@ -990,6 +1061,7 @@ impl Ctx<'_> {
             std,
             test,
             fit,
+            calm: Vec::new(),
         }))
     }
 
@@ -1001,25 +1073,9 @@ impl Ctx<'_> {
             .filter(|&i| f.owners[i] == Some(e))
             .collect();
         for &i in &mine {
-            if !f.free[i] {
-                continue;
-            }
-            let span = f.upper[i] - f.lower[i];
-            let v = f.theta[i];
-            let side = if v - f.lower[i] <= 1e-3 * span {
-                Some(("lower", f.lower[i]))
-            } else if f.upper[i] - v <= 1e-3 * span {
-                Some(("upper", f.upper[i]))
-            } else {
-                None
-            };
-            if let Some((which, b)) = side {
+            if let Some(at) = f.on_bound(i) {
                 return Some(format!(
-                    "{} = {} {} is on its {which} bound {}: the data ask for more than this effect can give, so it is not counted",
-                    f.names[i],
-                    g4(v),
-                    f.units[i],
-                    g4(b)
+                    "{at}: the data ask for more than this effect can give, so it is not counted"
                 ));
             }
         }
@@ -1056,16 +1112,12 @@ impl Ctx<'_> {
         e: Effect,
         tested: usize,
     ) -> Result<Option<(Candidate, Fitted)>, DiagnosisError> {
-        let Some(f) = self.fit(cur, Some(e), false)? else {
+        let Some(mut f) = self.fit(cur, Some(e), false)? else {
             return Ok(None);
         };
+        f.calm = self.calm(f.physics.clone());
         // windows that both models roll out through a spin say nothing about the candidate
-        let keep: Vec<bool> = self
-            .calm(f.physics.clone())
-            .iter()
-            .zip(&cur.calm)
-            .map(|(a, b)| *a || *b)
-            .collect();
+        let keep = either_calm(&f.calm, &cur.calm);
         let kept = |v: &[f64]| -> Vec<f64> {
             v.iter()
                 .zip(&keep)
@@ -1320,6 +1372,7 @@ pub fn diagnose(
         calm: Vec::new(),
     };
     let mut nominal_refit = BTreeMap::new();
+    let mut nominal_on_bound = Vec::new();
     let mut cur = match ctx.fit(&given, None, false)? {
         Some(f) => {
             nominal_refit = f
@@ -1328,7 +1381,8 @@ pub fn diagnose(
                 .cloned()
                 .zip(f.theta.iter().copied())
                 .collect();
-            ctx.current(f.physics, f.test, f.fit)
+            nominal_on_bound = (0..f.names.len()).filter_map(|i| f.on_bound(i)).collect();
+            ctx.current_of(&f)
         }
         None => {
             let baseline = Augmented {
@@ -1344,8 +1398,9 @@ pub fn diagnose(
     };
     let baseline = cur.clone();
     let baseline_error = mean(&baseline.test);
-    let model_error = if nominal_refit.is_empty() {
-        baseline_error
+    // the model as given, per held-out window, and where it spins
+    let (given_test, given_calm) = if nominal_refit.is_empty() {
+        (baseline.test.clone(), baseline.calm.clone())
     } else {
         let as_given = Augmented {
             model,
@@ -1353,8 +1408,12 @@ pub fn diagnose(
             with: None,
             pure_physics,
         };
-        mean(&as_given.errors(&ctx.d, &ctx.test_w, None))
+        (
+            as_given.errors(&ctx.d, &ctx.test_w, None),
+            ctx.calm(base.clone()),
+        )
     };
+    let model_error = mean(&given_test);
     // forward selection over the library
     let mut lib: Vec<Effect> = cfg
         .effects
@@ -1393,22 +1452,12 @@ pub fn diagnose(
         })?;
         // refit everything added so far jointly (kept only where it fits the fit half better)
         let mut step_fit = f.clone();
-        let added_alone = Current {
-            physics: f.physics.clone(),
-            test: f.test.clone(),
-            fit: f.fit.clone(),
-            calm: Vec::new(),
-        };
-        if let Some(j) = ctx.fit(&added_alone, None, true)?
+        if let Some(j) = ctx.fit(&ctx.current_of(f), None, true)?
             && mean(&j.fit) <= mean(&f.fit)
         {
             step_fit = j;
         }
-        let next = ctx.current(
-            step_fit.physics.clone(),
-            step_fit.test.clone(),
-            step_fit.fit.clone(),
-        );
+        let next = ctx.current_of(&step_fit);
         selection.push(SelectionStep {
             step: selection.len() + 1,
             given,
@@ -1444,6 +1493,17 @@ pub fn diagnose(
         let eff: Vec<usize> = (0..f.names.len())
             .filter(|&i| f.owners[i].is_some())
             .collect();
+        // the same on the windows not both the model as given and the final model spin on
+        let keep = either_calm(&given_calm, &cur.calm);
+        let kept_mean = |v: &[f64]| {
+            mean(
+                &v.iter()
+                    .zip(&keep)
+                    .filter_map(|(x, k)| k.then_some(*x))
+                    .collect::<Vec<_>>(),
+            )
+        };
+        let (model_error_calm, error_after_calm) = (kept_mean(&given_test), kept_mean(&cur.test));
         JointFit {
             effects: added.iter().map(|e| e.name().to_string()).collect(),
             params: eff.iter().map(|&i| (qualified(i), f.theta[i])).collect(),
@@ -1465,6 +1525,14 @@ pub fn diagnose(
             model_error,
             reduction_vs_model: if model_error > 0.0 {
                 1.0 - ea / model_error
+            } else {
+                0.0
+            },
+            spin_windows: (0..keep.len()).filter(|&i| !keep[i]).collect(),
+            model_error_calm,
+            error_after_calm,
+            reduction_vs_model_calm: if model_error_calm > 0.0 {
+                1.0 - error_after_calm / model_error_calm
             } else {
                 0.0
             },
@@ -1533,6 +1601,8 @@ pub fn diagnose(
         windows: [ctx.fit_w.len(), ctx.test_w.len()],
         baseline_error,
         nominal_refit,
+        nominal_on_bound,
+        held_out_errors: baseline.test.clone(),
         correlations,
         summary,
         config: cfg.clone(),
@@ -1645,6 +1715,15 @@ pub(crate) fn split_windows(
 /// spins it causes (at 100× its held-out bootstrap bound fell below 0 on a patch fitted
 /// within 0.1 m and 0.02 of the truth).
 const EFFECT_FIT_SENSITIVITY_LIMIT: f64 = 1e4;
+
+/// Per window: calm under at least one of two models (both masks from [`Ctx::calm`]; an empty
+/// mask counts every window calm).
+fn either_calm(a: &[bool], b: &[bool]) -> Vec<bool> {
+    let n = a.len().max(b.len());
+    (0..n)
+        .map(|i| a.get(i).copied().unwrap_or(true) || b.get(i).copied().unwrap_or(true))
+        .collect()
+}
 
 /// Random directions in parameter space along which [`Ctx::calm`] measures a held-out window's
 /// sensitivity.
@@ -1907,6 +1986,12 @@ impl Diagnosis {
                 p.join(", ")
             );
         }
+        for b in &self.nominal_on_bound {
+            let _ = writeln!(
+                o,
+                "note: the baseline's {b}: the nominal model cannot follow these data there, and an effect found may stand in for what it lacks (pushing: κ on 1 is a face wider than the block's depth a, which the square-block model cannot hold)"
+            );
+        }
         for step in &self.selection {
             let _ = writeln!(
                 o,
@@ -1952,6 +2037,16 @@ impl Diagnosis {
                     j.model_error,
                     j.error_after,
                     100.0 * j.reduction_vs_model
+                );
+            }
+            if !j.spin_windows.is_empty() {
+                let _ = writeln!(
+                    o,
+                    "  without the {} held-out windows both the model as given and the model with the effects roll out through a spin: {:.4} → {:.4}, {:.1} % removed",
+                    j.spin_windows.len(),
+                    j.model_error_calm,
+                    j.error_after_calm,
+                    100.0 * j.reduction_vs_model_calm
                 );
             }
             for (name, v) in &j.params {

@@ -59,6 +59,13 @@ pub fn diagnosis_html(d: &Diagnosis) -> String {
             p.join(", ")
         );
     }
+    for b in &d.nominal_on_bound {
+        let _ = writeln!(
+            o,
+            "<p><b>Note:</b> the baseline's {}: the nominal model cannot follow these data there, and an effect found may stand in for what it lacks.</p>",
+            esc(b)
+        );
+    }
     for step in &d.selection {
         let _ = writeln!(
             o,
@@ -110,6 +117,16 @@ pub fn diagnosis_html(d: &Diagnosis) -> String {
             );
         }
         let _ = writeln!(o, "</table>");
+        if !j.spin_windows.is_empty() {
+            let _ = writeln!(
+                o,
+                "<p>Without the {} held-out windows that both the model as given and the model with the effects roll out through a spin: {} → {}, {:.1} % removed from the model as given.</p>",
+                j.spin_windows.len(),
+                g4(j.model_error_calm),
+                g4(j.error_after_calm),
+                100.0 * j.reduction_vs_model_calm
+            );
+        }
     }
     if let Some(disc) = &d.discovery {
         o.push_str(&crate::discovery::discovery_html(disc));
