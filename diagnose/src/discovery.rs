@@ -7,11 +7,13 @@
 //!
 //! 1. **One-step residual of each state derivative** on the fit half: `r = (s_meas(t + h) −
 //!    Φ(s(t), u))/h` for the targets of the robot (car: `vx`, `vy`, `omega`; pushing: `x`, `y`,
-//!    `theta` in the world frame and `bx`, `by` in the block frame, per push). The car's
-//!    steering angle `delta` is a target too, a correction of the angle the tires see: its
+//!    `theta` in the world frame and `bx`, `by` in the block frame, per push). Two of the car's
+//!    tire-model inputs are targets too: the steering angle `delta`, a correction of the angle
+//!    the tires see, and the grip `grip` (`μ`), a scale `1 + μ` of both axles' peak forces. Their
 //!    rows are the three velocity residuals, each divided by its RMS, and a term's column is
-//!    the feature times the derivatives' sensitivity to `δ`; it
-//!    takes only features of the commands and the speed ([`Target::searched_with`]).
+//!    the feature times the derivatives' sensitivity to the input; `δ` takes only features of
+//!    the commands and the speed, `μ` only features of the position (a region of other grip;
+//!    [`Target::searched_with`]).
 //! 2. **Screen** per target: every feature regressed alone on the residual; a (target, feature)
 //!    pair passes when its coefficient's t-value (standard error clustered by trajectory,
 //!    [`cluster_std`]) clears the Bonferroni threshold for the `M` pairs tried; the strongest
@@ -20,7 +22,7 @@
 //!    state-estimation noise that the stiff tire dynamics amplify, and wins the one-step fit
 //!    against the true term.) Pairs with the shape of a nominal parameter's own term
 //!    ([`Target::nominal_parameter`]: the car's `v̇ₓ` on `d`, `d·vₓ`, `1`, `vₓ²`, `δ` on `1` (the
-//!    library's steering offset); pushing `ẋ_b` on `ℓ·cos φ`, `θ̇` on `ℓ·sin φ`, `ℓ·p`) are
+//!    library's steering offset), `μ` on `1` (the peak forces); pushing `ẋ_b` on `ℓ·cos φ`, `θ̇` on `ℓ·sin φ`, `ℓ·p`) are
 //!    not tried: such a term is a change of that
 //!    parameter, not a missing effect.
 //! 3. **Sparse forward selection on the k-step error**: each round scores every screened pair by
@@ -403,17 +405,17 @@ impl Ctx<'_> {
 /// The one-step regression data of one target.
 struct Regression {
     target: Target,
-    /// Rows per transition: 1, or for the car's steering angle `δ` the three velocity
-    /// derivatives it acts on.
+    /// Rows per transition: 1, or for the car's inputs `δ`, `μ` the three velocity
+    /// derivatives they act on.
     rows: usize,
-    /// The residual per row (`n × rows`; for `δ` each derivative divided by its RMS residual).
+    /// The residual per row (`n × rows`; for an input each derivative divided by its RMS
+    /// residual).
     y: Vec<f64>,
-    /// Per row, what a unit of the target adds to `y` (1, or for `δ` the derivative's
-    /// sensitivity to the steering angle on the same scale): a term's column is this times the
-    /// feature.
+    /// Per row, what a unit of the target adds to `y` (1, or for an input the derivative's
+    /// sensitivity to it on the same scale): a term's column is this times the feature.
     gain: Vec<f64>,
-    /// Per transition, the residual in the target's units and its weight, for the plot (for
-    /// `δ` the steering-angle error the three residuals imply, weighted by its sensitivity).
+    /// Per transition, the residual in the target's units and its weight, for the plot (for an
+    /// input the error of it the three residuals imply, weighted by its sensitivity).
     point: Vec<(f64, f64)>,
 }
 
@@ -429,10 +431,10 @@ impl Regression {
         }
     }
 
-    /// The steering angle's regression from the velocity derivatives' residuals `r` and their
-    /// sensitivities `g = ∂(v̇ₓ, v̇_y, ω̇)/∂δ` (both `n × 3`), each derivative divided by its
-    /// RMS residual.
-    fn steering(r: &[f64], g: &[f64]) -> Self {
+    /// An input's (`δ`, `μ`) regression from the velocity derivatives' residuals `r` and their
+    /// sensitivities `g = ∂(v̇ₓ, v̇_y, ω̇)/∂input` (both `n × 3`), each derivative divided by
+    /// its RMS residual.
+    fn input(target: Target, r: &[f64], g: &[f64]) -> Self {
         let n = r.len() / 3;
         let w: Vec<f64> = (0..3)
             .map(|c| {
@@ -453,7 +455,7 @@ impl Regression {
             })
             .collect();
         Self {
-            target: Target::Delta,
+            target,
             rows: 3,
             y,
             gain,
@@ -630,19 +632,19 @@ pub fn discover_terms_split(
             Target::Theta => d(2),
             Target::BlockX => th.cos() * d(0) + th.sin() * d(1),
             Target::BlockY => -th.sin() * d(0) + th.cos() * d(1),
-            // not a derivative: see `Regression::steering`
-            Target::Delta => 0.0,
+            // not derivatives: see `Regression::input`
+            Target::Delta | Target::Grip => 0.0,
         };
         v / h
     };
     let mut regs: Vec<Regression> = Vec::new();
     for &target in &targets {
-        regs.push(if target == Target::Delta {
+        regs.push(if target.is_input() {
             let velocities = [Target::Vx, Target::Vy, Target::Omega];
             let r: Vec<f64> = (0..n)
                 .flat_map(|i| velocities.map(|t| residual(i, t)))
                 .collect();
-            Regression::steering(&r, &steering_sensitivity(physics, &s0, &u0)?)
+            Regression::input(target, &r, &input_sensitivity(physics, target, &s0, &u0)?)
         } else {
             Regression::direct(target, (0..n).map(|i| residual(i, target)).collect())
         });
@@ -660,7 +662,7 @@ pub fn discover_terms_split(
     };
     let feats: Vec<Feature> = library(robot, Some(area), cfg.grid);
     // (target, feature) pairs with the shape of a nominal parameter's own term are that
-    // parameter, not an effect, and the steering angle takes only an input's shapes: not tried
+    // parameter, not an effect, and the inputs take only their own shapes: not tried
     let tried = |t: Target, f: usize| {
         t.searched_with(&feats[f]) && t.nominal_parameter(&feats[f]).is_none()
     };
@@ -1057,20 +1059,21 @@ fn fit_effect(
     Ok((res.theta, std))
 }
 
-/// `∂(v̇ₓ, v̇_y, ω̇)/∂δ` of `physics` at each state of `s` (`n × dim_state`) and input of `u`
-/// (`n × dim_u`): the derivatives' change per radian of a `δ` term (through the servo's lag when the
-/// model has one), `n × 3`.
-fn steering_sensitivity(
+/// `∂(v̇ₓ, v̇_y, ω̇)/∂input` of `physics` for the input `target` (`δ`, `μ`) at each state of
+/// `s` (`n × dim_state`) and input of `u` (`n × dim_u`): the derivatives' change per unit of a
+/// term on it (for `δ` through the servo's lag when the model has one), `n × 3`.
+fn input_sensitivity(
     physics: &PhysicsModel,
+    target: Target,
     s: &[f64],
     u: &[f64],
 ) -> Result<Vec<f64>, DiscoveryError> {
     const EPS: f64 = 1e-6;
     let one = Feature::parse("1").expect("the constant feature parses");
     let probe = CustomEffect::new(
-        "steering_probe",
+        "input_probe",
         vec![CustomTerm {
-            target: Target::Delta,
+            target,
             feature: one,
             coefficient: EPS,
         }],

@@ -246,9 +246,22 @@ fn a_nominal_parameter_change_is_not_reported_as_a_term() {
         .filter(|f| Target::Delta.searched_with(f) && Target::Delta.nominal_parameter(f).is_none())
         .count();
     assert!(steering >= 5, "δ·vₓ, δ·vₓ², δ·|v|, … are tried on δ");
+    // the grip takes the position alone: `x`, `y`, each bump and the bands (4 directions ×
+    // `grid` offsets, tried on the grip only), but not `1` (the peak forces)
+    let grip = library(Robot::Car, None, 0)
+        .iter()
+        .filter(|f| Target::Grip.searched_with(f) && Target::Grip.nominal_parameter(f).is_none())
+        .count()
+        + grid * grid
+        + 4 * grid;
+    assert_eq!(
+        grip,
+        2 + grid * grid + 4 * grid,
+        "x, y, bumps and bands are tried on μ"
+    );
     assert_eq!(
         d.pairs_tried,
-        3 * features - shaped.len() + steering,
+        3 * features - shaped.len() + steering + grip,
         "{}",
         d.table()
     );

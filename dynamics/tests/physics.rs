@@ -708,3 +708,51 @@ fn a_steering_angle_term_is_a_change_of_the_steering_the_tires_see() {
     sl.resize(lagged.dim_state(), 0.1);
     check_field_jacobians(&lagged, &sl, &u);
 }
+
+#[test]
+fn a_grip_term_scales_the_tires_peak_forces() {
+    // on `1`: both axles' peak forces scaled by 1 + θ, everywhere
+    let c = -0.3;
+    let global = CustomEffect::from_toml(&format!(
+        "name = \"grip\"\n[[term]]\nstate = \"grip\"\nfeature = \"1\"\ncoefficient = {c}\n"
+    ))
+    .unwrap();
+    let plain = PhysicsModel::car(&[]).unwrap();
+    let mut with = plain.clone();
+    with.add_custom(global).unwrap();
+    let mut scaled = plain.clone();
+    for name in ["Df", "Dr"] {
+        let v = scaled.params()[scaled.param_index(name).unwrap()];
+        scaled.set_param(name, (1.0 + c) * v).unwrap();
+    }
+    let (s, u) = (&CAR_S[..6], CAR_U);
+    let (mut got, mut want, mut before) = (vec![0.0; 6], vec![0.0; 6], vec![0.0; 6]);
+    with.eval_one(s, &u, &mut got);
+    scaled.eval_one(s, &u, &mut want);
+    plain.eval_one(s, &u, &mut before);
+    assert!(max_rel_diff(&got, &want) < 1e-12, "{got:?} vs {want:?}");
+    assert!((got[4] - before[4]).abs() > 1e-3, "the term changes v̇_y");
+    check_field_jacobians(&with, s, &u);
+    // on a bump: the full change at its centre, none far from it
+    let bump = CustomEffect::from_toml(&format!(
+        "name = \"region\"\n[[term]]\nstate = \"grip\"\nfeature = \"gauss({},{},0.3)\"\ncoefficient = {c}\n",
+        s[0], s[1]
+    ))
+    .unwrap();
+    let mut region = plain.clone();
+    region.add_custom(bump).unwrap();
+    region.eval_one(s, &u, &mut got);
+    assert!(
+        max_rel_diff(&got, &want) < 1e-12,
+        "at the centre: {got:?} vs {want:?}"
+    );
+    let mut far = s.to_vec();
+    far[0] += 5.0;
+    region.eval_one(&far, &u, &mut got);
+    plain.eval_one(&far, &u, &mut want);
+    assert!(
+        max_rel_diff(&got, &want) < 1e-9,
+        "far away: {got:?} vs {want:?}"
+    );
+    check_field_jacobians(&region, s, &u);
+}

@@ -178,15 +178,24 @@ pub(crate) fn disc<R: Real>(x: R, y: R, cx: R, cy: R, r: R, w: R) -> R {
     ((r - dist) / w).sigmoid()
 }
 
-/// The car vector field with the effects in `slots` whose `active` flag is set; `steer` is
-/// added to the steering angle the tires see (custom `δ` terms).
+/// The custom terms' corrections of the tire model's inputs.
+#[derive(Clone, Copy)]
+pub(crate) struct Inputs<R> {
+    /// Added to the steering angle the tires see (`δ` terms).
+    pub steer: R,
+    /// The tires' peak forces are scaled by `1 + grip` (`μ` terms).
+    pub grip: R,
+}
+
+/// The car vector field with the effects in `slots` whose `active` flag is set and the custom
+/// terms' input corrections `inputs`.
 pub(crate) fn rhs<R: Real>(
     p: &[R],
     slots: &[Slot],
     active: &[bool],
     s: &[R],
     u: &[R],
-    steer: R,
+    inputs: Inputs<R>,
     out: &mut [R],
 ) {
     let [
@@ -225,8 +234,9 @@ pub(crate) fn rhs<R: Real>(
             _ => {}
         }
     }
-    // custom `δ` terms correct the angle the tires see
-    let delta = delta + steer;
+    // custom `δ` terms correct the angle the tires see, `μ` terms the grip
+    let delta = delta + inputs.steer;
+    let grip = grip * (inputs.grip + 1.0);
     let (sd, cd) = (delta.sin(), delta.cos());
     let vyf = vy + lf * om;
     let v_long_f = cd * vx + sd * vyf;

@@ -13,7 +13,10 @@
 //! 1/s²); the pose kinematics stay as they are. `delta` (`δ` in rad) is not a derivative: it
 //! corrects the **effective steering angle** the tires see (after the servo's lag, when the model
 //! has one), so one term acts on `v̇_y` and `ω̇` through the tire model the way an input
-//! nonlinearity does (a steering gain that changes with speed, `δ += θ·δ·vₓ²`). Pushing (time
+//! nonlinearity does (a steering gain that changes with speed, `δ += θ·δ·vₓ²`). `grip` (`μ`,
+//! dimensionless) is not a derivative either: the tires' peak forces (both axles, and the rear
+//! friction ellipse) are scaled by `1 + Σ θ·feature`, so a term on a position feature is a region
+//! of other grip (`μ += −0.5·g(cx, cy; r)`: half the grip around `(cx, cy)`). Pushing (time
 //! in pushes, one push integrates normalised time over `[0, 1]`): `x`, `y`, `theta` add a rate
 //! in the **world (table) frame**, so a term constant over the push moves the block by
 //! `θ·feature` per push; `bx`, `by` add it
@@ -46,6 +49,9 @@ pub enum Target {
     Omega,
     /// Car: the effective steering angle `δ` (an input correction, not a derivative).
     Delta,
+    /// Car: the tires' grip `μ`, a scale `1 + μ` of both axles' peak forces (a correction
+    /// through the tire model, not a derivative).
+    Grip,
     /// Pushing: world `ẋ` (per push).
     X,
     /// Pushing: world `ẏ` (per push).
@@ -58,11 +64,12 @@ pub enum Target {
     BlockY,
 }
 
-const TARGETS: [(Target, &str, &str, Unit, Robot); 9] = [
+const TARGETS: [(Target, &str, &str, Unit, Robot); 10] = [
     (Target::Vx, "vx", "v̇ₓ", Unit::new(1, -2), Robot::Car),
     (Target::Vy, "vy", "v̇_y", Unit::new(1, -2), Robot::Car),
     (Target::Omega, "omega", "ω̇", Unit::new(0, -2), Robot::Car),
     (Target::Delta, "delta", "δ", Unit::new(0, 0), Robot::Car),
+    (Target::Grip, "grip", "μ", Unit::new(0, 0), Robot::Car),
     (Target::X, "x", "ẋ", Unit::new(1, -1), Robot::Pushing),
     (Target::Y, "y", "ẏ", Unit::new(1, -1), Robot::Pushing),
     (
@@ -135,7 +142,7 @@ impl Target {
     /// part, is the shape of the library's `pusher_friction` (on perturbed nominal worlds of
     /// 1000 pushes it passed the search's test in 11 of 20 seeds, and on `ℓ·φ` in 9 of 20 once
     /// `ℓ·sin φ` was left out). `δ` on `1` is the library's
-    /// `steering_offset` (`delta0`).
+    /// `steering_offset` (`delta0`); `μ` on `1` is a scale of the peak forces `Df`, `Dr`.
     pub fn nominal_parameter(self, feature: &Feature) -> Option<&'static str> {
         match (self, feature.name().as_str()) {
             (Target::Vx, "d") => Some("Cm1"),
@@ -143,6 +150,7 @@ impl Target {
             (Target::Vx, "1") => Some("Cr0"),
             (Target::Vx, "vx*vx" | "vx*|vx|") => Some("Cr2"),
             (Target::Delta, "1") => Some("steering_offset.delta0"),
+            (Target::Grip, "1") => Some("Df"),
             (Target::BlockX, "l" | "l*cos_phi") => Some("L"),
             (Target::Theta, "l*sin_phi" | "l*phi" | "l*p") => Some("c"),
             (Target::BlockY, "l*sin_phi" | "l*phi") => Some("pusher_friction.mu"),
@@ -155,15 +163,28 @@ impl Target {
     /// `|vₓ|`, `|v|`), the shapes of an input's nonlinearity. With a slip angle, `ω`, `v_y` or
     /// a position in it a `δ` term is a change of the tire model (on a car whose tires were
     /// 10 % off the model's, `δ += 0.48·α_r·vₓ` passed the search's test). A custom effect file
-    /// may still put any feature on `δ`.
+    /// may still put any feature on `δ`. On the grip `μ` only features of the position (`x`,
+    /// `y`, the bumps and bands): a grip that changes everywhere alike is the tires' own
+    /// parameters, a grip that changes with the motion is a tire model's shape. The bands are
+    /// tried on `μ` only (a strip of other grip across a floor).
     pub fn searched_with(self, feature: &Feature) -> bool {
-        self != Target::Delta
-            || feature.factors().iter().all(|a| {
+        let all = |ok: fn(&Atom) -> bool| feature.factors().iter().all(ok);
+        match self {
+            Target::Delta => all(|a| {
                 matches!(
                     a,
                     Atom::Delta | Atom::Throttle | Atom::Vx | Atom::AbsVx | Atom::Speed
                 )
-            })
+            }),
+            Target::Grip => all(Atom::is_position),
+            _ => all(|a| !matches!(a, Atom::Band { .. })),
+        }
+    }
+
+    /// Whether the target corrects an input of the tire model (`δ`, `μ`) rather than adding to
+    /// a derivative.
+    pub fn is_input(self) -> bool {
+        matches!(self, Target::Delta | Target::Grip)
     }
 
     /// Looks a target up by name.
@@ -175,7 +196,7 @@ impl Target {
             .ok_or_else(|| CustomError::UnknownState {
                 name: name.to_string(),
                 known:
-                    "car: vx, vy, omega, delta (the effective steering angle); pushing: x, y, theta (world frame), bx, by (block frame)"
+                    "car: vx, vy, omega, delta (the effective steering angle), grip (a scale of the tires' peak forces); pushing: x, y, theta (world frame), bx, by (block frame)"
                         .into(),
             })
     }
@@ -445,12 +466,19 @@ impl CustomEffect {
         )
     }
 
-    /// The correction of the effective steering angle: the sum of the `δ` terms with
-    /// coefficients `theta` (0 without such terms).
-    pub(crate) fn steering<R: Real>(&self, theta: &[R], p: &[R], s: &[R], u: &[R]) -> R {
+    /// The correction of the input `target` (`δ`, `μ`): the sum of its terms with coefficients
+    /// `theta` (0 without such terms).
+    pub(crate) fn input<R: Real>(
+        &self,
+        target: Target,
+        theta: &[R],
+        p: &[R],
+        s: &[R],
+        u: &[R],
+    ) -> R {
         let mut d = R::cst(0.0);
         for (t, &c) in self.terms.iter().zip(theta) {
-            if t.target == Target::Delta {
+            if t.target == target {
                 d = d + c * t.feature.eval(self.robot, p, s, u);
             }
         }
@@ -463,8 +491,8 @@ impl CustomEffect {
         for (t, &c) in self.terms.iter().zip(theta) {
             let v = c * t.feature.eval(self.robot, p, s, u);
             match t.target {
-                // an input correction: `steering`
-                Target::Delta => {}
+                // input corrections: `input`
+                Target::Delta | Target::Grip => {}
                 Target::Vx => out[3] = out[3] + v,
                 Target::Vy => out[4] = out[4] + v,
                 Target::Omega => out[5] = out[5] + v,
@@ -545,6 +573,14 @@ coefficient = -3.2
         );
         assert!(Target::Delta.searched_with(&f("delta*vx*vx")));
         assert!(!Target::Delta.searched_with(&f("alpha_r*vx")));
+        assert_eq!(Target::Grip.nominal_parameter(&f("1")), Some("Df"));
+        assert!(Target::Grip.searched_with(&f("gauss(0.5,0.2,0.4)")));
+        assert!(Target::Grip.searched_with(&f("x")));
+        assert!(!Target::Grip.searched_with(&f("gauss(0.5,0.2,0.4)*sat_alpha_r")));
+        assert!(!Target::Grip.searched_with(&f("vx")));
+        assert!(Target::Grip.searched_with(&f("band(0.785,0.2,0.3)")));
+        assert!(!Target::Vy.searched_with(&f("band(0.785,0.2,0.3)")));
+        assert!(Target::Grip.is_input() && Target::Delta.is_input() && !Target::Vy.is_input());
         assert!(Target::Omega.searched_with(&f("alpha_r*vx")));
         assert_eq!(Target::X.nominal_parameter(&f("l*cos_phi")), None);
     }

@@ -34,7 +34,11 @@
 //! Both robots: `x`, `y` (m, world/table frame), `1` (a constant) and position basis functions
 //! `gauss(cx,cy,r)` = `exp(−((x − cx)² + (y − cy)²)/(2r²))` (a Gaussian bump of width `r` \[m\]
 //! centred at `(cx, cy)`, for region-dependent effects; the term search puts them on a coarse
-//! grid over the driven area). Angles count as dimensionless in units (rad = 1), so
+//! grid over the driven area) and `band(a,d,w)` = `exp(−(n·(x, y) − d)²/(2w²))` with `n =
+//! (−sin a, cos a)` (a straight band along the direction `a` \[rad\], at the signed distance
+//! `d` \[m\] from the origin, of width `w` \[m\]: a strip of other grip across a floor, which
+//! one bump covers only in part; the term search puts them at 4 directions × `grid` offsets
+//! and tries them on the car's grip). Angles count as dimensionless in units (rad = 1), so
 //! `ω̇ += θ·δ·vₓ` has `θ` in `1/(m·s)`.
 //!
 //! Features are memoryless: lagged inputs and input rates are not in the library (they need
@@ -203,6 +207,16 @@ pub enum Atom {
         /// Width \[m\].
         r: f64,
     },
+    /// Gaussian band `exp(−(n·(x, y) − d)²/(2w²))`, `n = (−sin a, cos a)`: a straight band
+    /// along the direction `a` at the signed distance `d` from the origin, of width `w`.
+    Band {
+        /// Direction of the band \[rad\].
+        a: f64,
+        /// Signed distance of its centre line from the origin \[m\].
+        d: f64,
+        /// Width \[m\].
+        w: f64,
+    },
 }
 
 /// Which robots an atom belongs to.
@@ -328,6 +342,7 @@ impl Atom {
             Atom::Gauss { cx, cy, r } => {
                 format!("gauss({},{},{})", short(*cx), short(*cy), short(*r))
             }
+            Atom::Band { a, d, w } => format!("band({},{},{})", short(*a), short(*d), short(*w)),
             a => entry(a).map(|e| e.1).unwrap_or("?").to_string(),
         }
     }
@@ -341,6 +356,12 @@ impl Atom {
                 short(*cy).replace('-', "−"),
                 short(*r)
             ),
+            Atom::Band { a, d, w } => format!(
+                "b({}, {}; {})",
+                short(*a).replace('-', "−"),
+                short(*d).replace('-', "−"),
+                short(*w)
+            ),
             a => entry(a).map(|e| e.2).unwrap_or("?").to_string(),
         }
     }
@@ -348,7 +369,7 @@ impl Atom {
     /// Unit.
     pub fn unit(&self) -> Unit {
         match self {
-            Atom::Gauss { .. } => Unit::default(),
+            Atom::Gauss { .. } | Atom::Band { .. } => Unit::default(),
             a => entry(a).map(|e| e.3).unwrap_or_default(),
         }
     }
@@ -356,7 +377,7 @@ impl Atom {
     /// Whether the atom exists for `robot`.
     pub fn belongs_to(&self, robot: Robot) -> bool {
         let owner = match self {
-            Atom::Gauss { .. } => Owner::Both,
+            Atom::Gauss { .. } | Atom::Band { .. } => Owner::Both,
             a => entry(a).map(|e| e.4).unwrap_or(Owner::Both),
         };
         match owner {
@@ -366,13 +387,21 @@ impl Atom {
         }
     }
 
-    /// Names of the atoms of `robot` (`gauss(cx,cy,r)` last).
+    /// Whether the atom is a function of the position alone (`x`, `y`, a bump, a band).
+    pub fn is_position(&self) -> bool {
+        matches!(
+            self,
+            Atom::X | Atom::Y | Atom::Gauss { .. } | Atom::Band { .. }
+        )
+    }
+
+    /// Names of the atoms of `robot` (`gauss(cx,cy,r)`, `band(a,d,w)` last).
     pub fn names(robot: Robot) -> Vec<String> {
         TABLE
             .iter()
             .filter(|e| e.0.belongs_to(robot))
             .map(|e| e.1.to_string())
-            .chain(std::iter::once("gauss(cx,cy,r)".to_string()))
+            .chain(["gauss(cx,cy,r)".to_string(), "band(a,d,w)".to_string()])
             .collect()
     }
 
@@ -382,20 +411,28 @@ impl Atom {
         if let Some(e) = TABLE.iter().find(|e| e.1 == n) {
             return Ok(e.0);
         }
-        if let Some(args) = n.strip_prefix("gauss(").and_then(|r| r.strip_suffix(')')) {
-            let v: Vec<f64> = args
+        // three finite numbers, the last (a width) positive
+        let args = |prefix: &str| -> Option<Result<[f64; 3], FeatureError>> {
+            let inner = n.strip_prefix(prefix)?.strip_suffix(')')?;
+            let v: Vec<f64> = inner
                 .split(',')
                 .map(|a| a.trim().parse::<f64>())
                 .collect::<Result<_, _>>()
-                .map_err(|_| FeatureError::BadGauss(n.to_string()))?;
-            if v.len() != 3 || !v.iter().all(|x| x.is_finite()) || v[2] <= 0.0 {
-                return Err(FeatureError::BadGauss(n.to_string()));
-            }
-            return Ok(Atom::Gauss {
-                cx: v[0],
-                cy: v[1],
-                r: v[2],
-            });
+                .unwrap_or_default();
+            Some(match v[..] {
+                [a, b, c] if a.is_finite() && b.is_finite() && c.is_finite() && c > 0.0 => {
+                    Ok([a, b, c])
+                }
+                _ => Err(FeatureError::BadGauss(n.to_string())),
+            })
+        };
+        if let Some(v) = args("gauss(") {
+            let [cx, cy, r] = v?;
+            return Ok(Atom::Gauss { cx, cy, r });
+        }
+        if let Some(v) = args("band(") {
+            let [a, d, w] = v?;
+            return Ok(Atom::Band { a, d, w });
         }
         Err(FeatureError::UnknownAtom {
             name: n.to_string(),
@@ -415,6 +452,10 @@ impl Atom {
                 let dx = s[0] - *cx;
                 let dy = s[1] - *cy;
                 (-(dx * dx + dy * dy) / (2.0 * r * r)).exp()
+            }
+            (_, Atom::Band { a, d, w }) => {
+                let e = s[1] * a.cos() - s[0] * a.sin() - *d;
+                (-(e * e) / (2.0 * w * w)).exp()
             }
             (Robot::Car, a) => car_atom(a, p, s, u),
             (Robot::Pushing, a) => push_atom(a, s, u),
@@ -486,9 +527,9 @@ pub enum FeatureError {
         /// Atoms of the pusher.
         pushing: String,
     },
-    /// A malformed Gaussian bump.
+    /// A malformed position basis function.
     #[error(
-        "bad position basis '{0}'; write gauss(cx,cy,r) with finite numbers and r > 0 (metres)"
+        "bad position basis '{0}'; write gauss(cx,cy,r) or band(a,d,w) with finite numbers and r, w > 0 (metres, a in rad)"
     )]
     BadGauss(String),
     /// No factors or too many.
@@ -575,12 +616,10 @@ impl Feature {
         &self.factors
     }
 
-    /// Whether the feature depends on where the robot is (`x`, `y` or a Gaussian bump): a
-    /// region's term, which the term search tries only after the terms that hold everywhere.
+    /// Whether the feature depends on where the robot is (`x`, `y`, a Gaussian bump or band):
+    /// a region's term, which the term search tries only after the terms that hold everywhere.
     pub fn depends_on_position(&self) -> bool {
-        self.factors
-            .iter()
-            .any(|a| matches!(a, Atom::X | Atom::Y | Atom::Gauss { .. }))
+        self.factors.iter().any(Atom::is_position)
     }
 
     /// Name used in files: the atoms joined by `*`.
@@ -647,7 +686,8 @@ pub struct Area {
 
 /// The candidate features of the term search for `robot`: the physics-informed products of
 /// states and inputs, slip angles and their saturating functions, `x`, `y`, and, when `area`
-/// is given, Gaussian bumps on a `grid × grid` lattice over it (width: the lattice spacing).
+/// is given, Gaussian bumps on a `grid × grid` lattice over it (width: the lattice spacing) and
+/// for the car bands at 4 directions and `grid` offsets across it (width: half the spacing).
 pub fn library(robot: Robot, area: Option<Area>, grid: usize) -> Vec<Feature> {
     let names: &[&str] = match robot {
         Robot::Car => &[
@@ -731,6 +771,29 @@ pub fn library(robot: Robot, area: Option<Area>, grid: usize) -> Vec<Feature> {
                 }
             }
         }
+        // the car's straight bands (for its grip): 4 directions, `grid` offsets across the
+        // area in each, as wide as half the spacing
+        if robot == Robot::Car {
+            for k in 0..4 {
+                let ang = round(k as f64 * std::f64::consts::FRAC_PI_4);
+                let n = [-ang.sin(), ang.cos()];
+                let proj: Vec<f64> = [a.lo, [a.lo[0], a.hi[1]], [a.hi[0], a.lo[1]], a.hi]
+                    .iter()
+                    .map(|c| n[0] * c[0] + n[1] * c[1])
+                    .collect();
+                let lo = proj.iter().copied().fold(f64::INFINITY, f64::min);
+                let span = (proj.iter().copied().fold(f64::NEG_INFINITY, f64::max) - lo).max(1e-3);
+                for i in 0..grid {
+                    v.push(Feature {
+                        factors: vec![Atom::Band {
+                            a: ang,
+                            d: round(lo + (i as f64 + 0.5) / grid as f64 * span),
+                            w: round((0.5 * span / grid as f64).max(1e-3)),
+                        }],
+                    });
+                }
+            }
+        }
     }
     v
 }
@@ -790,8 +853,8 @@ mod tests {
         };
         let lib = library(Robot::Car, Some(area), 3);
         let region: Vec<&Feature> = lib.iter().filter(|f| f.depends_on_position()).collect();
-        // x, y and each of the 9 bumps alone and times the slip of each axle
-        assert_eq!(region.len(), 2 + 27);
+        // x, y, each of the 9 bumps alone and times the slip of each axle, 4 × 3 bands
+        assert_eq!(region.len(), 2 + 27 + 12);
         for axle in [Atom::SatAlphaF, Atom::SatAlphaR] {
             let n = region
                 .iter()
@@ -830,6 +893,25 @@ mod tests {
         let e = Feature::parse("delta*speed").unwrap_err().to_string();
         assert!(e.contains("'speed'") && e.contains("|v|"), "{e}");
         assert!(Feature::parse("gauss(1,2)").is_err());
+        assert!(Feature::parse("band(0.5,0.1,0)").is_err());
+        let b = Feature::parse("band(0.5,0.1,0.4)").unwrap();
+        assert_eq!(b.name(), "band(0.5,0.1,0.4)");
+        assert!(b.depends_on_position());
+        // on its centre line (distance 0.1 along the normal) the band is 1, a width off e^(−1/2)
+        let n = [-(0.5f64).sin(), (0.5f64).cos()];
+        let at = |off: f64| {
+            let s = [
+                n[0] * off + 3.0 * n[1],
+                n[1] * off - 3.0 * n[0],
+                0.0,
+                1.0,
+                0.0,
+                0.0,
+            ];
+            b.eval(Robot::Car, &[], &s, &[0.0, 0.0])
+        };
+        assert!((at(0.1) - 1.0).abs() < 1e-12);
+        assert!((at(0.5) - (-0.5f64).exp()).abs() < 1e-12);
         assert!(Feature::parse("vx*vx*vx*vx*vx").is_err());
         let e = Feature::parse("l*vx")
             .unwrap()

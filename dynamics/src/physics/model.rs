@@ -1,7 +1,7 @@
 //! [`PhysicsModel`]: nominal model + enabled effects + flat parameter vector.
 
 use super::car::{self, CAR_NOMINAL_PARAMS, Slot};
-use super::custom::{COEFFICIENT_BOUND, CustomEffect, CustomError};
+use super::custom::{COEFFICIENT_BOUND, CustomEffect, CustomError, Target};
 use super::push::{self, PUSH_NOMINAL_PARAMS};
 use super::{Effect, ParamSpec, Robot};
 use crate::ode::{InputTape, VectorField};
@@ -478,8 +478,11 @@ impl PhysicsModel {
     pub fn eval_generic<R: Real>(&self, p: &[R], active: &[bool], s: &[R], u: &[R], out: &mut [R]) {
         match self.robot {
             Robot::Car => {
-                let steer = self.custom_steering(p, s, u);
-                car::rhs(p, &self.slots, active, s, u, steer, out)
+                let inputs = car::Inputs {
+                    steer: self.custom_input(Target::Delta, p, s, u),
+                    grip: self.custom_input(Target::Grip, p, s, u),
+                };
+                car::rhs(p, &self.slots, active, s, u, inputs, out)
             }
             Robot::Pushing => push::rhs(p, &self.slots, active, s, u, out),
         }
@@ -496,13 +499,13 @@ impl PhysicsModel {
         }
     }
 
-    /// The custom effects' correction of the effective steering angle (`δ` terms).
-    fn custom_steering<R: Real>(&self, p: &[R], s: &[R], u: &[R]) -> R {
+    /// The custom effects' correction of the input `target` (`δ`, `μ` terms).
+    fn custom_input<R: Real>(&self, target: Target, p: &[R], s: &[R], u: &[R]) -> R {
         let mut off = self.custom_start();
         let mut d = R::cst(0.0);
         for c in &self.custom {
             let n = c.terms().len();
-            d = d + c.steering(&p[off..off + n], p, s, u);
+            d = d + c.input(target, &p[off..off + n], p, s, u);
             off += n;
         }
         d
