@@ -53,7 +53,7 @@ use dynlab_learn::dynamics::conventions::wrap_angle;
 use dynlab_learn::dynamics::data::{
     DataError, Split, SplitMix64, StateTrajectory, Window, split_trajectories, windows,
 };
-use dynlab_learn::dynamics::physics::{Effect, ModelError, PhysicsModel};
+use dynlab_learn::dynamics::physics::{Effect, ModelError, PhysicsModel, Target};
 use dynlab_learn::fit::{bounded_least_squares, calm_windows, cluster_std, initial_state_after};
 use dynlab_learn::train::{segment, segment_origins};
 use dynlab_learn::{Dataset, LearnError, Model, World};
@@ -766,6 +766,10 @@ struct Ctx<'a> {
     test_w: Vec<Window>,
     /// Held-out segments (bootstrap clusters).
     test_segments: usize,
+    /// The fit half's segments (indices into the trajectories) and the number of segments of
+    /// each half: the term search's split.
+    fit_trajs: Vec<usize>,
+    segments: [usize; 2],
     /// Positions `(x, y)` at every window start (fit and held-out): where the data are.
     positions: Vec<[f64; 2]>,
 }
@@ -1104,6 +1108,47 @@ impl Ctx<'_> {
         None
     }
 
+    /// Why a grip patch that removes `reduction` of the held-out error from `cur` is not
+    /// counted: the term search's best grip term on the position (`μ` on `x`, `y`, a bump or a
+    /// band, one term) removes more. The disc is then not the region's shape (a low-grip band
+    /// across the floor fits a disc on part of it, and the term search finds the band).
+    fn region_term_note(
+        &self,
+        cur: &Current,
+        reduction: f64,
+    ) -> Result<Option<String>, DiagnosisError> {
+        let dcfg = DiscoveryConfig {
+            steps: Some(self.d.k),
+            seed: self.cfg.seed,
+            max_terms: 1,
+            targets: Some(vec![Target::Grip.name().to_string()]),
+            ..self.cfg.discovery.clone()
+        };
+        let d = discover_terms_split(
+            &cur.physics,
+            &self.model.physics_solver(),
+            self.model.physics_time(),
+            self.d.trajs,
+            &self.fit_trajs,
+            &self.fit_w,
+            &self.test_w,
+            self.d.k,
+            self.segments,
+            &dcfg,
+        )?;
+        Ok(d.terms
+            .first()
+            .filter(|t| t.error_reduction > reduction)
+            .map(|t| {
+                format!(
+                    "a grip term on the position, {}, removes more of the held-out error ({:.1} % against {:.1} %): the region of other grip is not a disc (see the term search)",
+                    t.equation,
+                    100.0 * t.error_reduction,
+                    100.0 * reduction
+                )
+            }))
+    }
+
     /// Fits and scores candidate `e` against the augmented model `cur`; `tested`: the number of
     /// candidates of this step (Bonferroni).
     fn candidate(
@@ -1145,11 +1190,14 @@ impl Ctx<'_> {
         );
         // a reason against it matters only where the numbers alone would count it
         let counts = raw >= self.cfg.min_reduction && ci_lower > 0.0 && self.test_segments >= 2;
-        let note = if counts {
+        let mut note = if counts {
             self.implausible(e, &f)
         } else {
             None
         };
+        if counts && note.is_none() && e == Effect::GripPatch && self.pure_physics {
+            note = self.region_term_note(cur, raw)?;
+        }
         let significant = counts && note.is_none();
         let mine: Vec<usize> = (0..f.names.len())
             .filter(|&i| f.owners[i] == Some(e))
@@ -1362,6 +1410,8 @@ pub fn diagnose(
         fit_w,
         test_w,
         test_segments: split.validation.len(),
+        fit_trajs: split.train.clone(),
+        segments: [split.train.len(), split.validation.len()],
         positions,
     };
     // the baseline: the model as given, or with its nominal parameters refitted on the fit half

@@ -158,6 +158,9 @@ pub struct DiscoveryConfig {
     pub bins: usize,
     /// Name of the discovered custom effect (default `discovered`).
     pub name: String,
+    /// Names of the targets searched (`vx`, `grip`, …, as in effect files; default: every
+    /// target of the robot).
+    pub targets: Option<Vec<String>>,
 }
 
 impl Default for DiscoveryConfig {
@@ -179,6 +182,7 @@ impl Default for DiscoveryConfig {
             iterations: 15,
             bins: 12,
             name: "discovered".into(),
+            targets: None,
         }
     }
 }
@@ -194,6 +198,15 @@ impl DiscoveryConfig {
 
     fn validate(&self) -> Result<(), DiscoveryError> {
         let bad = |name, value: String, hint| Err(DiscoveryError::Setting { name, value, hint });
+        if let Some(ts) = &self.targets
+            && let Some(t) = ts.iter().find(|t| Target::from_name(t).is_err())
+        {
+            return bad(
+                "targets",
+                t.clone(),
+                "use target names of effect files: vx, vy, omega, delta, grip (car); x, y, theta, bx, by (pushing)",
+            );
+        }
         if !(self.holdout_fraction > 0.0 && self.holdout_fraction < 1.0) {
             return bad(
                 "holdout_fraction",
@@ -613,7 +626,14 @@ pub fn discover_terms_split(
     }
     let mut pred = vec![0.0; n * dp];
     physics.integrate_step(solver, n, &s0, &u0, h, &mut pred);
-    let targets = Target::all(robot);
+    let targets: Vec<Target> = Target::all(robot)
+        .into_iter()
+        .filter(|t| {
+            cfg.targets
+                .as_ref()
+                .is_none_or(|ts| ts.iter().any(|n| n == t.name()))
+        })
+        .collect();
     // the residual of a derivative at transition i
     let residual = |i: usize, target: Target| -> f64 {
         let (ti, a) = trans[i];

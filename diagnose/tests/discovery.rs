@@ -456,3 +456,70 @@ fn a_model_with_an_effect_state_is_searched() {
     println!("{}", d.table());
     assert!(d.transitions > 1000 && d.baseline_error.is_finite());
 }
+
+/// The simulator's low-grip band (half the grip within 0.4 m of a line at 0.5 rad through
+/// (0, 0.3), `launch_scripts/scenarios/car_grip_band.toml`), outside the library, on the
+/// documented model: over 3 seeds the term the search tries for it is on the grip `μ`, negative
+/// (less grip) and on a band or a bump centred within the band, and removes ≥ 20 % of the
+/// held-out error; it passes the search's test in at least 2 (measured: 3 of 3, 51, 66 and
+/// 25 %). (The bootstrap over whole held-out segments is wide for a region: only the segments
+/// that cross it gain.)
+#[test]
+fn a_low_grip_band_is_a_grip_term_on_a_band() {
+    use dynlab_sim::car::GripPatch;
+    use dynlab_sim::{Region, RegionShape};
+    let mut scenario = car_scenario(None, 1.0);
+    scenario.effects.grip_patch = Some(GripPatch {
+        enabled: true,
+        scale: 0.5,
+        region: Region {
+            shape: RegionShape::Band,
+            centre: [0.0, 0.3],
+            angle: 0.5,
+            width: 0.8,
+            ..Region::default()
+        },
+    });
+    // the band's signed distance along a feature's normal at a position
+    let inside = |x: f64, y: f64| (-(0.5f64).sin() * x + (0.5f64).cos() * (y - 0.3)).abs() <= 0.4;
+    let mut significant = 0;
+    for seed in 1..=3u64 {
+        let data = car_dataset(&scenario, 4, 30.0, 900 + seed, 2).unwrap();
+        let model = physics_model(PhysicsModel::car(&[]).unwrap(), data.pose_dt_s);
+        let d = discover_terms(
+            &model,
+            &data,
+            &DiscoveryConfig {
+                seed,
+                ..DiscoveryConfig::default()
+            },
+        )
+        .unwrap();
+        println!("seed {seed}\n{}", d.table());
+        let t = d
+            .terms
+            .iter()
+            .find(|t| t.state == "grip")
+            .unwrap_or_else(|| panic!("no grip term tried\n{}", d.table()));
+        assert!(t.coefficient < 0.0, "less grip: {}", d.table());
+        assert!(t.error_reduction >= 0.2, "{}", d.table());
+        let f = dynlab_learn::dynamics::physics::features::Feature::parse(&t.feature).unwrap();
+        use dynlab_learn::dynamics::physics::features::Atom;
+        let on_band = f.factors().iter().any(|a| match *a {
+            // the feature's centre line crosses the band within the floor
+            Atom::Band { a, d, .. } => (-15..=15).any(|i| {
+                let s = 0.1 * i as f64;
+                let (x, y) = (-a.sin() * d + a.cos() * s, a.cos() * d + a.sin() * s);
+                x.abs() <= 1.5 && y.abs() <= 1.5 && inside(x, y)
+            }),
+            Atom::Gauss { cx, cy, .. } => inside(cx, cy),
+            _ => false,
+        });
+        assert!(on_band, "{}", d.table());
+        significant += usize::from(t.significant);
+    }
+    assert!(
+        significant >= 2,
+        "the grip term passed the test in {significant} of 3 seeds"
+    );
+}
