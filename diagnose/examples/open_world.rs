@@ -29,7 +29,7 @@ use std::collections::BTreeSet;
 use std::time::Instant;
 
 use dynlab_control::racing::true_car_model;
-use dynlab_diagnose::diagnosis::simdata::car_dataset;
+use dynlab_diagnose::diagnosis::simdata::{car_dataset, low_grip_band, over_low_grip_band};
 use dynlab_diagnose::diagnosis::{DiagnoseConfig, diagnose};
 use dynlab_learn::dynamics::physics::{Effect, Target};
 use dynlab_learn::train::{KindDefaults, TrainConfig, train};
@@ -96,29 +96,19 @@ impl Hidden {
                 })
             }
             Hidden::Offset => e.steering_offset = Some(SteeringOffset::default()),
-            Hidden::Disc | Hidden::Band => {
-                let region = if matches!(self, Hidden::Disc) {
-                    Region {
+            Hidden::Disc => {
+                e.grip_patch = Some(GripPatch {
+                    enabled: true,
+                    scale: 0.5,
+                    region: Region {
                         shape: RegionShape::Disc,
                         centre: [0.5, 0.0],
                         radius: 0.6,
                         ..Region::default()
-                    }
-                } else {
-                    Region {
-                        shape: RegionShape::Band,
-                        centre: [0.0, 0.3],
-                        angle: 0.5,
-                        width: 0.8,
-                        ..Region::default()
-                    }
-                };
-                e.grip_patch = Some(GripPatch {
-                    enabled: true,
-                    scale: 0.5,
-                    region,
+                    },
                 })
             }
+            Hidden::Band => e.grip_patch = Some(low_grip_band()),
             Hidden::GainSpeed => {
                 e.steering_gain_speed = Some(SteeringGainSpeed {
                     enabled: true,
@@ -262,6 +252,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let mut wrong: BTreeSet<String> = BTreeSet::new();
         let mut beyond: Vec<f64> = Vec::new();
         let mut terms: std::collections::BTreeMap<String, usize> = Default::default();
+        // the band: seeds whose first significant term is less grip over it
+        let mut on_band = 0;
         for seed in first_seed..first_seed + n {
             let mut car = CarScenario::default();
             car.noise.position_std = 0.0005 * noise;
@@ -354,6 +346,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 let sig: Vec<_> = disc.terms.iter().filter(|t| t.significant).collect();
                 if !sig.is_empty() {
                     beyond.push(disc.error_reduction);
+                    let t = sig[0];
+                    on_band += usize::from(
+                        matches!(case[..], [Hidden::Band])
+                            && t.state == Target::Grip.name()
+                            && t.coefficient < 0.0
+                            && over_low_grip_band(&t.feature),
+                    );
                     for t in sig {
                         let key = format!(
                             "{} {} {}",
@@ -430,6 +429,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     .collect::<Vec<_>>()
                     .join("; ")
             ));
+        }
+        if matches!(case[..], [Hidden::Band]) {
+            fitted.push(format!("less grip over the band in {on_band}/{n}"));
         }
         if !wrong.is_empty() {
             fitted.push(format!(

@@ -7,7 +7,9 @@
 //! noise (0.5 mm, 2 mrad) and go through the same pipeline as a bag (`Dataset::from_samples`,
 //! Savitzky–Golay velocities). Everything is seeded.
 
-use dynlab_diagnose::diagnosis::simdata::{car_dataset, car_scenario, push_dataset, push_scenario};
+use dynlab_diagnose::diagnosis::simdata::{
+    car_dataset, car_scenario, low_grip_band, over_low_grip_band, push_dataset, push_scenario,
+};
 use dynlab_diagnose::diagnosis::{DiagnoseConfig, diagnose};
 use dynlab_diagnose::discovery::{Discovery, DiscoveryConfig, discover_terms, discovery_html};
 use dynlab_learn::dynamics::data::{CommandSample, PoseSample, SavGol, SplitMix64};
@@ -466,22 +468,8 @@ fn a_model_with_an_effect_state_is_searched() {
 /// that cross it gain.)
 #[test]
 fn a_low_grip_band_is_a_grip_term_on_a_band() {
-    use dynlab_sim::car::GripPatch;
-    use dynlab_sim::{Region, RegionShape};
     let mut scenario = car_scenario(None, 1.0);
-    scenario.effects.grip_patch = Some(GripPatch {
-        enabled: true,
-        scale: 0.5,
-        region: Region {
-            shape: RegionShape::Band,
-            centre: [0.0, 0.3],
-            angle: 0.5,
-            width: 0.8,
-            ..Region::default()
-        },
-    });
-    // the band's signed distance along a feature's normal at a position
-    let inside = |x: f64, y: f64| (-(0.5f64).sin() * x + (0.5f64).cos() * (y - 0.3)).abs() <= 0.4;
+    scenario.effects.grip_patch = Some(low_grip_band());
     let mut significant = 0;
     for seed in 1..=3u64 {
         let data = car_dataset(&scenario, 4, 30.0, 900 + seed, 2).unwrap();
@@ -503,19 +491,7 @@ fn a_low_grip_band_is_a_grip_term_on_a_band() {
             .unwrap_or_else(|| panic!("no grip term tried\n{}", d.table()));
         assert!(t.coefficient < 0.0, "less grip: {}", d.table());
         assert!(t.error_reduction >= 0.2, "{}", d.table());
-        let f = dynlab_learn::dynamics::physics::features::Feature::parse(&t.feature).unwrap();
-        use dynlab_learn::dynamics::physics::features::Atom;
-        let on_band = f.factors().iter().any(|a| match *a {
-            // the feature's centre line crosses the band within the floor
-            Atom::Band { a, d, .. } => (-15..=15).any(|i| {
-                let s = 0.1 * i as f64;
-                let (x, y) = (-a.sin() * d + a.cos() * s, a.cos() * d + a.sin() * s);
-                x.abs() <= 1.5 && y.abs() <= 1.5 && inside(x, y)
-            }),
-            Atom::Gauss { cx, cy, .. } => inside(cx, cy),
-            _ => false,
-        });
-        assert!(on_band, "{}", d.table());
+        assert!(over_low_grip_band(&t.feature), "{}", d.table());
         significant += usize::from(t.significant);
     }
     assert!(

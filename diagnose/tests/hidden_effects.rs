@@ -6,11 +6,12 @@
 //!
 //! Data are generated in process (seeded), small but sufficient: 3 episodes of 15 s at 100 Hz.
 
-use dynlab_diagnose::diagnosis::simdata::{car_dataset, car_scenario, nominal_model};
+use dynlab_diagnose::diagnosis::simdata::{
+    car_dataset, car_scenario, low_grip_band, nominal_model, over_low_grip_band,
+};
 use dynlab_diagnose::diagnosis::{DiagnoseConfig, Diagnosis, diagnose};
 use dynlab_learn::World;
 use dynlab_learn::dynamics::physics::Effect;
-use dynlab_learn::dynamics::physics::features::Atom;
 
 fn run_car(effect: Option<Effect>, seed: u64) -> Diagnosis {
     run_car_with(effect, seed, None)
@@ -170,19 +171,8 @@ fn a_steering_gain_falling_with_speed_gets_no_library_name_and_a_steering_term()
 /// the diagnosis names `grip_patch` over the band: seed 9 of this test, and 3 × 15 s of data.)
 #[test]
 fn a_low_grip_band_is_not_a_disc_but_a_grip_term() {
-    let inside = |x: f64, y: f64| (-(0.5f64).sin() * x + (0.5f64).cos() * (y - 0.3)).abs() <= 0.4;
     let mut scenario = car_scenario(None, 1.0);
-    scenario.effects.grip_patch = Some(dynlab_sim::car::GripPatch {
-        enabled: true,
-        scale: 0.5,
-        region: dynlab_sim::Region {
-            shape: dynlab_sim::RegionShape::Band,
-            centre: [0.0, 0.3],
-            angle: 0.5,
-            width: 0.8,
-            ..dynlab_sim::Region::default()
-        },
-    });
+    scenario.effects.grip_patch = Some(low_grip_band());
     let d = run_episodes(&scenario, [4.0, 30.0], 348, 8, None);
     let table = d.table();
     assert!(d.effects.is_empty(), "no library effect: {table}");
@@ -207,18 +197,7 @@ fn a_low_grip_band_is_not_a_disc_but_a_grip_term() {
     assert!(t.coefficient < 0.0, "{table}");
     assert!(t.error_reduction >= 0.4, "{table}");
     assert!(t.error_reduction > patch.error_reduction, "{table}");
-    let f = dynlab_learn::dynamics::physics::features::Feature::parse(&t.feature).unwrap();
-    let over = f.factors().iter().any(|a| match *a {
-        Atom::Gauss { cx, cy, .. } => inside(cx, cy),
-        // the band's centre line crosses the low-grip band on the floor
-        Atom::Band { a, d, .. } => (-15..=15).any(|i| {
-            let s = 0.1 * f64::from(i);
-            let (x, y) = (-a.sin() * d + a.cos() * s, a.cos() * d + a.sin() * s);
-            x.abs() <= 1.5 && y.abs() <= 1.5 && inside(x, y)
-        }),
-        _ => false,
-    });
-    assert!(over, "{table}");
+    assert!(over_low_grip_band(&t.feature), "{table}");
 }
 
 #[test]

@@ -144,6 +144,46 @@ pub fn car_scenario(effect: Option<Effect>, noise: f64) -> CarScenario {
     s
 }
 
+/// The low-grip band outside the library (`launch_scripts/scenarios/car_grip_band.toml`): both
+/// tires' peak force halved within 0.4 m of the line through (0, 0.3) at 0.5 rad, across the
+/// floor.
+pub fn low_grip_band() -> dynlab_sim::car::GripPatch {
+    dynlab_sim::car::GripPatch {
+        enabled: true,
+        scale: 0.5,
+        region: Region {
+            shape: RegionShape::Band,
+            centre: [0.0, 0.3],
+            angle: 0.5,
+            width: 0.8,
+            ..Region::default()
+        },
+    }
+}
+
+/// Whether a term's feature has a position factor over [`low_grip_band`] on the 3 × 3 m
+/// floor: a bump centred in it, or a band whose centre line crosses it.
+pub fn over_low_grip_band(feature: &str) -> bool {
+    use dynlab_learn::dynamics::physics::features::{Atom, Feature};
+    let band = low_grip_band().region;
+    let inside = |x: f64, y: f64| {
+        let (s, c) = band.angle.sin_cos();
+        (-s * (x - band.centre[0]) + c * (y - band.centre[1])).abs() <= 0.5 * band.width
+    };
+    let Ok(f) = Feature::parse(feature) else {
+        return false;
+    };
+    f.factors().iter().any(|a| match *a {
+        Atom::Gauss { cx, cy, .. } => inside(cx, cy),
+        Atom::Band { a, d, .. } => (-15..=15).any(|i| {
+            let s = 0.1 * f64::from(i);
+            let (x, y) = (-a.sin() * d + a.cos() * s, a.cos() * d + a.sin() * s);
+            x.abs() <= 1.5 && y.abs() <= 1.5 && inside(x, y)
+        }),
+        _ => false,
+    })
+}
+
 /// The pushing world with only `effect` on (see [`car_scenario`]).
 pub fn push_scenario(effect: Option<Effect>, noise: f64) -> PushScenario {
     use dynlab_sim::push::{ComOffset, FrictionPatch, PusherFriction, TableTilt};
