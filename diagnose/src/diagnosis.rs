@@ -27,12 +27,16 @@
 //! compared (the model before the step and the model with the candidate) roll out through a
 //! spin, more than 100 times (`CHAOS_LIMIT`) as sensitive to their parameters as the median window,
 //! are left out of that candidate's scores ([`Candidate::chaotic_windows`]); the joint fit's
-//! reduction counts every held-out window. A candidate is **significant** when the
+//! reduction counts every held-out window, and is given without those both the model as given
+//! and the final model spin on as well ([`JointFit::reduction_vs_model_calm`]). A candidate is
+//! **significant** when the
 //! reduction is at least [`DiagnoseConfig::min_reduction`] *and* the lower end of a one-sided
 //! bootstrap confidence interval over held-out segments (resampled whole, seeded) is above zero.
 //! The interval's error probability is divided by the number of candidates tested
 //! ([`DiagnoseConfig::correct_for_candidates`], Bonferroni), so the chance that *some* candidate
 //! of a nominal data set passes stays at `1 − confidence`.
+//! A car's `grip_patch` is not counted when the term search's best grip term on the position
+//! ([`crate::discovery`], `μ` on a bump or band) removes more: the region is not a disc.
 //! The verdict is the best significant candidate, or none: then the report says so and lists
 //! what the residual correlates with (state and input features, and inputs at lags).
 //!
