@@ -306,7 +306,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             "\n{:<5} {:>13} {:<40} {:<70} {:>6}",
             "seed", "block/mm", "library named", "term search", "time/s"
         );
-        let (mut clean, mut sig) = (0, 0);
+        let (mut clean, mut sig, mut bound, mut named_on_bound) = (0, 0, 0, 0);
         for seed in first_seed..first_seed + nominal_seeds {
             let t0 = Instant::now();
             let (scenario, model) = world(100 + seed)?;
@@ -318,6 +318,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             let terms = terms_of(&d);
             clean += usize::from(d.effects.is_empty());
             sig += usize::from(!terms.is_empty());
+            let on_bound = !d.nominal_on_bound.is_empty();
+            bound += usize::from(on_bound);
+            named_on_bound += usize::from(on_bound && !d.effects.is_empty());
             let [bx, by] = scenario.block.size;
             println!(
                 "{:<5} {:>6.1}×{:<6.1} {:<40} {:<70} {:>6.1}",
@@ -325,7 +328,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 1e3 * bx,
                 1e3 * by,
                 if d.effects.is_empty() {
-                    "—".to_string()
+                    if on_bound {
+                        "— (a nominal parameter on its bound)"
+                    } else {
+                        "—"
+                    }
+                    .to_string()
                 } else {
                     d.selection
                         .iter()
@@ -343,6 +351,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                         })
                         .collect::<Vec<_>>()
                         .join(", ")
+                        + if on_bound {
+                            " (a nominal parameter on its bound)"
+                        } else {
+                            ""
+                        }
                 },
                 d.discovery
                     .as_ref()
@@ -351,7 +364,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             );
         }
         println!(
-            "nominal over {nominal_seeds} seeds: nothing named in {clean}/{nominal_seeds}; a significant term in {sig}/{nominal_seeds}"
+            "nominal over {nominal_seeds} seeds: nothing named in {clean}/{nominal_seeds}; a significant term in {sig}/{nominal_seeds}; a refitted nominal parameter on its bound in {bound} (of those, named: {named_on_bound})"
         );
     }
     Ok(())

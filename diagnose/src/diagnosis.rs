@@ -472,9 +472,10 @@ pub struct Diagnosis {
     #[serde(default)]
     pub nominal_refit: BTreeMap<String, f64>,
     /// Refitted nominal parameters of the baseline that end on a bound of their range: the
-    /// nominal model cannot follow these data, and an effect found may stand in for a
-    /// parameter the model holds fixed (pushing: a face wider than the block's depth `a` puts
-    /// `κ` on its bound 1, and `com_offset` then takes up part of the missing reach).
+    /// nominal model does not follow these data there, and an effect found may stand in for
+    /// what it lacks (pushing: `κ` ends on its bound 1 on the simulator's data, perturbed or
+    /// not; on perturbed worlds whose pushed face is wider than deep, `com_offset` took up part
+    /// of the rest in 4 of 20).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub nominal_on_bound: Vec<String>,
     /// Per held-out window, the baseline's k-step error (normalised units, capped): with
@@ -2041,10 +2042,7 @@ impl Diagnosis {
             );
         }
         for b in &self.nominal_on_bound {
-            let _ = writeln!(
-                o,
-                "note: the baseline's {b}: the nominal model cannot follow these data there, and an effect found may stand in for what it lacks (pushing: κ on 1 is a face wider than the block's depth a, which the square-block model cannot hold)"
-            );
+            let _ = writeln!(o, "  on a bound: the baseline's {b}");
         }
         for step in &self.selection {
             let _ = writeln!(

@@ -62,7 +62,7 @@ pub fn diagnosis_html(d: &Diagnosis) -> String {
     for b in &d.nominal_on_bound {
         let _ = writeln!(
             o,
-            "<p><b>Note:</b> the baseline's {}: the nominal model cannot follow these data there, and an effect found may stand in for what it lacks.</p>",
+            "<p>On a bound: the baseline's {} (the nominal model does not follow these data there; an effect found may stand in for what it lacks).</p>",
             esc(b)
         );
     }
