@@ -98,6 +98,15 @@ fn search(model: &Model, data: &Dataset, seed: u64) -> Discovery {
     discover_terms(model, data, &cfg).unwrap()
 }
 
+/// The search with its default windows (every setting but the seed at its default).
+fn search_all(model: &Model, data: &Dataset, seed: u64) -> Discovery {
+    let cfg = DiscoveryConfig {
+        seed,
+        ..DiscoveryConfig::default()
+    };
+    discover_terms(model, data, &cfg).unwrap()
+}
+
 #[test]
 fn out_of_library_steering_gain_is_discovered_over_seeds() {
     let truth = truth_with(STEERING_GAIN_SPEED);
@@ -394,15 +403,7 @@ fn pushing_block_frame_drift_is_discovered() {
             default_physics_solver(World::Push),
         )
         .unwrap();
-        let d = discover_terms(
-            &model,
-            &data,
-            &DiscoveryConfig {
-                seed,
-                ..DiscoveryConfig::default()
-            },
-        )
-        .unwrap();
+        let d = search_all(&model, &data, seed);
         println!("{}", d.table());
         if truth == &nominal {
             assert!(d.terms.iter().all(|t| !t.significant), "{}", d.table());
@@ -474,15 +475,7 @@ fn a_low_grip_band_is_a_grip_term_on_a_band() {
     for seed in 1..=3u64 {
         let data = car_dataset(&scenario, 4, 30.0, 900 + seed, 2).unwrap();
         let model = physics_model(PhysicsModel::car(&[]).unwrap(), data.pose_dt_s);
-        let d = discover_terms(
-            &model,
-            &data,
-            &DiscoveryConfig {
-                seed,
-                ..DiscoveryConfig::default()
-            },
-        )
-        .unwrap();
+        let d = search_all(&model, &data, seed);
         println!("seed {seed}\n{}", d.table());
         let t = d
             .terms
