@@ -62,7 +62,9 @@ use dynlab_learn::fit::{bounded_least_squares, calm_windows, cluster_std, initia
 use dynlab_learn::train::{segment, segment_origins};
 use dynlab_learn::{Dataset, LearnError, Model, World};
 
-use crate::discovery::{Discovery, DiscoveryConfig, DiscoveryError, discover_terms_split};
+use crate::discovery::{
+    Discovery, DiscoveryConfig, DiscoveryError, discover_terms_split, grip_discs, normal_quantile,
+};
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
@@ -676,6 +678,9 @@ impl Augmented<'_> {
 /// of a 0.2 s motor lag; the segments' cuts do not restart the states.
 const EFFECT_HISTORY_S: f64 = 3.0;
 
+/// Discs from the one-step screen among a `grip_patch` fit's starts.
+const SCREENED_DISCS: usize = 4;
+
 /// Starting points of an effect's parameters (the rest at their defaults), chosen from the
 /// data's extent for the patch effects.
 fn starts(e: Effect, trajs: &[StateTrajectory]) -> Vec<Vec<(&'static str, f64)>> {
@@ -947,10 +952,13 @@ impl Ctx<'_> {
             model_of(theta).map(|m| self.errors(m, ws, resid))
         };
         // starts: screen by cost, refine the best two
-        let effect_starts = match cand {
+        let mut effect_starts = match cand {
             Some(e) => starts(e, self.d.trajs),
             None => vec![Vec::new()],
         };
+        if cand == Some(Effect::GripPatch) {
+            effect_starts.extend(self.screened_discs(cur)?);
+        }
         let mut scored: Vec<(f64, Vec<f64>)> = Vec::new();
         for st in effect_starts {
             let mut th: Vec<f64> = idx
@@ -1072,6 +1080,50 @@ impl Ctx<'_> {
             fit,
             calm: Vec::new(),
         }))
+    }
+
+    /// Starts of a `grip_patch` fit from the discs that best explain the one-step residual of
+    /// the model `cur` ([`grip_discs`]; a physics model only): the grid of [`starts`] misses a
+    /// patch that lies between its points, and the k-step fit then wanders off or ends at no
+    /// grip at all.
+    fn screened_discs(
+        &self,
+        cur: &Current,
+    ) -> Result<Vec<Vec<(&'static str, f64)>>, DiagnosisError> {
+        if !self.pure_physics {
+            return Ok(Vec::new());
+        }
+        let edge = Effect::GripPatch
+            .params()
+            .iter()
+            .find(|p| p.name == "w")
+            .map_or(0.05, |p| p.default);
+        let dcfg = DiscoveryConfig {
+            seed: self.cfg.seed,
+            ..self.cfg.discovery.clone()
+        };
+        let discs = grip_discs(
+            &cur.physics,
+            &self.model.physics_solver(),
+            self.model.physics_time(),
+            self.d.trajs,
+            &self.fit_trajs,
+            edge,
+            &dcfg,
+            SCREENED_DISCS,
+        )?;
+        Ok(discs
+            .into_iter()
+            .map(|d| {
+                vec![
+                    ("cx", d.centre[0]),
+                    ("cy", d.centre[1]),
+                    ("r", d.radius),
+                    ("w", edge),
+                    ("k", d.factor),
+                ]
+            })
+            .collect())
     }
 
     /// Why a fitted effect is not a physical explanation, if it is not: a parameter on its
@@ -1836,8 +1888,15 @@ pub(crate) fn robust_windows(
         .collect()
 }
 
+/// Fewest resamples beyond a bootstrap bound for it to be read off their order statistics.
+const TAIL_RESAMPLES: f64 = 10.0;
+
 /// One-sided lower bootstrap bound (error probability `alpha`) of the error reduction
 /// `1 − Σafter/Σbefore`, resampling held-out segments whole (shared with the term search).
+/// When fewer than [`TAIL_RESAMPLES`] resamples lie beyond it (the term search's Bonferroni
+/// `alpha` of a few in 10⁴ with 2000 resamples), the percentile would be the smallest resample,
+/// as noisy as one segment drawn many times: the bound is then the normal one, the reduction
+/// minus `z(alpha)` bootstrap standard deviations.
 pub(crate) fn bootstrap_lower(
     ws: &[Window],
     before: &[f64],
@@ -1866,6 +1925,15 @@ pub(crate) fn bootstrap_lower(
             a += per[i].1;
         }
         stats.push(if b > 0.0 { 1.0 - a / b } else { 0.0 });
+    }
+    if alpha * (resamples as f64) < TAIL_RESAMPLES {
+        let (b, a) = per
+            .iter()
+            .fold((0.0, 0.0), |acc, p| (acc.0 + p.0, acc.1 + p.1));
+        let reduction = if b > 0.0 { 1.0 - a / b } else { 0.0 };
+        let m = stats.iter().sum::<f64>() / resamples as f64;
+        let var = stats.iter().map(|v| (v - m).powi(2)).sum::<f64>() / resamples as f64;
+        return reduction - normal_quantile(1.0 - alpha) * var.sqrt();
     }
     stats.sort_by(|a, b| a.total_cmp(b));
     let q = (alpha * resamples as f64).floor() as usize;
@@ -2185,5 +2253,53 @@ pub(crate) fn g4(v: f64) -> String {
     } else {
         let digits = (3 - a.log10().floor() as i32).max(0) as usize;
         format!("{v:.digits$}")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Held-out windows of 30 segments, two per segment, with the error before (1 each) and
+    /// after: a reduction of `r(i)` in segment `i`.
+    fn windows_with(r: impl Fn(usize) -> f64) -> (Vec<Window>, Vec<f64>, Vec<f64>) {
+        let ws: Vec<Window> = (0..60)
+            .map(|i| Window {
+                trajectory: i / 2,
+                start: i % 2,
+            })
+            .collect();
+        let after = ws.iter().map(|w| 1.0 - r(w.trajectory)).collect();
+        (ws, vec![1.0; 60], after)
+    }
+
+    #[test]
+    fn a_tiny_alpha_gets_the_normal_bound_and_a_usual_one_the_percentile() {
+        // reductions 0.3 … 0.7 in the segments: mean 0.5
+        let (ws, before, after) = windows_with(|i| 0.3 + 0.4 * (i % 5) as f64 / 4.0);
+        let sd_of_mean = {
+            let v: Vec<f64> = (0..5).map(|i| 0.3 + 0.1 * i as f64).collect();
+            let var = v.iter().map(|x| (x - 0.5).powi(2)).sum::<f64>() / 5.0;
+            (var / 30.0).sqrt()
+        };
+        // α = 0.05/187 with 2000 resamples: fewer than one resample beyond the bound
+        let alpha = 0.05 / 187.0;
+        let lower = bootstrap_lower(&ws, &before, &after, 2000, alpha, 7);
+        let normal = 0.5 - normal_quantile(1.0 - alpha) * sd_of_mean;
+        assert!(
+            (lower - normal).abs() < 0.01,
+            "normal bound {lower} against {normal} (σ of the mean {sd_of_mean})"
+        );
+        // α = 0.05: the 5th percentile of the resamples, above the normal bound of the tiny α
+        let p5 = bootstrap_lower(&ws, &before, &after, 2000, 0.05, 7);
+        assert!(
+            p5 > lower && (p5 - (0.5 - 1.645 * sd_of_mean)).abs() < 0.01,
+            "5th percentile {p5}"
+        );
+        // one segment made six times worse: a reduction of 12 % whose bound is below zero
+        let (ws, before, after) = windows_with(|i| if i == 0 { -5.0 } else { 0.3 });
+        let reduction = 1.0 - after.iter().sum::<f64>() / before.iter().sum::<f64>();
+        assert!(reduction > 0.1);
+        assert!(bootstrap_lower(&ws, &before, &after, 2000, alpha, 7) < 0.0);
     }
 }

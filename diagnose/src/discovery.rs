@@ -13,7 +13,9 @@
 //!    rows are the three velocity residuals, each divided by its RMS, and a term's column is
 //!    the feature times the derivatives' sensitivity to the input; `δ` takes only features of
 //!    the commands and the speed, `μ` only features of the position (a region of other grip;
-//!    [`Target::searched_with`]).
+//!    [`Target::searched_with`]). Besides the library's coarse lattice of bumps and bands,
+//!    `μ` takes the band and the bump whose shape, screened on a fine lattice, explains the most
+//!    of its residual alone (a region's edges then fall where the data put them).
 //! 2. **Screen** per target: every feature regressed alone on the residual; a (target, feature)
 //!    pair passes when its coefficient's t-value (standard error clustered by trajectory,
 //!    [`cluster_std`]) clears the Bonferroni threshold for the `M` pairs tried; the strongest
@@ -35,7 +37,8 @@
 //!    on the held-out half. It is **significant** when it removes at least
 //!    [`DiscoveryConfig::min_reduction`] of the baseline error, the lower end of a one-sided
 //!    bootstrap interval over held-out segments (resampled whole) of its improvement is above
-//!    zero at error probability `(1 − confidence)/M` (Bonferroni), and its coefficient is more
+//!    zero at error probability `(1 − confidence)/M` (Bonferroni; at so small a probability the
+//!    normal bound, not the smallest of the resamples), and its coefficient is more
 //!    than the same threshold's `z` standard errors (clustered by trajectory) from zero. The
 //!    search stops at the first term that is not significant or after
 //!    [`DiscoveryConfig::max_terms`]. Chaotic windows (a rollout near a spin, far more
@@ -477,6 +480,297 @@ impl Regression {
     }
 }
 
+/// One-step predictions of a model from a sample of the fit half's transitions.
+struct OneStep {
+    /// `(trajectory, step)` of each transition.
+    trans: Vec<(usize, usize)>,
+    /// The model's state at each transition's start (`n × dp`), the command, the prediction.
+    s0: Vec<f64>,
+    u0: Vec<f64>,
+    pred: Vec<f64>,
+    dp: usize,
+}
+
+impl OneStep {
+    /// The transitions of the trajectories `fit_trajs` (at most `max`, a sample drawn with
+    /// `seed`), stepped once by `physics`.
+    fn new(physics: &PhysicsModel, ctx: &Ctx, fit_trajs: &[usize], max: usize, seed: u64) -> Self {
+        let trajs = ctx.trajs;
+        let mut trans: Vec<(usize, usize)> = fit_trajs
+            .iter()
+            .flat_map(|&ti| (0..trajs[ti].len().saturating_sub(1)).map(move |a| (ti, a)))
+            .collect();
+        if trans.len() > max {
+            SplitMix64::new(seed ^ 0x0A40_9382_2299_F31D).shuffle(&mut trans);
+            trans.truncate(max);
+            trans.sort_unstable();
+        }
+        let n = trans.len();
+        let (dp, du) = (physics.dim_state(), ctx.du);
+        let mut s0 = Vec::with_capacity(n * dp);
+        let mut u0 = Vec::with_capacity(n * du);
+        for &(ti, a) in &trans {
+            s0.extend(initial_state(physics, &trajs[ti], a));
+            u0.extend_from_slice(&trajs[ti].u[a * du..(a + 1) * du]);
+        }
+        let mut pred = vec![0.0; n * dp];
+        physics.integrate_step(&ctx.solver, n, &s0, &u0, ctx.h, &mut pred);
+        Self {
+            trans,
+            s0,
+            u0,
+            pred,
+            dp,
+        }
+    }
+
+    /// The position `(x, y)` at each transition's start.
+    fn positions(&self) -> Vec<[f64; 2]> {
+        self.s0
+            .chunks(self.dp)
+            .map(|s| [s[0], s[1]])
+            .collect()
+    }
+
+    /// The residual of the derivative of `target` at transition `i` (0 for the inputs; see
+    /// [`Self::input_regression`]).
+    fn residual(&self, ctx: &Ctx, i: usize, target: Target) -> f64 {
+        let (ti, a) = self.trans[i];
+        let (ds, dp) = (ctx.ds, self.dp);
+        let meas = &ctx.trajs[ti].s[(a + 1) * ds..(a + 2) * ds];
+        let d = |c: usize| {
+            let e = meas[c] - self.pred[i * dp + c];
+            if c == ctx.angle { wrap_angle(e) } else { e }
+        };
+        let th = self.s0[i * dp + 2];
+        let v = match target {
+            Target::Vx => d(3),
+            Target::Vy => d(4),
+            Target::Omega => d(5),
+            Target::X => d(0),
+            Target::Y => d(1),
+            Target::Theta => d(2),
+            Target::BlockX => th.cos() * d(0) + th.sin() * d(1),
+            Target::BlockY => -th.sin() * d(0) + th.cos() * d(1),
+            Target::Delta | Target::Grip => 0.0,
+        };
+        v / ctx.h
+    }
+
+    /// The regression of the car's input `target` (`δ`, `μ`): the three velocity residuals
+    /// and their sensitivities to it ([`Regression::input`]).
+    fn input_regression(
+        &self,
+        physics: &PhysicsModel,
+        ctx: &Ctx,
+        target: Target,
+    ) -> Result<Regression, DiscoveryError> {
+        let velocities = [Target::Vx, Target::Vy, Target::Omega];
+        let r: Vec<f64> = (0..self.trans.len())
+            .flat_map(|i| velocities.map(|t| self.residual(ctx, i, t)))
+            .collect();
+        let g = input_sensitivity(physics, target, &self.s0, &self.u0)?;
+        Ok(Regression::input(target, &r, &g))
+    }
+}
+
+/// An input regression summed per transition, for features of the position alone: a region
+/// indicator `φ` fitted alone has the coefficient `Σφ·gy / Σφ²·gg` and removes
+/// `(Σφ·gy)²/Σφ²·gg` of the squared residual.
+struct RowSums {
+    /// Per transition: the position, `Σ gain·y` and `Σ gain²` over its rows.
+    pos: Vec<[f64; 2]>,
+    gy: Vec<f64>,
+    gg: Vec<f64>,
+}
+
+impl RowSums {
+    fn of(reg: &Regression, pos: Vec<[f64; 2]>) -> Self {
+        let n = pos.len();
+        let (mut gy, mut gg) = (vec![0.0; n], vec![0.0; n]);
+        for j in 0..(n * reg.rows).min(reg.y.len()) {
+            gy[j / reg.rows] += reg.gain[j] * reg.y[j];
+            gg[j / reg.rows] += reg.gain[j] * reg.gain[j];
+        }
+        Self { pos, gy, gg }
+    }
+
+    /// The smallest rectangle around the positions.
+    fn area(&self) -> Area {
+        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+        for p in &self.pos {
+            for c in 0..2 {
+                lo[c] = lo[c].min(p[c]);
+                hi[c] = hi[c].max(p[c]);
+            }
+        }
+        Area { lo, hi }
+    }
+
+    /// The squared residual the region `phi` removes fitted alone, and its coefficient.
+    fn fit(&self, phi: impl Fn([f64; 2]) -> f64) -> Option<(f64, f64)> {
+        let (mut sy, mut sg) = (0.0, 0.0);
+        for ((p, gy), gg) in self.pos.iter().zip(&self.gy).zip(&self.gg) {
+            let v = phi(*p);
+            sy += v * gy;
+            sg += v * v * gg;
+        }
+        (sg > 0.0 && (sy * sy / sg).is_finite()).then(|| (sy * sy / sg, sy / sg))
+    }
+}
+
+/// The centres of an `n × n` lattice over the rectangle `lo`–`hi` (cell centres).
+fn lattice(lo: [f64; 2], hi: [f64; 2], n: usize) -> Vec<[f64; 2]> {
+    let f = |i: usize| (i as f64 + 0.5) / n as f64;
+    (0..n)
+        .flat_map(|a| {
+            (0..n).map(move |b| [lo[0] + f(a) * (hi[0] - lo[0]), lo[1] + f(b) * (hi[1] - lo[1])])
+        })
+        .collect()
+}
+
+/// The band and the bump that explain the most of the grip regression `reg` alone, their
+/// shapes (a band's direction, offset and width; a bump's centre and width) screened on a fine
+/// lattice over the positions of `one`: the library's coarse lattice places a region's edges
+/// only to within its spacing (a band of the true direction, a third of the floor off, removed
+/// under half of what the band removes). They join the library as two more candidates.
+fn fitted_regions(reg: &Regression, one: &OneStep) -> Vec<Feature> {
+    const ANGLES: usize = 36;
+    const OFFSETS: usize = 30;
+    const CENTRES: usize = 15;
+    const WIDTHS: [f64; 4] = [0.04, 0.07, 0.1, 0.14];
+    let sums = RowSums::of(reg, one.positions());
+    let Area { lo, hi } = sums.area();
+    let side = (hi[0] - lo[0]).max(hi[1] - lo[1]).max(1e-3);
+    let round = |v: f64| (v * 1000.0).round() / 1000.0;
+    let mut best: [Option<(f64, String)>; 2] = [None, None];
+    let mut consider = |slot: usize, name: String, fit: Option<(f64, f64)>| {
+        if let Some((gain, _)) = fit
+            && best[slot].as_ref().is_none_or(|b| gain > b.0)
+        {
+            best[slot] = Some((gain, name));
+        }
+    };
+    for w in WIDTHS.map(|q| round(q * side).max(1e-3)) {
+        for i in 0..ANGLES {
+            let a = round(i as f64 * std::f64::consts::PI / ANGLES as f64);
+            let nv = [-a.sin(), a.cos()];
+            let proj = |p: [f64; 2]| nv[0] * p[0] + nv[1] * p[1];
+            let corners = [lo, [lo[0], hi[1]], [hi[0], lo[1]], hi].map(proj);
+            let pmin = corners.iter().copied().fold(f64::INFINITY, f64::min);
+            let pmax = corners.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+            for j in 0..OFFSETS {
+                let d = round(pmin + (j as f64 + 0.5) / OFFSETS as f64 * (pmax - pmin));
+                let fit = sums.fit(|p| (-(proj(p) - d).powi(2) / (2.0 * w * w)).exp());
+                consider(0, format!("band({a},{d},{w})"), fit);
+            }
+        }
+        for c in lattice(lo, hi, CENTRES) {
+            let (cx, cy) = (round(c[0]), round(c[1]));
+            let fit = sums.fit(|p| {
+                (-((p[0] - cx).powi(2) + (p[1] - cy).powi(2)) / (2.0 * w * w)).exp()
+            });
+            consider(1, format!("gauss({cx},{cy},{w})"), fit);
+        }
+    }
+    best.into_iter()
+        .flatten()
+        .filter_map(|(_, name)| Feature::parse(&name).ok())
+        .collect()
+}
+
+/// A disc of other tire grip ([`grip_discs`]): the `grip_patch` effect's centre, radius and
+/// grip factor.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct GripDisc {
+    /// Centre `(x, y)` \[m\].
+    pub centre: [f64; 2],
+    /// Radius \[m\].
+    pub radius: f64,
+    /// Grip inside relative to outside (1: no change).
+    pub factor: f64,
+}
+
+/// Discs of other tire grip that best explain the one-step velocity residuals of the car model
+/// `physics` (stepped by `solver` over `h` s) on the trajectories `fit_trajs` of `trajs`, best
+/// first, at most `count`, with centres apart: starts for the `grip_patch` fit, whose k-step
+/// fit only finds a disc near where it starts. Every disc of a lattice over the driven area
+/// (12 × 12 centres, 5 radii from 5 to 32 % of its larger side), with edges `edge` m wide, gets
+/// the grip change its region explains alone (the `μ` regression of the term search, linear
+/// in the change) and is ranked by the residual that removes.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn grip_discs(
+    physics: &PhysicsModel,
+    solver: &Solver,
+    h: f64,
+    trajs: &[StateTrajectory],
+    fit_trajs: &[usize],
+    edge: f64,
+    cfg: &DiscoveryConfig,
+    count: usize,
+) -> Result<Vec<GripDisc>, DiscoveryError> {
+    const CENTRES: usize = 12;
+    const RADII: [f64; 5] = [0.05, 0.1, 0.15, 0.22, 0.32];
+    if physics.robot() != Robot::Car {
+        return Ok(Vec::new());
+    }
+    let ctx = Ctx {
+        trajs,
+        ds: World::Car.state_dim(),
+        du: World::Car.action_dim(),
+        k: 1,
+        scale: Vec::new(),
+        angle: World::Car.angle_dim(),
+        solver: *solver,
+        h,
+    };
+    let one = OneStep::new(physics, &ctx, fit_trajs, cfg.max_transitions, cfg.seed);
+    let n = one.trans.len();
+    if n < 10 {
+        return Ok(Vec::new());
+    }
+    let reg = one.input_regression(physics, &ctx, Target::Grip)?;
+    let sums = RowSums::of(&reg, one.positions());
+    let Area { lo, hi } = sums.area();
+    let side = (hi[0] - lo[0]).max(hi[1] - lo[1]).max(1e-3);
+    let mut scored: Vec<(f64, GripDisc)> = Vec::new();
+    for centre in lattice(lo, hi, CENTRES) {
+        for r in RADII.map(|q| q * side) {
+            // the `grip_patch` shape: σ((r − ‖p − c‖)/w)
+            let fit = sums.fit(|p| {
+                let d = (p[0] - centre[0]).hypot(p[1] - centre[1]);
+                1.0 / (1.0 + (-(r - d) / edge).exp())
+            });
+            if let Some((gain, coef)) = fit {
+                let factor = (1.0 + coef).clamp(0.05, 3.0);
+                scored.push((
+                    gain,
+                    GripDisc {
+                        centre,
+                        radius: r,
+                        factor,
+                    },
+                ));
+            }
+        }
+    }
+    scored.sort_by(|a, b| b.0.total_cmp(&a.0));
+    let mut out: Vec<GripDisc> = Vec::new();
+    for (_, d) in scored {
+        if out.len() == count {
+            break;
+        }
+        let apart = out.iter().all(|o| {
+            (o.centre[0] - d.centre[0]).hypot(o.centre[1] - d.centre[1])
+                > 0.5 * o.radius.max(d.radius)
+        });
+        if apart {
+            out.push(d);
+        }
+    }
+    Ok(out)
+}
+
 /// Searches the feature library for terms the model of `model` misses on `data`; see the
 /// [module docs](self). Car data are cut into segments of [`DiscoveryConfig::segment_s`] and
 /// split by whole segments (seeded) into a fit and a held-out half, as the diagnosis does.
@@ -600,16 +894,8 @@ pub fn discover_terms_split(
     };
 
     // 1. one-step residuals of the targets on the fit half
-    let mut trans: Vec<(usize, usize)> = fit_trajs
-        .iter()
-        .flat_map(|&ti| (0..trajs[ti].len().saturating_sub(1)).map(move |a| (ti, a)))
-        .collect();
-    if trans.len() > cfg.max_transitions {
-        SplitMix64::new(cfg.seed ^ 0x0A40_9382_2299_F31D).shuffle(&mut trans);
-        trans.truncate(cfg.max_transitions);
-        trans.sort_unstable();
-    }
-    let n = trans.len();
+    let one = OneStep::new(physics, &ctx, fit_trajs, cfg.max_transitions, cfg.seed);
+    let n = one.trans.len();
     if n < 10 {
         return Err(DiscoveryError::TooLittleData {
             segments: fit_trajs.len(),
@@ -617,15 +903,7 @@ pub fn discover_terms_split(
             k,
         });
     }
-    let dp = physics.dim_state();
-    let mut s0 = Vec::with_capacity(n * dp);
-    let mut u0 = Vec::with_capacity(n * du);
-    for &(ti, a) in &trans {
-        s0.extend(initial_state(physics, &trajs[ti], a));
-        u0.extend_from_slice(&trajs[ti].u[a * du..(a + 1) * du]);
-    }
-    let mut pred = vec![0.0; n * dp];
-    physics.integrate_step(solver, n, &s0, &u0, h, &mut pred);
+    let (trans, s0, u0, dp) = (&one.trans, &one.s0, &one.u0, one.dp);
     let targets: Vec<Target> = Target::all(robot)
         .into_iter()
         .filter(|t| {
@@ -634,39 +912,15 @@ pub fn discover_terms_split(
                 .is_none_or(|ts| ts.iter().any(|n| n == t.name()))
         })
         .collect();
-    // the residual of a derivative at transition i
-    let residual = |i: usize, target: Target| -> f64 {
-        let (ti, a) = trans[i];
-        let meas = &trajs[ti].s[(a + 1) * ds..(a + 2) * ds];
-        let d = |c: usize| {
-            let e = meas[c] - pred[i * dp + c];
-            if c == angle { wrap_angle(e) } else { e }
-        };
-        let th = s0[i * dp + 2];
-        let v = match target {
-            Target::Vx => d(3),
-            Target::Vy => d(4),
-            Target::Omega => d(5),
-            Target::X => d(0),
-            Target::Y => d(1),
-            Target::Theta => d(2),
-            Target::BlockX => th.cos() * d(0) + th.sin() * d(1),
-            Target::BlockY => -th.sin() * d(0) + th.cos() * d(1),
-            // not derivatives: see `Regression::input`
-            Target::Delta | Target::Grip => 0.0,
-        };
-        v / h
-    };
     let mut regs: Vec<Regression> = Vec::new();
     for &target in &targets {
         regs.push(if target.is_input() {
-            let velocities = [Target::Vx, Target::Vy, Target::Omega];
-            let r: Vec<f64> = (0..n)
-                .flat_map(|i| velocities.map(|t| residual(i, t)))
-                .collect();
-            Regression::input(target, &r, &input_sensitivity(physics, target, &s0, &u0)?)
+            one.input_regression(physics, &ctx, target)?
         } else {
-            Regression::direct(target, (0..n).map(|i| residual(i, target)).collect())
+            Regression::direct(
+                target,
+                (0..n).map(|i| one.residual(&ctx, i, target)).collect(),
+            )
         });
     }
     // features
@@ -680,11 +934,24 @@ pub fn discover_terms_split(
         }
         Area { lo, hi }
     };
-    let feats: Vec<Feature> = library(robot, Some(area), cfg.grid);
+    let mut feats: Vec<Feature> = library(robot, Some(area), cfg.grid);
+    // the regions fitted to the grip's residual are tried on the grip alone
+    let fitted_from = feats.len();
+    if cfg.grid > 0
+        && let Some(reg) = regs.iter().find(|r| r.target == Target::Grip)
+    {
+        for f in fitted_regions(reg, &one) {
+            if !feats.contains(&f) {
+                feats.push(f);
+            }
+        }
+    }
     // (target, feature) pairs with the shape of a nominal parameter's own term are that
     // parameter, not an effect, and the inputs take only their own shapes: not tried
     let tried = |t: Target, f: usize| {
-        t.searched_with(&feats[f]) && t.nominal_parameter(&feats[f]).is_none()
+        t.searched_with(&feats[f])
+            && t.nominal_parameter(&feats[f]).is_none()
+            && (f < fitted_from || t == Target::Grip)
     };
     let nf = feats.len();
     let params = physics.params();
@@ -1116,7 +1383,7 @@ fn input_sensitivity(
 }
 
 /// The standard normal quantile `Φ⁻¹(p)` (bisection on `erfc`, to ~1e-9).
-fn normal_quantile(p: f64) -> f64 {
+pub(crate) fn normal_quantile(p: f64) -> f64 {
     let cdf = |x: f64| 0.5 * erfc(-x / std::f64::consts::SQRT_2);
     let (mut lo, mut hi) = (-40.0, 40.0);
     for _ in 0..200 {

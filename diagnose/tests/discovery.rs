@@ -258,17 +258,19 @@ fn a_nominal_parameter_change_is_not_reported_as_a_term() {
         .count();
     assert!(steering >= 5, "δ·vₓ, δ·vₓ², δ·|v|, … are tried on δ");
     // the grip takes the position alone: `x`, `y`, each bump and the bands (4 directions ×
-    // `grid` offsets, tried on the grip only), but not `1` (the peak forces)
+    // `grid` offsets, tried on the grip only), the band and the bump fitted to its residual,
+    // but not `1` (the peak forces)
     let grip = library(Robot::Car, None, 0)
         .iter()
         .filter(|f| Target::Grip.searched_with(f) && Target::Grip.nominal_parameter(f).is_none())
         .count()
         + grid * grid
-        + 4 * grid;
+        + 4 * grid
+        + 2;
     assert_eq!(
         grip,
-        2 + grid * grid + 4 * grid,
-        "x, y, bumps and bands are tried on μ"
+        4 + grid * grid + 4 * grid,
+        "x, y, bumps, bands and the two fitted regions are tried on μ"
     );
     assert_eq!(
         d.pairs_tried,
