@@ -1653,3 +1653,42 @@ mod tests {
         assert!((normal_quantile(1.0 - 1e-4) - 3.719_016).abs() < 1e-4);
     }
 }
+
+#[cfg(test)]
+mod grip_disc_tests {
+    use super::*;
+    use crate::diagnosis::simdata::{car_dataset, car_scenario, nominal_model};
+    use dynlab_learn::dynamics::physics::Effect;
+
+    /// The screen's best disc on data with the simulator's `grip_patch` (half the grip within
+    /// 0.6 m of (0.5, 0)) lies on the patch, with less grip inside.
+    #[test]
+    fn the_best_screened_disc_is_the_patch() {
+        let scenario = car_scenario(Some(Effect::GripPatch), 1.0);
+        for seed in [1, 2, 3] {
+            let data = car_dataset(&scenario, 4, 15.0, seed, 2).expect("simulated data");
+            let model = nominal_model(World::Car, data.pose_dt_s).expect("the nominal model");
+            let physics = model.physics().expect("a physics model");
+            let all: Vec<usize> = (0..data.trajectories.len()).collect();
+            let discs = grip_discs(
+                physics,
+                &model.physics_solver(),
+                model.physics_time(),
+                &data.trajectories,
+                &all,
+                0.05,
+                &DiscoveryConfig::default(),
+                4,
+            )
+            .expect("the screen runs");
+            assert_eq!(discs.len(), 4, "seed {seed}: four discs apart");
+            let best = discs[0];
+            let off = (best.centre[0] - 0.5).hypot(best.centre[1]);
+            println!("seed {seed}: {discs:?}");
+            assert!(
+                off < 0.35 && best.factor < 0.8 && (0.25..1.0).contains(&best.radius),
+                "seed {seed}: best disc {best:?}"
+            );
+        }
+    }
+}
