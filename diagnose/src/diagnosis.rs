@@ -63,7 +63,8 @@ use dynlab_learn::train::{segment, segment_origins};
 use dynlab_learn::{Dataset, LearnError, Model, World};
 
 use crate::discovery::{
-    Discovery, DiscoveryConfig, DiscoveryError, discover_terms_split, grip_discs, normal_quantile,
+    Discovery, DiscoveryConfig, DiscoveryError, discover_terms_split, grip_discs, lattice,
+    normal_quantile,
 };
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
@@ -693,17 +694,6 @@ fn starts(e: Effect, trajs: &[StateTrajectory]) -> Vec<Vec<(&'static str, f64)>>
             }
         }
     }
-    let grid = |n: usize| -> Vec<(f64, f64)> {
-        let mut v = Vec::new();
-        for a in 0..n {
-            for b in 0..n {
-                let fx = (a as f64 + 0.5) / n as f64;
-                let fy = (b as f64 + 0.5) / n as f64;
-                v.push((lo[0] + fx * (hi[0] - lo[0]), lo[1] + fy * (hi[1] - lo[1])));
-            }
-        }
-        v
-    };
     match e {
         Effect::AeroDrag => [0.0, 0.003, 0.01, 0.03, 0.1]
             .into_iter()
@@ -721,7 +711,7 @@ fn starts(e: Effect, trajs: &[StateTrajectory]) -> Vec<Vec<(&'static str, f64)>>
         Effect::GripPatch => {
             let r = 0.3 * (hi[0] - lo[0]).max(hi[1] - lo[1]).max(0.1);
             let mut v = Vec::new();
-            for (x, y) in grid(3) {
+            for [x, y] in lattice(lo, hi, 3) {
                 for k in [0.5, 1.5] {
                     v.push(vec![("cx", x), ("cy", y), ("r", r), ("w", 0.05), ("k", k)]);
                 }
@@ -733,7 +723,7 @@ fn starts(e: Effect, trajs: &[StateTrajectory]) -> Vec<Vec<(&'static str, f64)>>
         Effect::FrictionPatch => {
             let r = 0.25 * (hi[0] - lo[0]).max(hi[1] - lo[1]).max(0.02);
             let mut v = Vec::new();
-            for (x, y) in grid(3) {
+            for [x, y] in lattice(lo, hi, 3) {
                 for k in [0.3, 3.0] {
                     v.push(vec![("cx", x), ("cy", y), ("r", r), ("w", 0.01), ("k", k)]);
                 }

@@ -526,10 +526,7 @@ impl OneStep {
 
     /// The position `(x, y)` at each transition's start.
     fn positions(&self) -> Vec<[f64; 2]> {
-        self.s0
-            .chunks(self.dp)
-            .map(|s| [s[0], s[1]])
-            .collect()
+        self.s0.chunks(self.dp).map(|s| [s[0], s[1]]).collect()
     }
 
     /// The residual of the derivative of `target` at transition `i` (0 for the inputs; see
@@ -620,11 +617,16 @@ impl RowSums {
 }
 
 /// The centres of an `n × n` lattice over the rectangle `lo`–`hi` (cell centres).
-fn lattice(lo: [f64; 2], hi: [f64; 2], n: usize) -> Vec<[f64; 2]> {
+pub(crate) fn lattice(lo: [f64; 2], hi: [f64; 2], n: usize) -> Vec<[f64; 2]> {
     let f = |i: usize| (i as f64 + 0.5) / n as f64;
     (0..n)
         .flat_map(|a| {
-            (0..n).map(move |b| [lo[0] + f(a) * (hi[0] - lo[0]), lo[1] + f(b) * (hi[1] - lo[1])])
+            (0..n).map(move |b| {
+                [
+                    lo[0] + f(a) * (hi[0] - lo[0]),
+                    lo[1] + f(b) * (hi[1] - lo[1]),
+                ]
+            })
         })
         .collect()
 }
@@ -667,9 +669,8 @@ fn fitted_regions(reg: &Regression, one: &OneStep) -> Vec<Feature> {
         }
         for c in lattice(lo, hi, CENTRES) {
             let (cx, cy) = (round(c[0]), round(c[1]));
-            let fit = sums.fit(|p| {
-                (-((p[0] - cx).powi(2) + (p[1] - cy).powi(2)) / (2.0 * w * w)).exp()
-            });
+            let fit =
+                sums.fit(|p| (-((p[0] - cx).powi(2) + (p[1] - cy).powi(2)) / (2.0 * w * w)).exp());
             consider(1, format!("gauss({cx},{cy},{w})"), fit);
         }
     }
