@@ -57,7 +57,7 @@ use std::fmt::Write as _;
 use dynlab_learn::dynamics::conventions::wrap_angle;
 use dynlab_learn::dynamics::data::{DataError, SplitMix64, StateTrajectory, Window};
 use dynlab_learn::dynamics::ode::Solver;
-use dynlab_learn::dynamics::physics::custom::{COEFFICIENT_BOUND, fmt_num};
+use dynlab_learn::dynamics::physics::custom::fmt_num;
 use dynlab_learn::dynamics::physics::features::{Area, Feature, library, time_unit};
 use dynlab_learn::dynamics::physics::{
     CustomEffect, CustomTerm, ModelError, PhysicsModel, Robot, Target,
@@ -1085,11 +1085,7 @@ pub fn discover_terms_split(
                 }
                 let h = if pick.slope != 0.0 { pick.slope } else { 1.0 };
                 let mut trial = accepted.to_vec();
-                trial.push(CustomTerm {
-                    target: pick.target,
-                    feature: feats[pick.feature].clone(),
-                    coefficient: h.clamp(-COEFFICIENT_BOUND, COEFFICIENT_BOUND),
-                });
+                trial.push(bounded_term(pick.target, feats[pick.feature].clone(), h));
                 let m = with_terms(trial)?;
                 let mut r1 = Vec::new();
                 ctx.errors(&m, fit_w, Some(&mut r1));
@@ -1118,11 +1114,7 @@ pub fn discover_terms_split(
             let pick = &picks[pi];
             let feature = feats[pick.feature].clone();
             let mut trial = accepted.clone();
-            trial.push(CustomTerm {
-                target: pick.target,
-                feature: feature.clone(),
-                coefficient: pick.slope.clamp(-COEFFICIENT_BOUND, COEFFICIENT_BOUND),
-            });
+            trial.push(bounded_term(pick.target, feature.clone(), pick.slope));
             let effect = CustomEffect::new(&name, trial)
                 .map_err(|e| DiscoveryError::Physics(ModelError::Custom(e)))?;
             let (theta, std) = fit_effect(physics, &effect, &ctx, fit_w, cfg.iterations)?;
@@ -1261,6 +1253,18 @@ fn spin_free_windows(physics: &PhysicsModel, ctx: &Ctx, ws: &[Window]) -> Vec<Wi
     )
 }
 
+/// The term `target += coefficient·feature` with the coefficient clamped to its bounds.
+fn bounded_term(target: Target, feature: Feature, coefficient: f64) -> CustomTerm {
+    let mut t = CustomTerm {
+        target,
+        feature,
+        coefficient: 0.0,
+    };
+    let (lo, hi) = t.bounds();
+    t.coefficient = coefficient.clamp(lo, hi);
+    t
+}
+
 /// Fits the coefficients of `effect` (added to `physics`) on the fit windows' k-step error;
 /// returns them with standard errors clustered by trajectory.
 fn fit_effect(
@@ -1327,8 +1331,7 @@ fn fit_effect(
         }
         (r, jac)
     };
-    let lower = vec![-COEFFICIENT_BOUND; nt];
-    let upper = vec![COEFFICIENT_BOUND; nt];
+    let (lower, upper): (Vec<f64>, Vec<f64>) = effect.terms().iter().map(|t| t.bounds()).unzip();
     let free = vec![true; nt];
     let res = bounded_least_squares(&theta0, &lower, &upper, &free, iterations, &mut eval);
     let (r, jac) = eval(&res.theta, true);

@@ -26,7 +26,8 @@
 //!
 //! A custom effect is linear in its parameters (one coefficient per term). In a
 //! [`PhysicsModel`](super::PhysicsModel) the coefficients are appended to the parameter vector
-//! after the library effects' (names `custom.<name>.<j>`), bounded by `±`[`COEFFICIENT_BOUND`],
+//! after the library effects' (names `custom.<name>.<j>`), bounded by `±`[`COEFFICIENT_BOUND`]
+//! (a grip term on a region by [`GRIP_REGION_BOUNDS`]),
 //! always fitted by `train`, and printed by `equations()` as `ω̇ += θ · δ·vₓ [unit of θ]`.
 
 use serde::{Deserialize, Serialize};
@@ -237,9 +238,9 @@ pub enum CustomError {
         /// What is wrong.
         source: FeatureError,
     },
-    /// A coefficient that is not finite or outside the bound.
+    /// A coefficient that is not finite or outside its bounds ([`CustomTerm::bounds`]).
     #[error(
-        "custom effect '{effect}', term {term}: coefficient {value} must be finite with |θ| ≤ {COEFFICIENT_BOUND}"
+        "custom effect '{effect}', term {term}: coefficient {value} must be finite within [{lower}, {upper}] (a grip term on a region keeps the grip between 5 % and 4 × the rest's)"
     )]
     BadCoefficient {
         /// The effect.
@@ -248,6 +249,10 @@ pub enum CustomError {
         term: usize,
         /// The value.
         value: f64,
+        /// Its bounds.
+        lower: f64,
+        /// Its bounds.
+        upper: f64,
     },
     /// Terms of both robots.
     #[error(
@@ -280,10 +285,30 @@ pub struct CustomTerm {
     pub coefficient: f64,
 }
 
+/// Bounds of a grip term's coefficient on a region (a feature of bumps and bands, in `(0, 1]`):
+/// the grip there stays between 5 % and 4 × the rest's.
+pub const GRIP_REGION_BOUNDS: (f64, f64) = (-0.95, 3.0);
+
 impl CustomTerm {
     /// Unit of the coefficient: the derivative's over the feature's.
     pub fn coefficient_unit(&self) -> Unit {
         self.target.unit() / self.feature.unit()
+    }
+
+    /// Bounds of the coefficient: [`GRIP_REGION_BOUNDS`] for a grip term on a region (a
+    /// coefficient below −1 would make the tires push, not grip), else `±`[`COEFFICIENT_BOUND`].
+    pub fn bounds(&self) -> (f64, f64) {
+        let region = !self.feature.factors().is_empty()
+            && self
+                .feature
+                .factors()
+                .iter()
+                .all(|a| matches!(a, Atom::Gauss { .. } | Atom::Band { .. }));
+        if self.target == Target::Grip && region {
+            GRIP_REGION_BOUNDS
+        } else {
+            (-COEFFICIENT_BOUND, COEFFICIENT_BOUND)
+        }
     }
 }
 
@@ -344,18 +369,22 @@ impl TryFrom<CustomEffectSpec> for CustomEffect {
                     term: j,
                     source,
                 })?;
-            if !(t.coefficient.is_finite() && t.coefficient.abs() <= COEFFICIENT_BOUND) {
+            let term = CustomTerm {
+                target,
+                feature,
+                coefficient: t.coefficient,
+            };
+            let (lower, upper) = term.bounds();
+            if !(t.coefficient.is_finite() && (lower..=upper).contains(&t.coefficient)) {
                 return Err(CustomError::BadCoefficient {
                     effect: name,
                     term: j,
                     value: t.coefficient,
+                    lower,
+                    upper,
                 });
             }
-            terms.push(CustomTerm {
-                target,
-                feature,
-                coefficient: t.coefficient,
-            });
+            terms.push(term);
         }
         let robot = terms[0].target.robot();
         if terms.iter().any(|t| t.target.robot() != robot) {
@@ -583,6 +612,29 @@ coefficient = -3.2
         assert!(Target::Grip.is_input() && Target::Delta.is_input() && !Target::Vy.is_input());
         assert!(Target::Omega.searched_with(&f("alpha_r*vx")));
         assert_eq!(Target::X.nominal_parameter(&f("l*cos_phi")), None);
+    }
+
+    #[test]
+    fn a_grip_term_on_a_region_keeps_the_grip_positive() {
+        let file = |state: &str, feature: &str, c: f64| {
+            format!(
+                "name = \"g\"\n[[term]]\nstate = \"{state}\"\nfeature = \"{feature}\"\ncoefficient = {c}\n"
+            )
+        };
+        let region = CustomEffect::from_toml(&file("grip", "band(0.5,0.3,0.2)", -0.5)).unwrap();
+        assert_eq!(region.terms()[0].bounds(), GRIP_REGION_BOUNDS);
+        // `x` is not a region, a derivative's term not a grip term: wide bounds
+        for (state, feature) in [("grip", "x"), ("vy", "gauss(0.5,0.2,0.4)")] {
+            let c = CustomEffect::from_toml(&file(state, feature, -3.0)).unwrap();
+            assert_eq!(c.terms()[0].bounds(), (-COEFFICIENT_BOUND, COEFFICIENT_BOUND));
+        }
+        // less than no grip: the error names the bounds
+        let e = CustomEffect::from_toml(&file("grip", "gauss(0.5,0.2,0.4)", -1.5)).unwrap_err();
+        assert!(
+            matches!(e, CustomError::BadCoefficient { lower, .. } if lower == GRIP_REGION_BOUNDS.0),
+            "{e}"
+        );
+        assert!(e.to_string().contains("[-0.95, 3]"), "{e}");
     }
 
     #[test]

@@ -1,7 +1,7 @@
 //! [`PhysicsModel`]: nominal model + enabled effects + flat parameter vector.
 
 use super::car::{self, CAR_NOMINAL_PARAMS, Slot};
-use super::custom::{COEFFICIENT_BOUND, CustomEffect, CustomError, Target};
+use super::custom::{CustomEffect, CustomError, Target};
 use super::push::{self, PUSH_NOMINAL_PARAMS};
 use super::{Effect, ParamSpec, Robot};
 use crate::ode::{InputTape, VectorField};
@@ -278,8 +278,8 @@ impl PhysicsModel {
                         name: intern(j.to_string()),
                         symbol: "θ",
                         unit: intern(unit),
-                        lower: -COEFFICIENT_BOUND,
-                        upper: COEFFICIENT_BOUND,
+                        lower: t.bounds().0,
+                        upper: t.bounds().1,
                         default: 0.0,
                         description: "coefficient of a custom term",
                     },
