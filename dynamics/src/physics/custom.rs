@@ -626,7 +626,10 @@ coefficient = -3.2
         // `x` is not a region, a derivative's term not a grip term: wide bounds
         for (state, feature) in [("grip", "x"), ("vy", "gauss(0.5,0.2,0.4)")] {
             let c = CustomEffect::from_toml(&file(state, feature, -3.0)).unwrap();
-            assert_eq!(c.terms()[0].bounds(), (-COEFFICIENT_BOUND, COEFFICIENT_BOUND));
+            assert_eq!(
+                c.terms()[0].bounds(),
+                (-COEFFICIENT_BOUND, COEFFICIENT_BOUND)
+            );
         }
         // less than no grip: the error names the bounds
         let e = CustomEffect::from_toml(&file("grip", "gauss(0.5,0.2,0.4)", -1.5)).unwrap_err();
