@@ -19,7 +19,8 @@
 //! restart them) and carried along the rollout.
 //!
 //! The effect's parameters `θ_e` are fitted within their bounds (bounded Levenberg–Marquardt
-//! with a clarabel QP step, several starts for the patch effects) on the k-step open-loop error
+//! with a clarabel QP step, several starts for the patch effects, a `grip_patch` also from the
+//! discs that best explain the one-step residual, `discovery::grip_discs`) on the k-step open-loop error
 //! of the fit half, and the candidate is scored on the held-out half: `error_reduction =
 //! 1 − E_after/E_before` of the k-step error `E` (the squared error of every state dimension over
 //! k steps, each dimension divided by the RMS k-step change of that dimension in the data, so
