@@ -37,8 +37,8 @@
 //!    on the held-out half. It is **significant** when it removes at least
 //!    [`DiscoveryConfig::min_reduction`] of the baseline error, the lower end of a one-sided
 //!    bootstrap interval over held-out segments (resampled whole) of its improvement is above
-//!    zero at error probability `(1 − confidence)/M` (Bonferroni; at so small a probability the
-//!    normal bound, not the smallest of the resamples), and its coefficient is more
+//!    zero at error probability `(1 − confidence)/M` (Bonferroni; with enough resamples that ten
+//!    lie beyond the bound), and its coefficient is more
 //!    than the same threshold's `z` standard errors (clustered by trajectory) from zero. The
 //!    search stops at the first term that is not significant or after
 //!    [`DiscoveryConfig::max_terms`]. Chaotic windows (a rollout near a spin, far more
