@@ -99,11 +99,20 @@ fn car_steering_offset_is_found_and_recovered() {
     assert_found(&d, Effect::SteeringOffset, "delta0", 0.03, 0.003);
 }
 
+/// A disc of radius 0.6 m at (0.5, 0) with half the tire peak force, 4 × 30 s, two seeds. On
+/// 3 × 15 s (8 held-out segments) the fitted disc was right (k 0.455 and 0.486, r 0.61) and
+/// removed 86 and 95 % of the held-out error, but only the one or two segments that cross the
+/// patch gained and the bootstrap bound was −52 % and −125 %.
 #[test]
 fn car_grip_patch_is_found() {
-    // disc of radius 0.6 m at (0.5, 0) with half the tire peak force
-    let d = run_car(Some(Effect::GripPatch), 5);
-    assert_found(&d, Effect::GripPatch, "k", 0.5, 0.15);
+    for seed in [5, 6] {
+        let scenario = car_scenario(Some(Effect::GripPatch), 1.0);
+        let d = run_episodes(&scenario, [4.0, 30.0], 300 + seed, seed, None);
+        assert_found(&d, Effect::GripPatch, "k", 0.5, 0.15);
+        let p = &d.candidates[0].params;
+        let off = (p["cx"] - 0.5).hypot(p["cy"]);
+        assert!(off < 0.15 && (p["r"] - 0.6).abs() < 0.1, "{}", d.table());
+    }
 }
 
 #[test]
@@ -164,11 +173,12 @@ fn a_steering_gain_falling_with_speed_gets_no_library_name_and_a_steering_term()
 }
 
 /// Outside the library: half the grip within 0.4 m of a line at 0.5 rad through (0, 0.3)
-/// (launch_scripts/scenarios/car_grip_band.toml), 4 × 30 s. The library's disc fits the part of
-/// the band the data cross most (here 22 % removed, significant on its numbers), but the term
-/// search's grip term on a band removes more, so the disc is not counted and the term is what
-/// the user gets. (Where the data cross the band in one place only, a disc there is as good, and
-/// the diagnosis names `grip_patch` over the band: seed 9 of this test, and 3 × 15 s of data.)
+/// (launch_scripts/scenarios/car_grip_band.toml), 4 × 30 s. The library's disc fits only the
+/// part of the band the data cross most; the term search's grip term on the band fitted to the
+/// residual removes far more, and when the disc would count on its numbers it is set against
+/// that term and not counted. (Where the data cross the band in one place only, a disc there is
+/// as good, and the diagnosis names `grip_patch` over the band: seed 9 of this test, and 3 × 15 s
+/// of data.)
 #[test]
 fn a_low_grip_band_is_not_a_disc_but_a_grip_term() {
     let mut scenario = car_scenario(None, 1.0);
@@ -181,23 +191,22 @@ fn a_low_grip_band_is_not_a_disc_but_a_grip_term() {
         .iter()
         .find(|c| c.effect == "grip_patch")
         .unwrap();
-    let note = patch.note.as_deref().unwrap_or_default();
-    assert!(
-        note.contains("μ +="),
-        "the disc is set against a grip term: {table}"
-    );
-    // the grip term: less grip where the band is (a band or bump over it), as in the note
+    // the grip term: less grip where the band is, significant, more than the disc removes
     let disc = d.discovery.as_ref().expect("the term search ran");
     let t = disc
         .terms
         .iter()
-        .find(|t| t.state == "grip")
-        .unwrap_or_else(|| panic!("no grip term: {table}"));
-    assert!(note.contains(&t.equation), "{table}");
+        .find(|t| t.state == "grip" && t.significant)
+        .unwrap_or_else(|| panic!("no significant grip term: {table}"));
     assert!(t.coefficient < 0.0, "{table}");
     assert!(t.error_reduction >= 0.4, "{table}");
     assert!(t.error_reduction > patch.error_reduction, "{table}");
     assert!(over_low_grip_band(&t.feature), "{table}");
+    // a disc that would count on its numbers is set against the term: its note names it
+    if patch.error_reduction >= 0.1 && patch.ci_lower > 0.0 {
+        let note = patch.note.as_deref().unwrap_or_default();
+        assert!(note.contains("μ +=") && note.contains(&t.equation), "{table}");
+    }
 }
 
 #[test]
