@@ -1133,8 +1133,8 @@ impl Ctx<'_> {
     }
 
     /// Why a fitted effect is not a physical explanation, if it is not: a parameter on its
-    /// bound, or a patch that covers (nearly) all the data (a global change, which the refitted
-    /// nominal parameters stand for).
+    /// bound, a patch that covers (nearly) all the data (a global change, which the refitted
+    /// nominal parameters stand for), or one wider than the data (a straight boundary).
     fn implausible(&self, e: Effect, f: &Fitted) -> Option<String> {
         let mine: Vec<usize> = (0..f.names.len())
             .filter(|&i| f.owners[i] == Some(e))
@@ -1165,6 +1165,22 @@ impl Ctx<'_> {
                     "the patch (r = {} m) covers {:.0} % of where the data are: a global change of the nominal parameters, not a patch",
                     g4(r),
                     100.0 * inside
+                ));
+            }
+            // a disc wider than the data: only its edge, a nearly straight line, is seen
+            let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+            for p in &self.positions {
+                for c in 0..2 {
+                    lo[c] = lo[c].min(p[c]);
+                    hi[c] = hi[c].max(p[c]);
+                }
+            }
+            let across = (hi[0] - lo[0]).hypot(hi[1] - lo[1]);
+            if r > across {
+                return Some(format!(
+                    "the patch (r = {} m) is wider than the data ({} m across): its edge is a straight boundary of other grip through them, not a patch (see the term search)",
+                    g4(r),
+                    g4(across)
                 ));
             }
         }

@@ -205,7 +205,10 @@ fn a_low_grip_band_is_not_a_disc_but_a_grip_term() {
     // a disc that would count on its numbers is set against the term: its note names it
     if patch.error_reduction >= 0.1 && patch.ci_lower > 0.0 {
         let note = patch.note.as_deref().unwrap_or_default();
-        assert!(note.contains("μ +=") && note.contains(&t.equation), "{table}");
+        assert!(
+            note.contains("μ +=") && note.contains(&t.equation),
+            "{table}"
+        );
     }
 }
 
