@@ -64,7 +64,7 @@ use dynlab_learn::train::{segment, segment_origins};
 use dynlab_learn::{Dataset, LearnError, Model, World};
 
 use crate::discovery::{
-    Discovery, DiscoveryConfig, DiscoveryError, discover_terms_split, grip_discs, lattice,
+    Discovery, DiscoveryConfig, DiscoveryError, area_of, discover_terms_split, grip_discs, lattice,
 };
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
@@ -1168,14 +1168,8 @@ impl Ctx<'_> {
                 ));
             }
             // a disc wider than the data: only its edge, a nearly straight line, is seen
-            let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-            for p in &self.positions {
-                for c in 0..2 {
-                    lo[c] = lo[c].min(p[c]);
-                    hi[c] = hi[c].max(p[c]);
-                }
-            }
-            let across = (hi[0] - lo[0]).hypot(hi[1] - lo[1]);
+            let area = area_of(&self.positions);
+            let across = (area.hi[0] - area.lo[0]).hypot(area.hi[1] - area.lo[1]);
             if r > across {
                 return Some(format!(
                     "the patch (r = {} m) is wider than the data ({} m across): its edge is a straight boundary of other grip through them, not a patch (see the term search)",

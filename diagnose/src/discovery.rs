@@ -594,14 +594,7 @@ impl RowSums {
 
     /// The smallest rectangle around the positions.
     fn area(&self) -> Area {
-        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-        for p in &self.pos {
-            for c in 0..2 {
-                lo[c] = lo[c].min(p[c]);
-                hi[c] = hi[c].max(p[c]);
-            }
-        }
-        Area { lo, hi }
+        area_of(&self.pos)
     }
 
     /// The squared residual the region `phi` removes fitted alone, and its coefficient.
@@ -614,6 +607,18 @@ impl RowSums {
         }
         (sg > 0.0 && (sy * sy / sg).is_finite()).then(|| (sy * sy / sg, sy / sg))
     }
+}
+
+/// The smallest rectangle around `points`.
+pub(crate) fn area_of(points: &[[f64; 2]]) -> Area {
+    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+    for p in points {
+        for c in 0..2 {
+            lo[c] = lo[c].min(p[c]);
+            hi[c] = hi[c].max(p[c]);
+        }
+    }
+    Area { lo, hi }
 }
 
 /// The centres of an `n × n` lattice over the rectangle `lo`–`hi` (cell centres).
@@ -925,16 +930,7 @@ pub fn discover_terms_split(
         });
     }
     // features
-    let area = {
-        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-        for i in 0..n {
-            for c in 0..2 {
-                lo[c] = lo[c].min(s0[i * dp + c]);
-                hi[c] = hi[c].max(s0[i * dp + c]);
-            }
-        }
-        Area { lo, hi }
-    };
+    let area = area_of(&one.positions());
     let mut feats: Vec<Feature> = library(robot, Some(area), cfg.grid);
     // the regions fitted to the grip's residual are tried on the grip alone
     let fitted_from = feats.len();
