@@ -20,9 +20,9 @@
 //!
 //! The effect's parameters `θ_e` are fitted within their bounds (bounded Levenberg–Marquardt
 //! with a clarabel QP step, several starts for the patch effects, a `grip_patch` also from the
-//! discs that best explain the one-step residual, `discovery::grip_discs`) on the k-step open-loop error
-//! of the fit half, and the candidate is scored on the held-out half: `error_reduction =
-//! 1 − E_after/E_before` of the k-step error `E` (the squared error of every state dimension over
+//! discs that best explain the one-step residual, `discovery::grip_discs`) on the k-step
+//! open-loop error of the fit half, and the candidate is scored on the held-out half:
+//! `error_reduction = 1 − E_after/E_before` of the k-step error `E` (the squared error of every state dimension over
 //! k steps, each dimension divided by the RMS k-step change of that dimension in the data, so
 //! the scale is the error of the "nothing moves" model). Held-out windows that both models
 //! compared (the model before the step and the model with the candidate) roll out through a
@@ -941,7 +941,6 @@ impl Ctx<'_> {
         let cost_of = |theta: &[f64], ws: &[Window], resid: Option<&mut Vec<f64>>| {
             model_of(theta).map(|m| self.errors(m, ws, resid))
         };
-        // starts: screen by cost, refine the best two
         // starts (the screened discs flagged): screen by cost, refine the best two, and the
         // best screened disc when neither is one (on a seed whose baseline spun in 97 of
         // 2500 held-out windows the k-step cost ranked a wrong disc first, and its fit
