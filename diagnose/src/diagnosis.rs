@@ -703,7 +703,17 @@ fn starts(e: Effect, trajs: &[StateTrajectory]) -> Vec<Vec<(&'static str, f64)>>
             .into_iter()
             .map(|t| vec![("tau", t)])
             .collect(),
-        Effect::SteeringLag => [0.02, 0.05, 0.1, 0.2].map(|t| vec![("tau", t)]).to_vec(),
+        // a plain lag (the rate at its bound) and two rate limits: from the bound, the
+        // rate's gradient is nearly zero, so a fit never finds a limit it does not start near
+        Effect::SteeringLag => {
+            let mut v = Vec::new();
+            for t in [0.02, 0.05, 0.1, 0.2] {
+                for r in [50.0, 6.0, 2.0] {
+                    v.push(vec![("tau", t), ("rate", r)]);
+                }
+            }
+            v
+        }
         Effect::SteeringOffset => [-0.05, -0.01, 0.0, 0.01, 0.05]
             .into_iter()
             .map(|d| vec![("delta0", d)])

@@ -99,6 +99,13 @@ fn car_steering_offset_is_found_and_recovered() {
     assert_found(&d, Effect::SteeringOffset, "delta0", 0.03, 0.003);
 }
 
+#[test]
+fn car_steering_servo_rate_limit_is_found() {
+    // a 50 ms lag with a hard 3 rad/s clamp, the library's servo a smooth one
+    let d = run_car(Some(Effect::SteeringLag), 8);
+    assert_found(&d, Effect::SteeringLag, "rate", 3.0, 1.0);
+}
+
 /// A disc of radius 0.6 m at (0.5, 0) with half the tire peak force, 4 × 30 s, two seeds. On
 /// 3 × 15 s (8 held-out segments) the fitted disc was right (k 0.455 and 0.486, r 0.61) and
 /// removed 86 and 95 % of the held-out error, but only the one or two segments that cross the

@@ -114,7 +114,7 @@ pub fn push_dataset_with(
 /// use (the simulator's documented defaults unless noted), and mocap-like noise scaled by
 /// `noise` (1: 0.5 mm, 0.002 rad). `None`: the nominal car.
 pub fn car_scenario(effect: Option<Effect>, noise: f64) -> CarScenario {
-    use dynlab_sim::car::{AeroDrag, GripPatch, MotorLag, SteeringOffset};
+    use dynlab_sim::car::{AeroDrag, GripPatch, MotorLag, SteeringOffset, SteeringRateLimit};
     let mut s = CarScenario::default();
     s.noise.position_std = 0.0005 * noise;
     s.noise.yaw_std = 0.002 * noise;
@@ -137,6 +137,15 @@ pub fn car_scenario(effect: Option<Effect>, noise: f64) -> CarScenario {
                     radius: 0.6,
                     ..Region::default()
                 },
+            })
+        }
+        // the servo: a 50 ms lag with a hard 3 rad/s rate clamp (the library's rate limit
+        // is smooth)
+        Some(Effect::SteeringLag) => {
+            s.effects.steering_rate_limit = Some(SteeringRateLimit {
+                enabled: true,
+                rate: 3.0,
+                tau: 0.05,
             })
         }
         _ => {}

@@ -423,7 +423,7 @@ impl Atom {
                 [a, b, c] if a.is_finite() && b.is_finite() && c.is_finite() && c > 0.0 => {
                     Ok([a, b, c])
                 }
-                _ => Err(FeatureError::BadGauss(n.to_string())),
+                _ => Err(FeatureError::BadRegion(n.to_string())),
             })
         };
         if let Some(v) = args("gauss(") {
@@ -531,7 +531,7 @@ pub enum FeatureError {
     #[error(
         "bad position basis '{0}'; write gauss(cx,cy,r) or band(a,d,w) with finite numbers and r, w > 0 (metres, a in rad)"
     )]
-    BadGauss(String),
+    BadRegion(String),
     /// No factors or too many.
     #[error("feature '{name}' has {got} factors; use 1 to {max} atoms joined by '*'")]
     FactorCount {
