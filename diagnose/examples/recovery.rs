@@ -157,7 +157,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     Effect::AeroDrag => "c",
                     Effect::MotorLag => "tau",
                     Effect::SteeringOffset => "delta0",
-                    Effect::SteeringLag => "tau",
+                    Effect::SteeringLag => "rate",
                     Effect::GripPatch => "k",
                     Effect::ComOffset => "ox",
                     Effect::TableTilt => "gx",
