@@ -561,6 +561,26 @@ impl Fitted {
             g4(b)
         ))
     }
+
+    /// The first of effect `e`'s parameters on its bound ([`Fitted::on_bound`]), except one
+    /// whose bound is its default, which switches that part of the effect off (the servo's
+    /// rate at its upper bound: a plain lag), while another of the effect's parameters lies
+    /// inside its range: the effect is there in its simpler form.
+    fn effect_on_bound(&self, e: Effect) -> Option<String> {
+        let mine: Vec<usize> = (0..self.names.len())
+            .filter(|&i| self.owners[i] == Some(e))
+            .collect();
+        let off = |i: usize| {
+            let span = self.upper[i] - self.lower[i];
+            e.params().iter().any(|p| {
+                p.name == self.names[i] && (self.theta[i] - p.default).abs() <= 1e-3 * span
+            })
+        };
+        let inside = |i: usize| self.free[i] && self.on_bound(i).is_none();
+        mine.iter()
+            .filter(|&&i| !(off(i) && mine.iter().any(|&j| j != i && inside(j))))
+            .find_map(|&i| self.on_bound(i))
+    }
 }
 
 /// An augmented predictor: the model plus an effect's contribution.
@@ -1148,12 +1168,10 @@ impl Ctx<'_> {
         let mine: Vec<usize> = (0..f.names.len())
             .filter(|&i| f.owners[i] == Some(e))
             .collect();
-        for &i in &mine {
-            if let Some(at) = f.on_bound(i) {
-                return Some(format!(
-                    "{at}: the data ask for more than this effect can give, so it is not counted"
-                ));
-            }
+        if let Some(at) = f.effect_on_bound(e) {
+            return Some(format!(
+                "{at}: the data ask for more than this effect can give, so it is not counted"
+            ));
         }
         if matches!(e, Effect::GripPatch | Effect::FrictionPatch) && !self.positions.is_empty() {
             let get = |n: &str| {
@@ -2296,6 +2314,50 @@ mod tests {
             .collect();
         let after = ws.iter().map(|w| 1.0 - r(w.trajectory)).collect();
         (ws, vec![1.0; 60], after)
+    }
+
+    /// Effect `e` fitted with its parameters at `theta` (all free), with nothing else.
+    fn fitted_effect(e: Effect, theta: &[f64]) -> Fitted {
+        let specs = e.params();
+        let n = specs.len();
+        Fitted {
+            names: specs.iter().map(|p| p.name.to_string()).collect(),
+            units: specs.iter().map(|p| p.unit.to_string()).collect(),
+            owners: vec![Some(e); n],
+            physics: PhysicsModel::new(e.robot(), &[e]).unwrap(),
+            lower: specs.iter().map(|p| p.lower).collect(),
+            upper: specs.iter().map(|p| p.upper).collect(),
+            free: vec![true; n],
+            theta: theta.to_vec(),
+            std: vec![0.0; n],
+            test: Vec::new(),
+            fit: Vec::new(),
+            calm: Vec::new(),
+        }
+    }
+
+    #[test]
+    fn a_plain_lag_is_not_a_rate_on_its_bound_but_a_lag_on_its_bound_is() {
+        let servo = |tau: f64, rate: f64| {
+            fitted_effect(Effect::SteeringLag, &[tau, rate]).effect_on_bound(Effect::SteeringLag)
+        };
+        // the rate at its upper bound, its default: a plain lag, counted
+        assert_eq!(servo(0.05, 50.0), None);
+        assert_eq!(servo(0.05, 3.0), None);
+        // the rate at its lower bound, or the lag at its own: not counted
+        let low_rate = servo(0.05, 0.05).unwrap_or_default();
+        assert!(
+            low_rate.starts_with("rate = 0.05000 rad/s is on its lower"),
+            "{low_rate}"
+        );
+        let fast = servo(0.01, 50.0).unwrap_or_default();
+        assert!(
+            fast.starts_with("tau = 0.01000 s is on its lower"),
+            "{fast}"
+        );
+        // a one-parameter effect at its default bound (no drag) is on its bound
+        let drag = fitted_effect(Effect::AeroDrag, &[0.0]).effect_on_bound(Effect::AeroDrag);
+        assert!(drag.is_some());
     }
 
     #[test]
