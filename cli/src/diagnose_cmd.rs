@@ -162,6 +162,11 @@ pub fn run(args: DiagnoseArgs) -> anyhow::Result<()> {
     if !d.effects.is_empty() {
         train.extend(["--effects".into(), d.effects.join(",")]);
     }
+    // the fit starts from the diagnosis's values: from the defaults it may not find them (a
+    // patch elsewhere, a servo's rate limit from its no-limit bound)
+    for (name, v) in d.joint.iter().flat_map(|j| &j.params) {
+        train.extend(["--set".into(), format!("{name}={v}")]);
+    }
     if let Some(f) = &custom {
         train.extend(["--effects-file".into(), f.display().to_string()]);
     }

@@ -56,6 +56,19 @@ fn diagnose_names_the_steering_offset_of_the_bundled_bag_and_writes_json_and_htm
     assert!((d0 - 0.03).abs() < 0.005, "δ₀ = {d0}");
     assert!(c["param_std"]["delta0"].as_f64().unwrap() > 0.0);
     assert_eq!(j["candidates"][1]["significant"], false);
+    // the train command to add it starts from the fitted offset
+    let line = stdout
+        .lines()
+        .find(|l| l.starts_with("add them: dynlab train"))
+        .unwrap_or_default();
+    assert!(line.contains("--effects steering_offset"), "{stdout}");
+    let set: f64 = line
+        .split("--set steering_offset.delta0=")
+        .nth(1)
+        .and_then(|r| r.split_whitespace().next())
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(f64::NAN);
+    assert!((set - 0.03).abs() < 0.005, "{line}");
     let html = std::fs::read_to_string(out.join("diagnosis.html")).unwrap();
     assert!(html.contains("<section") && html.contains("steering_offset"));
 }
