@@ -24,6 +24,9 @@ mkdir -p "$out/test" "$out/models" "$out/eval" "$out/diagnosis" "$out/compare"
 
 step() { printf '\n== %s\n' "$*"; }
 effects_of() { python3 -c 'import json,sys; print(",".join(json.load(open(sys.argv[1])).get("effects") or []))' "$1"; }
+# the joint fit's effect parameters as `--set name=value` (the training starts there, as in the
+# train command the diagnosis prints)
+starts_of() { python3 -c 'import json,sys; j=json.load(open(sys.argv[1])).get("joint") or {}; print(" ".join(f"--set {k}={v!r}" for k,v in (j.get("params") or {}).items()))' "$1"; }
 custom_name_of() { python3 -c 'import sys,tomllib; print(tomllib.load(open(sys.argv[1],"rb")).get("name","custom"))' "$1"; }
 
 step "Held-out test data (same scenarios, other seeds)"
@@ -53,6 +56,8 @@ for effect_bag in car_drag_steering car_steering_gain; do
   effects="$(effects_of "$diag/diagnosis.json")"
   add=()
   [[ -n "$effects" ]] && add+=(--effects "$effects")
+  read -r -a sets <<< "$(starts_of "$diag/diagnosis.json")"
+  add+=("${sets[@]}")
   [[ -f "$diag/custom_effect.toml" ]] && add+=(--effects-file "$diag/custom_effect.toml")
   if [[ ${#add[@]} -eq 0 ]]; then
     echo "nothing found for $effect_bag; nothing to add"
@@ -95,7 +100,8 @@ if [[ -z "$verdict" ]]; then
   cp "$out/eval/before@$effect_bag.json" "$out/eval/after@$effect_bag.json"
 else
   step "$effect_bag: add $verdict and refit"
-  "$dynlab" train --bag "bags/$effect_bag" --kind physics --steps 3 --effects "$verdict" \
+  read -r -a sets <<< "$(starts_of "$out/diagnosis/$effect_bag/diagnosis.json")"
+  "$dynlab" train --bag "bags/$effect_bag" --kind physics --steps 3 --effects "$verdict" "${sets[@]}" \
     --out "$out/models/push_physics+$verdict" | grep -E "\($verdict|physics model, best"
   "$dynlab" eval-model --model "$out/models/push_physics+$verdict" --bag "$out/test/$effect_bag" --steps 3 \
     --json > "$out/eval/after@$effect_bag.json"
