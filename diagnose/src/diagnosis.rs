@@ -18,28 +18,28 @@
 //! commands up to 3 s before the window's segment as well, so the cuts between segments do not
 //! restart them) and carried along the rollout.
 //!
-//! The effect's parameters `θ_e` are fitted within their bounds (bounded Levenberg–Marquardt
-//! with a clarabel QP step, several starts for the patch effects, a `grip_patch` also from the
-//! discs that best explain the one-step residual, `discovery::grip_discs`) on the k-step
-//! open-loop error of the fit half, and the candidate is scored on the held-out half:
-//! `error_reduction = 1 − E_after/E_before` of the k-step error `E` (the squared error of every state dimension over
-//! k steps, each dimension divided by the RMS k-step change of that dimension in the data, so
-//! the scale is the error of the "nothing moves" model). Held-out windows that both models
-//! compared (the model before the step and the model with the candidate) roll out through a
-//! spin, more than 100 times (`CHAOS_LIMIT`) as sensitive to their parameters as the median window,
-//! are left out of that candidate's scores ([`Candidate::chaotic_windows`]); the joint fit's
-//! reduction counts every held-out window, and is given without those both the model as given
-//! and the final model spin on as well ([`JointFit::reduction_vs_model_calm`]). A candidate is
-//! **significant** when the
-//! reduction is at least [`DiagnoseConfig::min_reduction`] *and* the lower end of a one-sided
-//! bootstrap confidence interval over held-out segments (resampled whole, seeded) is above zero.
-//! The interval's error probability is divided by the number of candidates tested
-//! ([`DiagnoseConfig::correct_for_candidates`], Bonferroni), so the chance that *some* candidate
-//! of a nominal data set passes stays at `1 − confidence`.
-//! A car's `grip_patch` is not counted when the term search's best grip term on the position
-//! ([`crate::discovery`], `μ` on a bump or band) removes more: the region is not a disc.
-//! The verdict is the best significant candidate, or none: then the report says so and lists
-//! what the residual correlates with (state and input features, and inputs at lags).
+//! The effect's parameters `θ_e` are fitted within their bounds (bounded Levenberg–Marquardt with a
+//! clarabel QP step, several starts: for the patch effects over the data's extent, for the servo at
+//! several rate limits; a `grip_patch` also from the discs that best explain the one-step residual,
+//! `discovery::grip_discs`) on the k-step open-loop error of the fit half, and the candidate is
+//! scored on the held-out half: `error_reduction = 1 − E_after/E_before` of the k-step error `E`
+//! (the squared error of every state dimension over k steps, each dimension divided by the RMS
+//! k-step change of that dimension in the data, so the scale is the error of the "nothing moves"
+//! model). Held-out windows that both models compared (the model before the step and the model with
+//! the candidate) roll out through a spin, more than 100 times (`CHAOS_LIMIT`) as sensitive to
+//! their parameters as the median window, are left out of that candidate's scores
+//! ([`Candidate::chaotic_windows`]); the joint fit's reduction counts every held-out window, and is
+//! given without those both the model as given and the final model spin on as well
+//! ([`JointFit::reduction_vs_model_calm`]). A candidate is **significant** when the reduction is at
+//! least [`DiagnoseConfig::min_reduction`] *and* the lower end of a one-sided bootstrap confidence
+//! interval over held-out segments (resampled whole, seeded) is above zero. The interval's error
+//! probability is divided by the number of candidates tested
+//! ([`DiagnoseConfig::correct_for_candidates`], Bonferroni), so the chance that *some* candidate of
+//! a nominal data set passes stays at `1 − confidence`. A car's `grip_patch` is not counted when
+//! the term search's best grip term on the position ([`crate::discovery`], `μ` on a bump or band)
+//! removes more: the region is not a disc. The verdict is the best significant candidate, or none:
+//! then the report says so and lists what the residual correlates with (state and input features,
+//! and inputs at lags).
 //!
 //! **Nominal parameters refitted** ([`DiagnoseConfig::refit_nominal`], default for pushing
 //! physics models): the model's free nominal parameters (pushing: the limit-surface ratio `c`
@@ -725,15 +725,10 @@ fn starts(e: Effect, trajs: &[StateTrajectory]) -> Vec<Vec<(&'static str, f64)>>
             .collect(),
         // a plain lag (the rate at its bound) and two rate limits: from the bound, the
         // rate's gradient is nearly zero, so a fit never finds a limit it does not start near
-        Effect::SteeringLag => {
-            let mut v = Vec::new();
-            for t in [0.02, 0.05, 0.1, 0.2] {
-                for r in [50.0, 6.0, 2.0] {
-                    v.push(vec![("tau", t), ("rate", r)]);
-                }
-            }
-            v
-        }
+        Effect::SteeringLag => [0.02, 0.05, 0.1, 0.2]
+            .into_iter()
+            .flat_map(|t| [50.0, 6.0, 2.0].map(|r| vec![("tau", t), ("rate", r)]))
+            .collect(),
         Effect::SteeringOffset => [-0.05, -0.01, 0.0, 0.01, 0.05]
             .into_iter()
             .map(|d| vec![("delta0", d)])
