@@ -650,6 +650,16 @@ fn bad_model_configurations_get_clear_errors() {
     let e = PhysicsModel::parse_effects(&["aero_dreg"]).unwrap_err();
     assert!(e.to_string().contains("unknown effect 'aero_dreg'"), "{e}");
     let mut m = PhysicsModel::car(&[Effect::AeroDrag]).unwrap();
+    let e = m.set_param("steering_lag.rate", 3.0).unwrap_err();
+    let msg = e.to_string();
+    assert!(
+        msg.starts_with("unknown parameter 'steering_lag.rate'"),
+        "{e}"
+    );
+    assert!(
+        msg.contains("aero_drag.c") && msg.contains("effect added"),
+        "{e}"
+    );
     let e = m.set_param("aero_drag.c", f64::NAN).unwrap_err();
     assert!(matches!(e, ModelError::ParamOutOfBounds { .. }), "{e}");
     let e = m.set_params(&[1.0]).unwrap_err();

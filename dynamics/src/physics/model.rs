@@ -38,6 +38,16 @@ pub enum ModelError {
         /// All known names.
         known: String,
     },
+    /// An unknown parameter name.
+    #[error(
+        "unknown parameter '{name}'; this model's parameters: {known} (an effect's parameters exist only with the effect added)"
+    )]
+    UnknownParam {
+        /// The name given.
+        name: String,
+        /// The model's parameter names.
+        known: String,
+    },
     /// A parameter vector of the wrong length.
     #[error("expected {expected} parameters ({names}), got {got}")]
     ParamCount {
@@ -443,7 +453,7 @@ impl PhysicsModel {
     pub fn set_param(&mut self, name: &str, value: f64) -> Result<(), ModelError> {
         let i = self
             .param_index(name)
-            .ok_or_else(|| ModelError::UnknownEffect {
+            .ok_or_else(|| ModelError::UnknownParam {
                 name: name.to_string(),
                 known: self.param_names().join(", "),
             })?;
