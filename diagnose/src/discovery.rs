@@ -36,7 +36,8 @@
 //!    whose coefficients are refitted on the fit half (bounded Levenberg–Marquardt) and scored
 //!    on the held-out half. It is **significant** when it removes at least
 //!    [`DiscoveryConfig::min_reduction`] of the baseline error, the lower end of a one-sided
-//!    bootstrap interval over held-out segments (resampled whole) of its improvement is above
+//!    bootstrap interval over held-out segments (resampled whole, each segment weighing the
+//!    same: the geometric mean of their error ratios) of its improvement is above
 //!    zero at error probability `(1 − confidence)/M` (Bonferroni; with enough resamples that ten
 //!    lie beyond the bound), and its coefficient is more
 //!    than the same threshold's `z` standard errors (clustered by trajectory) from zero. The
@@ -300,8 +301,9 @@ pub struct DiscoveredTerm {
     /// Share of the baseline held-out k-step error this term removes when added to the terms
     /// before it.
     pub error_reduction: f64,
-    /// Lower end of the bootstrap interval of the improvement (relative to the terms before it;
-    /// −∞, `null` in JSON, with fewer than two held-out segments).
+    /// Lower end of the bootstrap interval of the typical held-out segment's improvement (the
+    /// geometric mean of the segments' error ratios, relative to the terms before it; −∞, `null`
+    /// in JSON, with fewer than two held-out segments).
     #[serde(deserialize_with = "null_as_nan")]
     pub ci_lower: f64,
     /// Significant (see the [module docs](self)).

@@ -2,7 +2,7 @@
 
 use std::fmt::Write as _;
 
-use super::{Candidate, Diagnosis, g4};
+use super::{Candidate, Diagnosis, g4, param_text};
 
 fn esc(s: &str) -> String {
     s.replace('&', "&amp;")
@@ -112,7 +112,11 @@ pub fn diagnosis_html(d: &Diagnosis) -> String {
                 "<tr><td>{}</td><td align=right>{}</td><td align=right>{}</td><td>{}</td></tr>",
                 esc(name),
                 g4(*v),
-                if sd > 0.0 { g4(sd) } else { "–".into() },
+                match j.on_bound.get(name) {
+                    Some(side) => format!("on its {side} bound"),
+                    None if sd > 0.0 => g4(sd),
+                    None => "–".into(),
+                },
                 esc(j.param_units.get(name).map_or("", |u| u.as_str()))
             );
         }
@@ -164,13 +168,13 @@ fn candidate_table(cands: &[Candidate], added: Option<&str>) -> String {
             .params
             .iter()
             .map(|(k, v)| {
-                let sd = c.param_std.get(k).copied().unwrap_or(0.0);
-                let unit = c.param_units.get(k).cloned().unwrap_or_default();
-                if sd > 0.0 {
-                    format!("{k} = {} ± {} {}", g4(*v), g4(sd), esc(&unit))
-                } else {
-                    format!("{k} = {} {}", g4(*v), esc(&unit))
-                }
+                esc(&param_text(
+                    k,
+                    *v,
+                    &c.param_std,
+                    &c.param_units,
+                    &c.on_bound,
+                ))
             })
             .collect();
         let bold = if added == Some(c.effect.as_str()) {
