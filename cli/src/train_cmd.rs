@@ -243,6 +243,9 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         out.baseline_validation_loss.into(),
     );
     if let Some(f) = &out.physics_fit {
+        for s in &f.started {
+            eprintln!("physics fit: started {s}");
+        }
         metrics.insert("physics_fit".into(), serde_json::to_value(f)?);
     }
     let training = TrainingMeta {

@@ -64,7 +64,7 @@ use dynlab_learn::train::{segment, segment_origins};
 use dynlab_learn::{Dataset, LearnError, Model, World};
 
 use crate::discovery::{
-    Discovery, DiscoveryConfig, DiscoveryError, area_of, discover_terms_split, grip_discs, lattice,
+    Discovery, DiscoveryConfig, DiscoveryError, area_of, discover_terms_split, grip_discs,
 };
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
@@ -738,61 +738,10 @@ const EFFECT_HISTORY_S: f64 = 3.0;
 /// Discs from the one-step screen among a `grip_patch` fit's starts.
 const SCREENED_DISCS: usize = 4;
 
-/// Starting points of an effect's parameters (the rest at their defaults), chosen from the
-/// data's extent for the patch effects.
+/// Starting points of an effect's parameters ([`Effect::starts`] over the data's extent).
 fn starts(e: Effect, trajs: &[StateTrajectory]) -> Vec<Vec<(&'static str, f64)>> {
-    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-    for t in trajs {
-        for i in 0..t.len() {
-            for c in 0..2 {
-                lo[c] = lo[c].min(t.s[i * t.dim_s + c]);
-                hi[c] = hi[c].max(t.s[i * t.dim_s + c]);
-            }
-        }
-    }
-    match e {
-        Effect::AeroDrag => [0.0, 0.003, 0.01, 0.03, 0.1]
-            .into_iter()
-            .map(|c| vec![("c", c)])
-            .collect(),
-        Effect::MotorLag => [0.02, 0.05, 0.1, 0.2, 0.35, 0.6]
-            .into_iter()
-            .map(|t| vec![("tau", t)])
-            .collect(),
-        // a plain lag (the rate at its bound) and two rate limits: from the bound, the
-        // rate's gradient is nearly zero, so a fit never finds a limit it does not start near
-        Effect::SteeringLag => [0.02, 0.05, 0.1, 0.2]
-            .into_iter()
-            .flat_map(|t| [50.0, 6.0, 2.0].map(|r| vec![("tau", t), ("rate", r)]))
-            .collect(),
-        Effect::SteeringOffset => [-0.05, -0.01, 0.0, 0.01, 0.05]
-            .into_iter()
-            .map(|d| vec![("delta0", d)])
-            .collect(),
-        Effect::GripPatch => {
-            let r = 0.3 * (hi[0] - lo[0]).max(hi[1] - lo[1]).max(0.1);
-            let mut v = Vec::new();
-            for [x, y] in lattice(lo, hi, 3) {
-                for k in [0.5, 1.5] {
-                    v.push(vec![("cx", x), ("cy", y), ("r", r), ("w", 0.05), ("k", k)]);
-                }
-            }
-            v
-        }
-        Effect::ComOffset => vec![vec![("ox", 0.0), ("oy", 0.0)]],
-        Effect::TableTilt => vec![vec![("gx", 0.0), ("gy", 0.0)]],
-        Effect::FrictionPatch => {
-            let r = 0.25 * (hi[0] - lo[0]).max(hi[1] - lo[1]).max(0.02);
-            let mut v = Vec::new();
-            for [x, y] in lattice(lo, hi, 3) {
-                for k in [0.3, 3.0] {
-                    v.push(vec![("cx", x), ("cy", y), ("r", r), ("w", 0.01), ("k", k)]);
-                }
-            }
-            v
-        }
-        Effect::PusherFriction => vec![vec![("mu", 0.1)], vec![("mu", 0.4)], vec![("mu", 1.0)]],
-    }
+    let (lo, hi) = dynlab_learn::fit::position_extent(trajs);
+    e.starts(lo, hi)
 }
 
 /// The physics part of an augmented model at one selection step: the model's physics with the
@@ -2232,7 +2181,7 @@ impl Diagnosis {
         if let Some(j) = &self.joint {
             let _ = writeln!(
                 o,
-                "{} refitted together: held-out error {:.4} → {:.4}, {:.1} % removed (bootstrap lower bound {:.1} %)",
+                "{} refitted together: held-out error {:.4} → {:.4}, {:.1} % removed (the typical held-out segment's error lower by at least {:.1} %, bootstrap bound)",
                 j.effects.join(" + "),
                 j.error_before,
                 j.error_after,

@@ -61,7 +61,7 @@ use dynlab_learn::dynamics::ode::Solver;
 use dynlab_learn::dynamics::physics::custom::fmt_num;
 use dynlab_learn::dynamics::physics::features::{Area, Feature, library, time_unit};
 use dynlab_learn::dynamics::physics::{
-    CustomEffect, CustomTerm, ModelError, PhysicsModel, Robot, Target,
+    CustomEffect, CustomTerm, ModelError, PhysicsModel, Robot, Target, lattice,
 };
 use dynlab_learn::fit::{SENSITIVITY_LIMIT, bounded_least_squares, cluster_std, initial_state};
 use dynlab_learn::train::segment;
@@ -621,21 +621,6 @@ pub(crate) fn area_of(points: &[[f64; 2]]) -> Area {
         }
     }
     Area { lo, hi }
-}
-
-/// The centres of an `n × n` lattice over the rectangle `lo`–`hi` (cell centres).
-pub(crate) fn lattice(lo: [f64; 2], hi: [f64; 2], n: usize) -> Vec<[f64; 2]> {
-    let f = |i: usize| (i as f64 + 0.5) / n as f64;
-    (0..n)
-        .flat_map(|a| {
-            (0..n).map(move |b| {
-                [
-                    lo[0] + f(a) * (hi[0] - lo[0]),
-                    lo[1] + f(b) * (hi[1] - lo[1]),
-                ]
-            })
-        })
-        .collect()
 }
 
 /// The band and the bump that explain the most of the grip regression `reg` alone, their
@@ -1572,7 +1557,7 @@ pub fn discovery_html(d: &Discovery) -> String {
     );
     let _ = writeln!(
         o,
-        "<table style=\"border-collapse:collapse\"><tr><th align=left>term</th><th align=left>held-out error removed</th><th>bootstrap lower bound</th><th>significant</th></tr>"
+        "<table style=\"border-collapse:collapse\"><tr><th align=left>term</th><th align=left>held-out error removed</th><th title=\"one-sided bootstrap bound of the typical held-out segment's error reduction (geometric mean of the segments' error ratios)\">bootstrap lower bound (typical segment)</th><th>significant</th></tr>"
     );
     for t in &d.terms {
         let w = (t.error_reduction.max(0.0) * 200.0).round();

@@ -443,6 +443,21 @@ fn effect_states_with_sens(
     (v_out, s_out)
 }
 
+/// The smallest rectangle `(lo, hi)` around the positions (the first two state components) of
+/// `trajs`.
+pub fn position_extent(trajs: &[StateTrajectory]) -> ([f64; 2], [f64; 2]) {
+    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+    for t in trajs.iter().filter(|t| t.dim_s >= 2) {
+        for i in 0..t.len() {
+            for c in 0..2 {
+                lo[c] = lo[c].min(t.s[i * t.dim_s + c]);
+                hi[c] = hi[c].max(t.s[i * t.dim_s + c]);
+            }
+        }
+    }
+    (lo, hi)
+}
+
 /// Which parameters the fit frees: `cfg.physics_free` names the nominal ones when set (effect
 /// parameters are always free except a patch's edge width), else [`PhysicsModel::default_free`].
 pub fn free_mask(p: &PhysicsModel, cfg: &TrainConfig) -> Result<Vec<bool>, LearnError> {
@@ -606,6 +621,9 @@ pub(crate) fn fit_physics(
         }
         (r, jac)
     };
+    let started = screen_starts(p, cfg, trajs, &|theta: &[f64]| {
+        eval_on(&ws, theta, false).0.iter().map(|r| r * r).sum()
+    })?;
     // rollouts through a spin out of the fit (see `calm_windows`): sensitivity of each
     // window's residuals to the free parameters, each column scaled by its parameter's size
     if free.iter().any(|&f| f) && k > 1 {
@@ -662,5 +680,64 @@ pub(crate) fn fit_physics(
         final_cost: res.cost,
         iterations: res.iterations,
         residuals: res.residuals,
+        started,
     })
+}
+
+/// Starts every library effect of `p` that `cfg.physics_values` gives no value from the best
+/// of its starting points ([`Effect::starts`](dynlab_dynamics::physics::Effect::starts) and
+/// [`Effect::fine_starts`](dynlab_dynamics::physics::Effect::fine_starts) over the data's
+/// extent) by the fit's cost `cost(θ)`, one effect after the other, and says so for
+/// each effect moved off its defaults: from its defaults a fit does not find a patch away
+/// from the default disc, nor a servo's rate limit.
+fn screen_starts(
+    p: &mut PhysicsModel,
+    cfg: &TrainConfig,
+    trajs: &[StateTrajectory],
+    cost: &dyn Fn(&[f64]) -> f64,
+) -> Result<Vec<String>, LearnError> {
+    let (lo, hi) = position_extent(trajs);
+    let mut started = Vec::new();
+    for e in p.effects() {
+        let prefix = format!("{}.", e.name());
+        if cfg
+            .physics_values
+            .iter()
+            .any(|(n, _)| n.starts_with(&prefix))
+        {
+            continue;
+        }
+        let mut starts = e.starts(lo, hi);
+        starts.extend(e.fine_starts(lo, hi));
+        if starts.len() < 2 {
+            continue;
+        }
+        let mut best = (cost(p.params()), None);
+        for st in &starts {
+            let mut q = p.clone();
+            if st
+                .iter()
+                .any(|(n, v)| q.set_param(&format!("{prefix}{n}"), *v).is_err())
+            {
+                continue;
+            }
+            let c = cost(q.params());
+            if c < best.0 {
+                best = (c, Some(st));
+            }
+        }
+        if let Some(st) = best.1 {
+            for (n, v) in st {
+                p.set_param(&format!("{prefix}{n}"), *v)?;
+            }
+            let values: Vec<String> = st.iter().map(|(n, v)| format!("{n} = {v:.3}")).collect();
+            started.push(format!(
+                "{} from {} (the best of {} starting points and its defaults)",
+                e.name(),
+                values.join(", "),
+                starts.len()
+            ));
+        }
+    }
+    Ok(started)
 }

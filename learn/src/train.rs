@@ -336,6 +336,10 @@ pub struct PhysicsFit {
     pub iterations: usize,
     /// Residuals used.
     pub residuals: usize,
+    /// The effects the fit started off their defaults, each with its start (`train` gives an
+    /// effect without `--set` values the best of its starting points).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub started: Vec<String>,
 }
 
 /// Cuts trajectories longer than `max_len` states into contiguous segments sharing their

@@ -303,6 +303,37 @@ static PUSHER_FRICTION: [ParamSpec; 1] = [ps(
     "Coulomb friction coefficient between pusher and block",
 )];
 
+/// The centres of the cells of an `n × n` lattice over the rectangle `lo`–`hi`.
+pub fn lattice(lo: [f64; 2], hi: [f64; 2], n: usize) -> Vec<[f64; 2]> {
+    let f = |i: usize| (i as f64 + 0.5) / n as f64;
+    (0..n)
+        .flat_map(|a| {
+            (0..n).map(move |b| {
+                [
+                    lo[0] + f(a) * (hi[0] - lo[0]),
+                    lo[1] + f(b) * (hi[1] - lo[1]),
+                ]
+            })
+        })
+        .collect()
+}
+
+/// Patch starts: discs of radius `r` and edge width `w` centred on an `n × n` lattice over
+/// `lo`–`hi`, each with every factor of `ks`.
+fn discs(
+    lo: [f64; 2],
+    hi: [f64; 2],
+    n: usize,
+    r: f64,
+    w: f64,
+    ks: [f64; 2],
+) -> Vec<Vec<(&'static str, f64)>> {
+    lattice(lo, hi, n)
+        .into_iter()
+        .flat_map(|[x, y]| ks.map(|k| vec![("cx", x), ("cy", y), ("r", r), ("w", w), ("k", k)]))
+        .collect()
+}
+
 impl Effect {
     /// Every effect in the library.
     pub const ALL: [Effect; 9] = [
@@ -378,6 +409,46 @@ impl Effect {
             Effect::TableTilt => &TABLE_TILT,
             Effect::FrictionPatch => &FRICTION_PATCH,
             Effect::PusherFriction => &PUSHER_FRICTION,
+        }
+    }
+
+    /// Starting points of a fit of the effect's parameters (each a list of `(name, value)`, the
+    /// rest at their defaults), the patches' over the rectangle `lo`–`hi` that the data's
+    /// positions span. From its defaults alone a fit seldom finds the effect: a patch away
+    /// from the default disc has no gradient, and a servo's rate limit has next to none at its
+    /// no-limit default (the rate's upper bound).
+    pub fn starts(self, lo: [f64; 2], hi: [f64; 2]) -> Vec<Vec<(&'static str, f64)>> {
+        let extent = (hi[0] - lo[0]).max(hi[1] - lo[1]);
+        let one = |name: &'static str, values: &[f64]| -> Vec<Vec<(&'static str, f64)>> {
+            values.iter().map(|&v| vec![(name, v)]).collect()
+        };
+        match self {
+            Effect::AeroDrag => one("c", &[0.0, 0.003, 0.01, 0.03, 0.1]),
+            Effect::MotorLag => one("tau", &[0.02, 0.05, 0.1, 0.2, 0.35, 0.6]),
+            // a plain lag (the rate at its bound) and two rate limits
+            Effect::SteeringLag => [0.02, 0.05, 0.1, 0.2]
+                .into_iter()
+                .flat_map(|t| [50.0, 6.0, 2.0].map(|r| vec![("tau", t), ("rate", r)]))
+                .collect(),
+            Effect::SteeringOffset => one("delta0", &[-0.05, -0.01, 0.0, 0.01, 0.05]),
+            Effect::GripPatch => discs(lo, hi, 3, 0.3 * extent.max(0.1), 0.05, [0.5, 1.5]),
+            Effect::ComOffset => vec![vec![("ox", 0.0), ("oy", 0.0)]],
+            Effect::TableTilt => vec![vec![("gx", 0.0), ("gy", 0.0)]],
+            Effect::FrictionPatch => discs(lo, hi, 3, 0.25 * extent.max(0.02), 0.01, [0.3, 3.0]),
+            Effect::PusherFriction => one("mu", &[0.1, 0.4, 1.0]),
+        }
+    }
+
+    /// More starting points for a fit with no screen of its own (`train`; the diagnosis adds
+    /// discs from a one-step screen of the residual instead): the patches' discs, half the
+    /// radius, on a 5 × 5 lattice. On 12 × 6 m of driving the 3 × 3 lattice's discs (3.5 m)
+    /// each covered more normal floor than patch, and none beat the defaults.
+    pub fn fine_starts(self, lo: [f64; 2], hi: [f64; 2]) -> Vec<Vec<(&'static str, f64)>> {
+        let extent = (hi[0] - lo[0]).max(hi[1] - lo[1]);
+        match self {
+            Effect::GripPatch => discs(lo, hi, 5, 0.15 * extent.max(0.1), 0.05, [0.5, 1.5]),
+            Effect::FrictionPatch => discs(lo, hi, 5, 0.125 * extent.max(0.02), 0.01, [0.3, 3.0]),
+            _ => Vec::new(),
         }
     }
 
