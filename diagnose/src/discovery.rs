@@ -36,8 +36,8 @@
 //!    whose coefficients are refitted on the fit half (bounded Levenberg–Marquardt) and scored
 //!    on the held-out half. It is **significant** when it removes at least
 //!    [`DiscoveryConfig::min_reduction`] of the baseline error, the lower end of a one-sided
-//!    bootstrap interval over held-out segments (resampled whole, each segment weighing the
-//!    same: the geometric mean of their error ratios) of its improvement is above
+//!    bootstrap interval over held-out segments (resampled whole; of the total error's and of
+//!    the typical segment's improvement, the larger) of its improvement is above
 //!    zero at error probability `(1 − confidence)/M` (Bonferroni; with enough resamples that ten
 //!    lie beyond the bound), and its coefficient is more
 //!    than the same threshold's `z` standard errors (clustered by trajectory) from zero. The
@@ -301,9 +301,9 @@ pub struct DiscoveredTerm {
     /// Share of the baseline held-out k-step error this term removes when added to the terms
     /// before it.
     pub error_reduction: f64,
-    /// Lower end of the bootstrap interval of the typical held-out segment's improvement (the
-    /// geometric mean of the segments' error ratios, relative to the terms before it; −∞, `null`
-    /// in JSON, with fewer than two held-out segments).
+    /// Lower end of the bootstrap interval of the improvement (relative to the terms before it,
+    /// as the diagnosis's `ci_lower`; −∞, `null` in JSON, with fewer than two held-out
+    /// segments).
     #[serde(deserialize_with = "null_as_nan")]
     pub ci_lower: f64,
     /// Significant (see the [module docs](self)).
@@ -1557,7 +1557,7 @@ pub fn discovery_html(d: &Discovery) -> String {
     );
     let _ = writeln!(
         o,
-        "<table style=\"border-collapse:collapse\"><tr><th align=left>term</th><th align=left>held-out error removed</th><th title=\"one-sided bootstrap bound of the typical held-out segment's error reduction (geometric mean of the segments' error ratios)\">bootstrap lower bound (typical segment)</th><th>significant</th></tr>"
+        "<table style=\"border-collapse:collapse\"><tr><th align=left>term</th><th align=left>held-out error removed</th><th title=\"the larger of the one-sided bootstrap bounds of the total held-out error's reduction and of the typical segment's (geometric mean of the segments' error ratios), each at half the error probability\">bootstrap lower bound</th><th>significant</th></tr>"
     );
     for t in &d.terms {
         let w = (t.error_reduction.max(0.0) * 200.0).round();

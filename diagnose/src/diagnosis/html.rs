@@ -97,7 +97,7 @@ pub fn diagnosis_html(d: &Diagnosis) -> String {
     if let Some(j) = &d.joint {
         let _ = writeln!(
             o,
-            "<h3>The selected effects refitted together</h3><p><b>{}</b>: held-out error {} → {}, {:.1} % removed (the typical held-out segment's error lower by at least {:.1} %, bootstrap bound). Add them with <code>dynlab train --kind physics --effects {}</code>.</p><table style=\"border-collapse:collapse\"><tr><th align=left>parameter</th><th align=right>value</th><th align=right>± std</th><th align=left>unit</th></tr>",
+            "<h3>The selected effects refitted together</h3><p><b>{}</b>: held-out error {} → {}, {:.1} % removed (bootstrap lower bound {:.1} %). Add them with <code>dynlab train --kind physics --effects {}</code>.</p><table style=\"border-collapse:collapse\"><tr><th align=left>parameter</th><th align=right>value</th><th align=right>± std</th><th align=left>unit</th></tr>",
             esc(&j.effects.join(" + ")),
             g4(j.error_before),
             g4(j.error_after),
@@ -160,7 +160,7 @@ fn candidate_table(cands: &[Candidate], added: Option<&str>) -> String {
     let mut o = String::new();
     let _ = writeln!(
         o,
-        "<table style=\"border-collapse:collapse\"><tr><th align=left>effect</th><th align=left>held-out error removed</th><th title=\"one-sided bootstrap bound of the typical held-out segment's error reduction (geometric mean of the segments' error ratios)\">bootstrap lower bound (typical segment)</th><th>significant</th><th title=\"held-out windows both models roll out through a spin, left out of this candidate's scores\">spins left out</th><th align=left>fitted parameters (± std)</th></tr>"
+        "<table style=\"border-collapse:collapse\"><tr><th align=left>effect</th><th align=left>held-out error removed</th><th title=\"the larger of the one-sided bootstrap bounds of the total held-out error's reduction and of the typical segment's (geometric mean of the segments' error ratios), each at half the error probability\">bootstrap lower bound</th><th>significant</th><th title=\"held-out windows both models roll out through a spin, left out of this candidate's scores\">spins left out</th><th align=left>fitted parameters (± std)</th></tr>"
     );
     for c in cands {
         let w = (c.error_reduction * 200.0).round();
