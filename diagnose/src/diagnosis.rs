@@ -1932,12 +1932,11 @@ const MAX_LOG_RATIO: f64 = 6.907_755_278_982_137; // ln 1000
 /// truth that lowered 9 of 15 held-out segments' error by 30–85 %, 47 % in all, had a bound of
 /// −29 % because one segment held 45 % of the baseline's error and one other got worse (the
 /// typical segment's bound: 21 %). With the typical segment alone, the many segments an effect
-/// does not touch dilute the few where it acts (a pushing friction patch was named in 4 of 5
-/// seeds against 5 of 5 with the total; an anisotropic table's grain term was not significant
-/// on one seed of five, and a position term took its place). Each bound is the `alpha/2`
-/// quantile of at least `resamples` resamples, and of enough that [`TAIL_RESAMPLES`] lie beyond
-/// it: with the term search's Bonferroni `alpha` of a few in 10⁴ and 2000 resamples the bound
-/// was the smallest resample.
+/// does not touch dilute the few where it acts (on one of five anisotropic-table seeds the
+/// grain term was not significant and a position term took its place). Each bound is the
+/// `alpha/2` quantile of at least `resamples` resamples, and of enough that [`TAIL_RESAMPLES`]
+/// lie beyond it: with the term search's Bonferroni `alpha` of a few in 10⁴ and 2000 resamples
+/// the bound was the smallest resample.
 pub(crate) fn bootstrap_lower(
     ws: &[Window],
     before: &[f64],
