@@ -97,7 +97,7 @@ pub fn diagnosis_html(d: &Diagnosis) -> String {
     if let Some(j) = &d.joint {
         let _ = writeln!(
             o,
-            "<h3>The selected effects refitted together</h3><p><b>{}</b>: held-out error {} → {}, {:.1} % removed (bootstrap lower bound {:.1} %). Add them with <code>dynlab train --kind physics --effects {}</code>.</p><table style=\"border-collapse:collapse\"><tr><th align=left>parameter</th><th align=right>value</th><th align=right>± std</th><th align=left>unit</th></tr>",
+            "<h3>The selected effects refitted together</h3><p><b>{}</b>: held-out error {} → {}, {:.1} % removed (bootstrap lower bound {:.1} %). Add them with <code>dynlab train --kind physics --effects {}</code>, starting from the values below (<code>--set effect.name=value</code> for each; the terminal prints the whole command).</p><table style=\"border-collapse:collapse\"><tr><th align=left>parameter</th><th align=right>value</th><th align=right>± std</th><th align=left>unit</th></tr>",
             esc(&j.effects.join(" + ")),
             g4(j.error_before),
             g4(j.error_after),
