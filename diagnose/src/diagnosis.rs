@@ -350,7 +350,7 @@ pub struct Candidate {
     #[serde(default)]
     pub chaotic_windows: usize,
     /// Lower end of the one-sided bootstrap interval of the reduction: the larger of the total
-    /// error's and the typical held-out segment's bounds ([`bootstrap_lower`]).
+    /// error's and the typical held-out segment's bounds, each at half the error probability.
     pub ci_lower: f64,
     /// Held-out k-step error before and after (normalised units).
     pub error_before: f64,
@@ -738,12 +738,6 @@ const EFFECT_HISTORY_S: f64 = 3.0;
 /// Discs from the one-step screen among a `grip_patch` fit's starts.
 const SCREENED_DISCS: usize = 4;
 
-/// Starting points of an effect's parameters ([`Effect::starts`] over the data's extent).
-fn starts(e: Effect, trajs: &[StateTrajectory]) -> Vec<Vec<(&'static str, f64)>> {
-    let (lo, hi) = dynlab_learn::fit::position_extent(trajs);
-    e.starts(lo, hi)
-}
-
 /// The physics part of an augmented model at one selection step: the model's physics with the
 /// effects added so far (nominal parameters as refitted), with its per-window errors.
 #[derive(Clone)]
@@ -956,10 +950,13 @@ impl Ctx<'_> {
         // 2500 held-out windows the k-step cost ranked a wrong disc first, and its fit
         // collapsed to k ≈ 0)
         let mut effect_starts: Vec<(bool, Vec<(&str, f64)>)> = match cand {
-            Some(e) => starts(e, self.d.trajs)
-                .into_iter()
-                .map(|st| (false, st))
-                .collect(),
+            Some(e) => {
+                let (lo, hi) = dynlab_learn::fit::position_extent(self.d.trajs);
+                e.starts(lo, hi)
+            }
+            .into_iter()
+            .map(|st| (false, st))
+            .collect(),
             None => vec![(false, Vec::new())],
         };
         if cand == Some(Effect::GripPatch) {

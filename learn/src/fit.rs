@@ -688,8 +688,8 @@ pub(crate) fn fit_physics(
 /// of its starting points ([`Effect::starts`](dynlab_dynamics::physics::Effect::starts) and
 /// [`Effect::fine_starts`](dynlab_dynamics::physics::Effect::fine_starts) over the data's
 /// extent) by the fit's cost `cost(θ)`, one effect after the other, and says so for
-/// each effect moved off its defaults: from its defaults a fit does not find a patch away
-/// from the default disc, nor a servo's rate limit.
+/// each effect moved off its defaults (why a fit needs them:
+/// [`Effect::starts`](dynlab_dynamics::physics::Effect::starts)).
 fn screen_starts(
     p: &mut PhysicsModel,
     cfg: &TrainConfig,
