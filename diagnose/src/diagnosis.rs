@@ -37,7 +37,9 @@
 //! ([`DiagnoseConfig::correct_for_candidates`], Bonferroni), so the chance that *some* candidate of
 //! a nominal data set passes stays at `1 − confidence`. A car's `grip_patch` is not counted when
 //! the term search's best grip term on the position ([`crate::discovery`], `μ` on a bump or band)
-//! removes more: the region is not a disc. The verdict is the best significant candidate, or none:
+//! removes more: the region is not a disc; nor a `steering_offset` when the term search's best
+//! steering term (`δ` on `δ·vₓ`, `d`, …) removes more: the steering error is not a constant.
+//! The verdict is the best significant candidate, or none:
 //! then the report says so and lists what the residual correlates with (state and input features,
 //! and inputs at lags).
 //!
@@ -1185,20 +1187,29 @@ impl Ctx<'_> {
         None
     }
 
-    /// Why a grip patch that removes `reduction` of the held-out error from `cur` is not
-    /// counted: the term search's best grip term on the position (`μ` on `x`, `y`, a bump or a
-    /// band, one term) removes more. The disc is then not the region's shape (a low-grip band
-    /// across the floor fits a disc on part of it, and the term search finds the band).
-    fn region_term_note(
+    /// Why library effect `e`, which removes `reduction` of the held-out error from `cur`, is
+    /// not counted: the term search's best term on the input the effect corrects ([`rival`])
+    /// removes more, so the effect only absorbs part of an error of another shape. A
+    /// `grip_patch` against a grip term on the position (`μ` on `x`, `y`, a bump or a band): a
+    /// low-grip band across the floor fits a disc on part of it, and the term search finds the
+    /// band. A `steering_offset` against a steering term (`δ` on `δ·vₓ`, `d`, …; never on `1`,
+    /// which is the offset itself): a steering gain that falls with speed is lowered on most
+    /// segments by a constant offset (22 % removed, named on one of five seeds before this
+    /// check), and the term search finds the gain.
+    fn rival_term_note(
         &self,
         cur: &Current,
+        e: Effect,
         reduction: f64,
     ) -> Result<Option<String>, DiagnosisError> {
+        let Some((target, what)) = rival(e) else {
+            return Ok(None);
+        };
         let dcfg = DiscoveryConfig {
             steps: Some(self.d.k),
             seed: self.cfg.seed,
             max_terms: 1,
-            targets: Some(vec![Target::Grip.name().to_string()]),
+            targets: Some(vec![target.name().to_string()]),
             ..self.cfg.discovery.clone()
         };
         let d = discover_terms_split(
@@ -1218,7 +1229,8 @@ impl Ctx<'_> {
             .filter(|t| t.error_reduction > reduction)
             .map(|t| {
                 format!(
-                    "a grip term on the position, {}, removes more of the held-out error ({:.1} % against {:.1} %): the region of other grip is not a disc (see the term search)",
+                    "{} term, {}, removes more of the held-out error ({:.1} % against {:.1} %): {what} (see the term search)",
+                    if target == Target::Grip { "a grip" } else { "a steering" },
                     t.equation,
                     100.0 * t.error_reduction,
                     100.0 * reduction
@@ -1272,8 +1284,8 @@ impl Ctx<'_> {
         } else {
             None
         };
-        if counts && note.is_none() && e == Effect::GripPatch && self.pure_physics {
-            note = self.region_term_note(cur, raw)?;
+        if counts && note.is_none() && self.pure_physics {
+            note = self.rival_term_note(cur, e, raw)?;
         }
         let significant = counts && note.is_none();
         let mine: Vec<usize> = (0..f.names.len())
@@ -1915,6 +1927,18 @@ const MAX_RESAMPLES: usize = 400_000;
 /// [`bootstrap_lower`]: a segment whose error was next to nothing on one side (both are capped
 /// per window, never zero on real data) weighs as a thousandfold change at most.
 const MAX_LOG_RATIO: f64 = 6.907_755_278_982_137; // ln 1000
+
+/// The term-search target whose best single term rivals library effect `e`, and what it means
+/// when that term removes more (see `Ctx::rival_term_note`).
+fn rival(e: Effect) -> Option<(Target, &'static str)> {
+    match e {
+        Effect::GripPatch => Some((Target::Grip, "the region of other grip is not a disc")),
+        Effect::SteeringOffset => {
+            Some((Target::Delta, "the steering error is not a constant offset"))
+        }
+        _ => None,
+    }
+}
 
 /// One-sided lower bootstrap bound (error probability `alpha`) of the held-out error reduction,
 /// resampling held-out segments whole (shared with the term search): the larger of two bounds,
