@@ -60,13 +60,15 @@ use dynlab_learn::dynamics::conventions::wrap_angle;
 use dynlab_learn::dynamics::data::{
     DataError, Split, SplitMix64, StateTrajectory, Window, split_trajectories, windows,
 };
+use dynlab_learn::dynamics::physics::features::{Atom, Feature};
 use dynlab_learn::dynamics::physics::{Effect, ModelError, PhysicsModel, Target};
 use dynlab_learn::fit::{bounded_least_squares, calm_windows, cluster_std, initial_state_after};
 use dynlab_learn::train::{segment, segment_origins};
 use dynlab_learn::{Dataset, LearnError, Model, World};
 
 use crate::discovery::{
-    Discovery, DiscoveryConfig, DiscoveryError, area_of, discover_terms_split, grip_discs,
+    Discovery, DiscoveryConfig, DiscoveryError, area_of, discover_terms_among,
+    discover_terms_split, grip_discs,
 };
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
@@ -1202,7 +1204,12 @@ impl Ctx<'_> {
         e: Effect,
         reduction: f64,
     ) -> Result<Option<String>, DiagnosisError> {
-        let Some((target, what)) = rival(e) else {
+        let Some(Rival {
+            target,
+            among,
+            meaning,
+        }) = rival(e)
+        else {
             return Ok(None);
         };
         let dcfg = DiscoveryConfig {
@@ -1212,7 +1219,7 @@ impl Ctx<'_> {
             targets: Some(vec![target.name().to_string()]),
             ..self.cfg.discovery.clone()
         };
-        let d = discover_terms_split(
+        let d = discover_terms_among(
             &cur.physics,
             &self.model.physics_solver(),
             self.model.physics_time(),
@@ -1223,13 +1230,14 @@ impl Ctx<'_> {
             self.d.k,
             self.segments,
             &dcfg,
+            &among,
         )?;
         Ok(d.terms
             .first()
             .filter(|t| t.error_reduction > reduction)
             .map(|t| {
                 format!(
-                    "{} term, {}, removes more of the held-out error ({:.1} % against {:.1} %): {what} (see the term search)",
+                    "{} term, {}, removes more of the held-out error ({:.1} % against {:.1} %): {meaning} (see the term search)",
                     if target == Target::Grip { "a grip" } else { "a steering" },
                     t.equation,
                     100.0 * t.error_reduction,
@@ -1874,9 +1882,9 @@ const CHAOS_DIRECTIONS: usize = 4;
 /// model without it cannot follow) is credited, one that starts a spin is charged.
 const CHAOS_LIMIT: f64 = 100.0;
 
-/// The fit windows without the chaotic ones ([`calm_windows`]): the sensitivity of each
-/// window's residuals to the fitted parameters at `theta0`, by forward differences of
-/// `step(c)` (0: a parameter held). `resid(θ, r)` fills the residual rows, step-major
+/// The fit windows without the chaotic ones ([`calm_windows`] over the windows the parameters
+/// reach): the sensitivity of each window's residuals to the fitted parameters at `theta0`, by
+/// forward differences of `step(c)` (0: a parameter held). `resid(θ, r)` fills the residual rows, step-major
 /// `(step, window, dimension)` with `ds` dimensions, and returns false for parameters the
 /// model refuses.
 pub(crate) fn robust_windows(
@@ -1909,12 +1917,36 @@ pub(crate) fn robust_windows(
             sens[(row / ds) % n] += d * d;
         }
     }
+    // windows the parameters barely reach (a patch or a bump far from them) are kept and left
+    // out of the median: with a local effect's many untouched windows as the reference, every
+    // window that crosses the patch was "chaotic" and left out, and the fit collapsed (a
+    // 55 % low-grip disc started 0.12 m from the truth ended at k = 0.001 on the windows that
+    // never cross it)
+    let top = sens
+        .iter()
+        .copied()
+        .filter(|v| v.is_finite())
+        .fold(0.0, f64::max);
+    let touched: Vec<bool> = sens
+        .iter()
+        .map(|&v| v.is_nan() || v >= UNTOUCHED * top)
+        .collect();
+    let reached: Vec<f64> = sens
+        .iter()
+        .zip(&touched)
+        .filter_map(|(v, t)| t.then_some(*v))
+        .collect();
+    let mut calm = calm_windows(&reached, limit).into_iter();
     fit_w
         .iter()
-        .zip(calm_windows(&sens, limit))
-        .filter_map(|(w, k)| k.then_some(*w))
+        .zip(&touched)
+        .filter_map(|(w, &t)| (!t || calm.next().unwrap_or(true)).then_some(*w))
         .collect()
 }
+
+/// A window whose sensitivity is below this fraction of the largest one is not reached by the
+/// parameters ([`robust_windows`]).
+const UNTOUCHED: f64 = 1e-8;
 
 /// Fewest resamples beyond a bootstrap bound: the resamples are raised to `10/alpha` (at most
 /// [`MAX_RESAMPLES`]) for a small `alpha`.
@@ -1928,16 +1960,33 @@ const MAX_RESAMPLES: usize = 400_000;
 /// per window, never zero on real data) weighs as a thousandfold change at most.
 const MAX_LOG_RATIO: f64 = 6.907_755_278_982_137; // ln 1000
 
-/// The term-search target whose best single term rivals library effect `e`, and what it means
-/// when that term removes more (see `Ctx::rival_term_note`).
-fn rival(e: Effect) -> Option<(Target, &'static str)> {
+/// The term-search target and features whose best single term rivals library effect `e`, and
+/// what it means when that term removes more (see `Ctx::rival_term_note`). A steering offset's
+/// rivals have the commanded angle as a factor (`δ·vₓ`, `δ`, …): a steering term without it
+/// (`d`, `vₓ`, `|v|`) is positive wherever the car drives forward, so it is a constant offset
+/// in another guise (on a car with a true 0.03 rad offset, `δ += 0.12·d` removed 36 % against
+/// the offset's 31 %).
+fn rival(e: Effect) -> Option<Rival> {
     match e {
-        Effect::GripPatch => Some((Target::Grip, "the region of other grip is not a disc")),
-        Effect::SteeringOffset => {
-            Some((Target::Delta, "the steering error is not a constant offset"))
-        }
+        Effect::GripPatch => Some(Rival {
+            target: Target::Grip,
+            among: |_| true,
+            meaning: "the region of other grip is not a disc",
+        }),
+        Effect::SteeringOffset => Some(Rival {
+            target: Target::Delta,
+            among: |f| f.factors().contains(&Atom::Delta),
+            meaning: "the steering error is not a constant offset",
+        }),
         _ => None,
     }
+}
+
+/// See [`rival`].
+struct Rival {
+    target: Target,
+    among: fn(&Feature) -> bool,
+    meaning: &'static str,
 }
 
 /// One-sided lower bootstrap bound (error probability `alpha`) of the held-out error reduction,

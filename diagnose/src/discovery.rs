@@ -849,6 +849,36 @@ pub fn discover_terms_split(
     segments: [usize; 2],
     cfg: &DiscoveryConfig,
 ) -> Result<Discovery, DiscoveryError> {
+    discover_terms_among(
+        physics,
+        solver,
+        h,
+        trajs,
+        fit_trajs,
+        fit_w,
+        test_w,
+        k,
+        segments,
+        cfg,
+        &|_| true,
+    )
+}
+
+/// [`discover_terms_split`] over the library's features for which `among` holds.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn discover_terms_among(
+    physics: &PhysicsModel,
+    solver: &Solver,
+    h: f64,
+    trajs: &[StateTrajectory],
+    fit_trajs: &[usize],
+    fit_w: &[Window],
+    test_w: &[Window],
+    k: usize,
+    segments: [usize; 2],
+    cfg: &DiscoveryConfig,
+    among: &dyn Fn(&Feature) -> bool,
+) -> Result<Discovery, DiscoveryError> {
     cfg.validate()?;
     let held_out = test_w.len();
     let robot = physics.robot();
@@ -933,7 +963,8 @@ pub fn discover_terms_split(
     // (target, feature) pairs with the shape of a nominal parameter's own term are that
     // parameter, not an effect, and the inputs take only their own shapes: not tried
     let tried = |t: Target, f: usize| {
-        t.searched_with(&feats[f])
+        among(&feats[f])
+            && t.searched_with(&feats[f])
             && t.nominal_parameter(&feats[f]).is_none()
             && (f < fitted_from || t == Target::Grip)
     };
