@@ -2399,6 +2399,35 @@ mod tests {
     use super::*;
     use crate::discovery::normal_quantile;
 
+    /// A local effect (a patch): 70 windows it never reaches (sensitivity ~1e-20), 26 that
+    /// cross it (~1) and 4 that spin (1e6). The median of all windows is the unreached ones',
+    /// so every crossing window looked chaotic; over the reached windows only the spins are.
+    #[test]
+    fn windows_a_local_effect_does_not_reach_do_not_set_the_chaotic_scale() {
+        let gain: Vec<f64> = (0..100)
+            .map(|i| match i {
+                0..70 => 1e-10,
+                70..96 => 1.0 + 0.01 * i as f64,
+                _ => 1e3,
+            })
+            .collect();
+        let ws: Vec<Window> = (0..100)
+            .map(|i| Window {
+                trajectory: i,
+                start: 0,
+            })
+            .collect();
+        // one residual row per window (k = 1, one dimension): r_i = gain_i · θ
+        let resid = |th: &[f64], r: &mut Vec<f64>| {
+            r.clear();
+            r.extend(gain.iter().map(|g| g * th[0]));
+            true
+        };
+        let kept = robust_windows(&ws, 1, &[0.5], &|_| 1e-3, &resid, 1e4);
+        let kept: Vec<usize> = kept.iter().map(|w| w.trajectory).collect();
+        assert_eq!(kept, (0..96).collect::<Vec<_>>());
+    }
+
     /// Held-out windows of 30 segments, two per segment, with the error before (1 each) and
     /// after: a reduction of `r(i)` in segment `i`.
     fn windows_with(r: impl Fn(usize) -> f64) -> (Vec<Window>, Vec<f64>, Vec<f64>) {
