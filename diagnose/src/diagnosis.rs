@@ -1008,6 +1008,11 @@ impl Ctx<'_> {
                 &|c: usize| if free[c] { fd_step(c, th0) } else { 0.0 },
                 &|th: &[f64], r: &mut Vec<f64>| cost_of(th, &self.fit_w, Some(r)).is_some(),
                 EFFECT_FIT_SENSITIVITY_LIMIT,
+                free_effects
+                    .iter()
+                    .copied()
+                    .chain(cand)
+                    .any(Effect::is_regional),
             ),
             None => Vec::new(),
         };
@@ -1154,7 +1159,7 @@ impl Ctx<'_> {
                 "{at}: the data ask for more than this effect can give, so it is not counted"
             ));
         }
-        if matches!(e, Effect::GripPatch | Effect::FrictionPatch) && !self.positions.is_empty() {
+        if e.is_regional() && !self.positions.is_empty() {
             let get = |n: &str| {
                 mine.iter()
                     .find(|&&i| f.names[i] == n)
@@ -1882,8 +1887,8 @@ const CHAOS_DIRECTIONS: usize = 4;
 /// model without it cannot follow) is credited, one that starts a spin is charged.
 const CHAOS_LIMIT: f64 = 100.0;
 
-/// The fit windows without the chaotic ones ([`calm_windows`] over the windows the parameters
-/// reach): the sensitivity of each window's residuals to the fitted parameters at `theta0`, by
+/// The fit windows without the chaotic ones ([`calm_windows`]; of a `regional` fit, a region's
+/// effect, over the windows the parameters reach): the sensitivity of each window's residuals to the fitted parameters at `theta0`, by
 /// forward differences of `step(c)` (0: a parameter held). `resid(θ, r)` fills the residual rows, step-major
 /// `(step, window, dimension)` with `ds` dimensions, and returns false for parameters the
 /// model refuses.
@@ -1894,6 +1899,7 @@ pub(crate) fn robust_windows(
     step: &dyn Fn(usize) -> f64,
     resid: &dyn Fn(&[f64], &mut Vec<f64>) -> bool,
     limit: f64,
+    regional: bool,
 ) -> Vec<Window> {
     let n = fit_w.len();
     let mut r0 = Vec::new();
@@ -1917,11 +1923,19 @@ pub(crate) fn robust_windows(
             sens[(row / ds) % n] += d * d;
         }
     }
-    // windows the parameters barely reach (a patch or a bump far from them) are kept and left
-    // out of the median: with a local effect's many untouched windows as the reference, every
-    // window that crosses the patch was "chaotic" and left out, and the fit collapsed (a
-    // 55 % low-grip disc started 0.12 m from the truth ended at k = 0.001 on the windows that
-    // never cross it)
+    // a region's parameters barely reach the windows that never cross it: those are kept and
+    // left out of the median. With them as the reference every window that crossed the patch
+    // was "chaotic" and left out, and the fit collapsed (a 55 % low-grip disc started 0.12 m
+    // from the truth ended at k = 0.001). Other parameters reach every window, if only a
+    // little, and keep the median of all (with the quiet windows left out of a servo's
+    // reference, spins stayed in its fit and its rate limit came out 4.9 rad/s, truth 3)
+    if !regional {
+        return fit_w
+            .iter()
+            .zip(calm_windows(&sens, limit))
+            .filter_map(|(w, k)| k.then_some(*w))
+            .collect();
+    }
     let top = sens
         .iter()
         .copied()
@@ -2399,9 +2413,9 @@ mod tests {
     use super::*;
     use crate::discovery::normal_quantile;
 
-    /// A local effect (a patch): 70 windows it never reaches (sensitivity ~1e-20), 26 that
+    /// A region's effect (a patch): 70 windows it never reaches (sensitivity ~1e-20), 26 that
     /// cross it (~1) and 4 that spin (1e6). The median of all windows is the unreached ones',
-    /// so every crossing window looked chaotic; over the reached windows only the spins are.
+    /// so every crossing window looks chaotic; over the reached windows only the spins are.
     #[test]
     fn windows_a_local_effect_does_not_reach_do_not_set_the_chaotic_scale() {
         let gain: Vec<f64> = (0..100)
@@ -2423,9 +2437,13 @@ mod tests {
             r.extend(gain.iter().map(|g| g * th[0]));
             true
         };
-        let kept = robust_windows(&ws, 1, &[0.5], &|_| 1e-3, &resid, 1e4);
+        let kept = robust_windows(&ws, 1, &[0.5], &|_| 1e-3, &resid, 1e4, true);
         let kept: Vec<usize> = kept.iter().map(|w| w.trajectory).collect();
         assert_eq!(kept, (0..96).collect::<Vec<_>>());
+        // an effect everywhere keeps the median of all windows
+        let kept = robust_windows(&ws, 1, &[0.5], &|_| 1e-3, &resid, 1e4, false);
+        let kept: Vec<usize> = kept.iter().map(|w| w.trajectory).collect();
+        assert_eq!(kept, (0..70).collect::<Vec<_>>());
     }
 
     /// Held-out windows of 30 segments, two per segment, with the error before (1 each) and

@@ -1264,6 +1264,7 @@ fn spin_free_windows(physics: &PhysicsModel, ctx: &Ctx, ws: &[Window]) -> Vec<Wi
             }
         },
         SENSITIVITY_LIMIT,
+        false,
     )
 }
 
@@ -1312,6 +1313,10 @@ fn fit_effect(
                 .is_some()
         },
         SENSITIVITY_LIMIT,
+        effect
+            .terms()
+            .iter()
+            .any(|t| t.feature.depends_on_position()),
     );
     let fit_w = fit_w.as_slice();
     let nr = (fit_w.len() * ctx.k * ctx.ds) as f64;

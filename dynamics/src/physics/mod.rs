@@ -348,6 +348,12 @@ impl Effect {
         Effect::PusherFriction,
     ];
 
+    /// Whether the effect acts on a region of the floor or table only (the patches): its
+    /// parameters do not reach motion that never crosses the region.
+    pub fn is_regional(self) -> bool {
+        matches!(self, Effect::GripPatch | Effect::FrictionPatch)
+    }
+
     /// The name used in files and on the command line (`aero_drag`, …).
     pub fn name(self) -> &'static str {
         match self {
