@@ -117,8 +117,9 @@ fn car_grip_patch_is_found() {
         let d = run_episodes(&scenario, [4.0, 30.0], 300 + seed, seed, None);
         assert_found(&d, Effect::GripPatch, "k", 0.5, 0.15);
         let p = &d.candidates[0].params;
+        // the centre within a third of the radius
         let off = (p["cx"] - 0.5).hypot(p["cy"]);
-        assert!(off < 0.15 && (p["r"] - 0.6).abs() < 0.1, "{}", d.table());
+        assert!(off < 0.2 && (p["r"] - 0.6).abs() < 0.1, "{}", d.table());
     }
 }
 
