@@ -69,8 +69,7 @@ use dynlab_learn::train::{segment, segment_origins};
 use dynlab_learn::{Dataset, LearnError, Model, World};
 
 use crate::discovery::{
-    Discovery, DiscoveryConfig, DiscoveryError, area_of, discover_terms_among,
-    discover_terms_split, grip_discs,
+    Discovery, DiscoveryConfig, DiscoveryError, area_of, discover_terms_split, grip_discs,
 };
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
@@ -1231,7 +1230,7 @@ impl Ctx<'_> {
             targets: Some(vec![target.name().to_string()]),
             ..self.cfg.discovery.clone()
         };
-        let d = discover_terms_among(
+        let d = discover_terms_split(
             &cur.physics,
             &self.model.physics_solver(),
             self.model.physics_time(),
@@ -1719,6 +1718,7 @@ pub fn diagnose(
             k,
             [split.train.len(), split.validation.len()],
             &dcfg,
+            &|_| true,
         )?)
     } else {
         None

@@ -829,44 +829,17 @@ pub fn discover_terms(
         k,
         segments,
         cfg,
+        &|_| true,
     )
 }
 
 /// The search on a given split (for a caller that already has one, such as the diagnosis):
 /// `physics` integrated by `solver` over `h` (car: the step in seconds, pushing: 1), trajectories
 /// `trajs`, the fit half's trajectories `fit_trajs` (one-step regression), k-step windows of the
-/// fit half `fit_w` and of the held-out half `test_w`.
+/// fit half `fit_w` and of the held-out half `test_w`; the library's features for which `among`
+/// holds are tried.
 #[allow(clippy::too_many_arguments)]
 pub fn discover_terms_split(
-    physics: &PhysicsModel,
-    solver: &Solver,
-    h: f64,
-    trajs: &[StateTrajectory],
-    fit_trajs: &[usize],
-    fit_w: &[Window],
-    test_w: &[Window],
-    k: usize,
-    segments: [usize; 2],
-    cfg: &DiscoveryConfig,
-) -> Result<Discovery, DiscoveryError> {
-    discover_terms_among(
-        physics,
-        solver,
-        h,
-        trajs,
-        fit_trajs,
-        fit_w,
-        test_w,
-        k,
-        segments,
-        cfg,
-        &|_| true,
-    )
-}
-
-/// [`discover_terms_split`] over the library's features for which `among` holds.
-#[allow(clippy::too_many_arguments)]
-pub(crate) fn discover_terms_among(
     physics: &PhysicsModel,
     solver: &Solver,
     h: f64,

@@ -99,6 +99,17 @@ fn physics_model(p: PhysicsModel, dt: f64) -> Model {
     .unwrap()
 }
 
+/// The library diagnosis with fewer windows and resamples than its defaults.
+fn quick_diagnosis(seed: u64) -> DiagnoseConfig {
+    DiagnoseConfig {
+        seed,
+        fit_windows: 300,
+        score_windows: 1000,
+        bootstrap: 500,
+        ..DiagnoseConfig::default()
+    }
+}
+
 fn search(model: &Model, data: &Dataset, seed: u64) -> Discovery {
     let cfg = DiscoveryConfig {
         seed,
@@ -172,13 +183,7 @@ fn the_library_does_not_name_the_out_of_library_effect() {
     let truth = truth_with(STEERING_GAIN_SPEED);
     let data = car_data(&truth, 11, 2, 12.0);
     let model = physics_model(PhysicsModel::car(&[]).unwrap(), data.pose_dt_s);
-    let cfg = DiagnoseConfig {
-        seed: 11,
-        fit_windows: 300,
-        score_windows: 1000,
-        bootstrap: 500,
-        ..DiagnoseConfig::default()
-    };
+    let cfg = quick_diagnosis(11);
     let diag = diagnose(&model, &data, &cfg).unwrap();
     println!("{}", diag.table());
     // no library name for it
@@ -208,13 +213,7 @@ coefficient = -0.25
     );
     let data = car_data_steered(&truth, 12, 2, 12.0, f64::abs);
     let model = physics_model(PhysicsModel::car(&[]).unwrap(), data.pose_dt_s);
-    let cfg = DiagnoseConfig {
-        seed: 12,
-        fit_windows: 300,
-        score_windows: 1000,
-        bootstrap: 500,
-        ..DiagnoseConfig::default()
-    };
+    let cfg = quick_diagnosis(12);
     let diag = diagnose(&model, &data, &cfg).unwrap();
     println!("{}", diag.table());
     let offset = diag
