@@ -1203,16 +1203,14 @@ impl Ctx<'_> {
 
     /// Why library effect `e`, which removes `reduction` of the held-out error from `cur`, is
     /// not counted: the term search's best term on the input the effect corrects ([`rival`])
-    /// removes at least [`DiagnoseConfig::min_reduction`] more (the bar an effect must clear),
-    /// so the effect only absorbs part of an error of another shape. (Without the margin a
-    /// Gaussian bump of grip removed 85.7 % against a right-fitted disc's 85.1 %, and the disc
-    /// was not counted.) A
-    /// `grip_patch` against a grip term on the position (`μ` on `x`, `y`, a bump or a band): a
-    /// low-grip band across the floor fits a disc on part of it, and the term search finds the
-    /// band. A `steering_offset` against a steering term (`δ` on `δ·vₓ`, `d`, …; never on `1`,
-    /// which is the offset itself): a steering gain that falls with speed is lowered on most
-    /// segments by a constant offset (22 % removed, named on one of five seeds before this
-    /// check), and the term search finds the gain.
+    /// removes at least [`DiagnoseConfig::min_reduction`] more (the bar an effect itself must
+    /// clear), so the effect only absorbs part of an error of another shape. A `grip_patch`
+    /// against a grip term on the position (`μ` on `x`, `y`, a bump or a band): a low-grip band
+    /// across the floor fits a disc on part of it, and the term search finds the band. A
+    /// `steering_offset` against a steering term with `δ` as a factor: a steering gain that
+    /// falls with speed is lowered on most segments by a constant offset (22 % removed, named on
+    /// one of five seeds before this check), and the term search finds the gain. (Without the
+    /// margin a Gaussian bump of grip that removed 85.7 % refused a right-fitted disc's 85.1 %.)
     fn rival_term_note(
         &self,
         cur: &Current,
@@ -1222,6 +1220,7 @@ impl Ctx<'_> {
         let Some(Rival {
             target,
             among,
+            term,
             meaning,
         }) = rival(e)
         else {
@@ -1252,8 +1251,7 @@ impl Ctx<'_> {
             .filter(|t| t.error_reduction >= reduction + self.cfg.min_reduction)
             .map(|t| {
                 format!(
-                    "{} term, {}, removes more of the held-out error ({:.1} % against {:.1} %): {meaning} (see the term search)",
-                    if target == Target::Grip { "a grip" } else { "a steering" },
+                    "{term} term, {}, removes more of the held-out error ({:.1} % against {:.1} %): {meaning} (see the term search)",
                     t.equation,
                     100.0 * t.error_reduction,
                     100.0 * reduction
@@ -1900,10 +1898,10 @@ const CHAOS_DIRECTIONS: usize = 4;
 const CHAOS_LIMIT: f64 = 100.0;
 
 /// The fit windows without the chaotic ones ([`calm_windows`]; of a `regional` fit, a region's
-/// effect, over the windows the parameters reach): the sensitivity of each window's residuals to the fitted parameters at `theta0`, by
-/// forward differences of `step(c)` (0: a parameter held). `resid(θ, r)` fills the residual rows, step-major
-/// `(step, window, dimension)` with `ds` dimensions, and returns false for parameters the
-/// model refuses.
+/// effect, over the windows the parameters reach): the sensitivity of each window's residuals
+/// to the fitted parameters at `theta0`, by forward differences of `step(c)` (0: a parameter
+/// held). `resid(θ, r)` fills the residual rows, step-major `(step, window, dimension)` with
+/// `ds` dimensions, and returns false for parameters the model refuses.
 pub(crate) fn robust_windows(
     fit_w: &[Window],
     ds: usize,
@@ -1987,8 +1985,8 @@ const MAX_RESAMPLES: usize = 400_000;
 const MAX_LOG_RATIO: f64 = 6.907_755_278_982_137; // ln 1000
 
 /// The term-search target and features whose best single term rivals library effect `e`, and
-/// what it means when that term removes `min_reduction` more (see `Ctx::rival_term_note`). A steering offset's
-/// rivals have the commanded angle as a factor (`δ·vₓ`, `δ`, …): a steering term without it
+/// what it means when that term removes `min_reduction` more (see `Ctx::rival_term_note`). A
+/// steering offset's rivals have the commanded angle as a factor (`δ·vₓ`, `δ`, …): a steering term without it
 /// (`d`, `vₓ`, `|v|`) is positive wherever the car drives forward, so it is a constant offset
 /// in another guise (on a car with a true 0.03 rad offset, `δ += 0.12·d` removed 36 % against
 /// the offset's 31 %).
@@ -1997,11 +1995,13 @@ fn rival(e: Effect) -> Option<Rival> {
         Effect::GripPatch => Some(Rival {
             target: Target::Grip,
             among: |_| true,
+            term: "a grip",
             meaning: "the region of other grip is not a disc",
         }),
         Effect::SteeringOffset => Some(Rival {
             target: Target::Delta,
             among: |f| f.factors().contains(&Atom::Delta),
+            term: "a steering",
             meaning: "the steering error is not a constant offset",
         }),
         _ => None,
@@ -2010,8 +2010,13 @@ fn rival(e: Effect) -> Option<Rival> {
 
 /// See [`rival`].
 struct Rival {
+    /// The target searched.
     target: Target,
+    /// The features tried on it.
     among: fn(&Feature) -> bool,
+    /// What the note calls the term.
+    term: &'static str,
+    /// What it means when the term removes more.
     meaning: &'static str,
 }
 
