@@ -2,7 +2,7 @@
 
 use std::fmt::Write as _;
 
-use super::{Candidate, Diagnosis, g4, param_text};
+use super::{Candidate, Diagnosis, cross_fit_text, g4, param_text};
 
 fn esc(s: &str) -> String {
     s.replace('&', "&amp;")
@@ -194,6 +194,13 @@ fn candidate_table(cands: &[Candidate], added: Option<&str>) -> String {
             c.chaotic_windows,
             params.join(", ")
         );
+        if let Some(x) = &c.cross_fit {
+            let _ = writeln!(
+                o,
+                "<tr><td></td><td colspan=5 style=\"color:#555\">{}</td></tr>",
+                esc(&cross_fit_text(x))
+            );
+        }
         if let Some(n) = &c.note {
             let _ = writeln!(
                 o,
