@@ -35,7 +35,10 @@
 //! interval over held-out segments (resampled whole, seeded) is above zero. The interval's error
 //! probability is divided by the number of candidates tested
 //! ([`DiagnoseConfig::correct_for_candidates`], Bonferroni), so the chance that *some* candidate of
-//! a nominal data set passes stays at `1 − confidence`. A car's `grip_patch` is not counted when
+//! a nominal data set passes stays at `1 − confidence`. A candidate whose reduction is large
+//! enough but whose bound is not above zero gets a second look ([`CrossFit`]): the step's model
+//! and the candidate fitted on the held-out half and scored on the fit half, both halves' scores
+//! pooled, the pooled bound at half the error probability. A car's `grip_patch` is not counted when
 //! the term search's best grip term on the position ([`crate::discovery`], `μ` on a bump or band)
 //! removes at least `min_reduction` more: the region is not a disc; nor a `steering_offset` when
 //! the term search's best steering term with `δ` as a factor (`δ·vₓ`, `δ`, …) does: the steering
@@ -332,7 +335,9 @@ pub struct Candidate {
     pub effect: String,
     /// Held-out k-step error removed, `1 − E_after/E_before`, clipped to \[0, 1\].
     pub error_reduction: f64,
-    /// Whether the reduction is practically large enough and its bootstrap interval excludes 0.
+    /// Whether the reduction is practically large enough and its bootstrap interval excludes 0
+    /// (on the held-out half, or over both halves in the second look, [`CrossFit`]), with
+    /// physical parameters.
     pub significant: bool,
     /// Fitted parameters by name.
     pub params: BTreeMap<String, f64>,
