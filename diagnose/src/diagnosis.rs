@@ -830,11 +830,11 @@ fn mean(v: &[f64]) -> f64 {
     v.iter().sum::<f64>() / v.len().max(1) as f64
 }
 
-/// `1 − mean(after) / mean(before)` (0 where there is no error before).
-fn reduction(before: &[f64], after: &[f64]) -> f64 {
-    let eb = mean(before);
-    if eb > 0.0 {
-        1.0 - mean(after) / eb
+/// The share of the error `before` that is gone `after`, `1 − after/before` (0 where there is
+/// no error before).
+fn reduction(before: f64, after: f64) -> f64 {
+    if before > 0.0 {
+        1.0 - after / before
     } else {
         0.0
     }
@@ -1339,7 +1339,7 @@ impl<'a> Ctx<'a> {
             .collect();
         let (before, after) = (kept(&cur.test), kept(&f.test));
         let (eb, ea) = (mean(&before), mean(&after));
-        let raw = reduction(&before, &after);
+        let raw = reduction(eb, ea);
         let alpha = 1.0 - self.cfg.confidence_for(tested);
         let seed = self.cfg.seed
             ^ (e as u64 + 1).wrapping_mul(0x9E37_79B9_7F4A_7C15)
@@ -1477,8 +1477,8 @@ impl<'a> Ctx<'a> {
         segments.sort_unstable();
         segments.dedup();
         Ok(Some(CrossFit {
-            other_reduction: reduction(&b2, &a2),
-            reduction: reduction(&before, &after),
+            other_reduction: reduction(mean(&b2), mean(&a2)),
+            reduction: reduction(mean(&before), mean(&after)),
             ci_lower: bootstrap_lower(
                 &ws,
                 &before,
@@ -1781,11 +1781,7 @@ pub fn diagnose(
     let added: Vec<Effect> = cur.effects()[have.len()..].to_vec();
     let joint = joint.map(|f| {
         let ea = mean(&cur.test);
-        let raw = if baseline_error > 0.0 {
-            1.0 - ea / baseline_error
-        } else {
-            0.0
-        };
+        let raw = reduction(baseline_error, ea);
         let ci_lower = bootstrap_lower(
             &ctx.test_w,
             &baseline.test,
@@ -1829,19 +1825,11 @@ pub fn diagnose(
                 .map(|i| (f.names[i].clone(), f.theta[i]))
                 .collect(),
             model_error,
-            reduction_vs_model: if model_error > 0.0 {
-                1.0 - ea / model_error
-            } else {
-                0.0
-            },
+            reduction_vs_model: reduction(model_error, ea),
             spin_windows: (0..keep.len()).filter(|&i| !keep[i]).collect(),
             model_error_calm,
             error_after_calm,
-            reduction_vs_model_calm: if model_error_calm > 0.0 {
-                1.0 - error_after_calm / model_error_calm
-            } else {
-                0.0
-            },
+            reduction_vs_model_calm: reduction(model_error_calm, error_after_calm),
             error_before: baseline_error,
             error_after: ea,
             error_reduction: raw,
@@ -2244,7 +2232,7 @@ pub(crate) fn bootstrap_lower(
             a += s.1;
             l += s.2;
         }
-        total.push(if b > 0.0 { 1.0 - a / b } else { 0.0 });
+        total.push(reduction(b, a));
         typical.push(1.0 - (l / n as f64).exp());
     }
     let q = ((half * resamples as f64).floor() as usize).min(resamples - 1);
