@@ -59,6 +59,7 @@ pub mod html;
 pub mod simdata;
 
 use std::collections::BTreeMap;
+use std::sync::Mutex;
 
 use dynlab_learn::dynamics::conventions::wrap_angle;
 use dynlab_learn::dynamics::data::{
@@ -1318,6 +1319,7 @@ impl<'a> Ctx<'a> {
         cur: &Current,
         e: Effect,
         tested: usize,
+        second: &SecondLook,
     ) -> Result<Option<(Candidate, Fitted)>, DiagnosisError> {
         let Some(mut f) = self.fit(cur, Some(e), false)? else {
             return Ok(None);
@@ -1348,7 +1350,7 @@ impl<'a> Ctx<'a> {
         let large = raw >= self.cfg.min_reduction && self.test_segments >= 2;
         // a large reduction the held-out half cannot bound: both halves scored
         let cross_fit = if large && ci_lower <= 0.0 && !self.swap[0].is_empty() {
-            self.cross_fit(cur, e, (&ws, &before, &after), alpha, seed)?
+            second.cross_fit(cur, e, (&ws, &before, &after), alpha, seed)?
         } else {
             None
         };
@@ -1429,6 +1431,69 @@ impl<'a> Ctx<'a> {
         }
     }
 
+    /// The step's model `cur` refitted on this context's fit windows (its added effects jointly,
+    /// with the refitted nominal parameters), or as it is where nothing is fitted.
+    fn step_model(&self, cur: &Current) -> Result<Current, DiagnosisError> {
+        let start = Current {
+            physics: cur.physics.clone(),
+            test: Vec::new(),
+            fit: Vec::new(),
+            calm: Vec::new(),
+        };
+        Ok(match self.fit(&start, None, true)? {
+            Some(f) => self.current_of(&f),
+            None => {
+                let test = self.errors(cur.physics.clone(), &self.test_w, None);
+                let fit = self.errors(cur.physics.clone(), &self.fit_w, None);
+                self.current(cur.physics.clone(), test, fit)
+            }
+        })
+    }
+
+    /// Every candidate of one step, fitted on parallel threads, best first.
+    fn step(
+        &self,
+        cur: &Current,
+        lib: &[Effect],
+    ) -> Result<Vec<(Candidate, Fitted)>, DiagnosisError> {
+        let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+        let second = &SecondLook {
+            ctx: self.swapped(),
+            model: Mutex::new(None),
+        };
+        let mut out = Vec::new();
+        for chunk in lib.chunks(threads.max(1)) {
+            let part: Vec<_> = std::thread::scope(|sc| {
+                let hs: Vec<_> = chunk
+                    .iter()
+                    .map(|&e| sc.spawn(move || self.candidate(cur, e, lib.len(), second)))
+                    .collect();
+                hs.into_iter()
+                    .map(|h| h.join().unwrap_or(Ok(None)))
+                    .collect::<Vec<_>>()
+            });
+            for r in part {
+                out.extend(r?);
+            }
+        }
+        out.sort_by(|a, b| {
+            b.0.error_reduction
+                .total_cmp(&a.0.error_reduction)
+                .then(b.0.raw_reduction.total_cmp(&a.0.raw_reduction))
+        });
+        Ok(out)
+    }
+}
+
+/// One selection step's second looks ([`CrossFit`]): the context with the halves' roles
+/// swapped and the step's model refitted on the held-out half, fitted once, by the first
+/// candidate that needs it, and shared by the others.
+struct SecondLook<'a> {
+    ctx: Ctx<'a>,
+    model: Mutex<Option<Current>>,
+}
+
+impl SecondLook<'_> {
     /// Candidate `e`'s second look ([`CrossFit`]): the step's model `cur` (its added effects
     /// and refitted nominal parameters) and then `e` fitted on the held-out half, scored on the
     /// fit half, and pooled with the first look's kept held-out windows and their errors
@@ -1442,19 +1507,17 @@ impl<'a> Ctx<'a> {
         alpha: f64,
         seed: u64,
     ) -> Result<Option<CrossFit>, DiagnosisError> {
-        let sw = self.swapped();
-        let start = Current {
-            physics: cur.physics.clone(),
-            test: Vec::new(),
-            fit: Vec::new(),
-            calm: Vec::new(),
-        };
-        let other = match sw.fit(&start, None, true)? {
-            Some(f) => sw.current_of(&f),
-            None => {
-                let test = sw.errors(cur.physics.clone(), &sw.test_w, None);
-                let fit = sw.errors(cur.physics.clone(), &sw.fit_w, None);
-                sw.current(cur.physics.clone(), test, fit)
+        let sw = &self.ctx;
+        let other = {
+            // the first candidate that needs it fits it; the step's others wait and share it
+            let mut slot = self.model.lock().unwrap_or_else(|p| p.into_inner());
+            match &*slot {
+                Some(m) => m.clone(),
+                None => {
+                    let m = sw.step_model(cur)?;
+                    *slot = Some(m.clone());
+                    m
+                }
             }
         };
         let Some(f) = sw.fit(&other, Some(e), false)? else {
@@ -1483,7 +1546,7 @@ impl<'a> Ctx<'a> {
                 &ws,
                 &before,
                 &after,
-                self.cfg.bootstrap,
+                sw.cfg.bootstrap,
                 0.5 * alpha,
                 seed ^ 0x6C62_272E_07BB_0142,
             ),
@@ -1493,36 +1556,6 @@ impl<'a> Ctx<'a> {
                 .map(|i| (f.names[i].clone(), f.theta[i]))
                 .collect(),
         }))
-    }
-
-    /// Every candidate of one step, fitted on parallel threads, best first.
-    fn step(
-        &self,
-        cur: &Current,
-        lib: &[Effect],
-    ) -> Result<Vec<(Candidate, Fitted)>, DiagnosisError> {
-        let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
-        let mut out = Vec::new();
-        for chunk in lib.chunks(threads.max(1)) {
-            let part: Vec<_> = std::thread::scope(|sc| {
-                let hs: Vec<_> = chunk
-                    .iter()
-                    .map(|&e| sc.spawn(move || self.candidate(cur, e, lib.len())))
-                    .collect();
-                hs.into_iter()
-                    .map(|h| h.join().unwrap_or(Ok(None)))
-                    .collect::<Vec<_>>()
-            });
-            for r in part {
-                out.extend(r?);
-            }
-        }
-        out.sort_by(|a, b| {
-            b.0.error_reduction
-                .total_cmp(&a.0.error_reduction)
-                .then(b.0.raw_reduction.total_cmp(&a.0.raw_reduction))
-        });
-        Ok(out)
     }
 }
 
