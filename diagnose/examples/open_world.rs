@@ -13,7 +13,11 @@
 //! from the fitted model (refitted jointly; min–mean–max over seeds); the fitted strength
 //! against the truth; and the term search beyond the library: in how many seeds it found a
 //! significant term, the error that term removes on top of the selected effects (mean), and
-//! the terms found (each with how often).
+//! the terms found (each with how often). Where no library effect is named (the cases outside
+//! the library), the "removed" column is what the discovered terms remove, every held-out
+//! window counted as the selected effects' are. Beside it, the share of the error above the
+//! true model's (the simulator's car with its effects at their true values; the steering gain
+//! as the custom term `δ += −1·δ·vₓ²/(vₓ² + v₀²)`; none for the band) that is removed.
 //!
 //! `cargo run --release -p dynlab-diagnose --example open_world -- [--seeds N]
 //! [--first-seed N] [--nominal-seeds N] [--perturb F] [--episodes N] [--duration S]
@@ -31,7 +35,7 @@ use std::time::Instant;
 use dynlab_control::racing::true_car_model;
 use dynlab_diagnose::diagnosis::simdata::{car_dataset, low_grip_band, over_low_grip_band};
 use dynlab_diagnose::diagnosis::{DiagnoseConfig, diagnose};
-use dynlab_learn::dynamics::physics::{Effect, Target};
+use dynlab_learn::dynamics::physics::{CustomEffect, Effect, Target};
 use dynlab_learn::train::{KindDefaults, TrainConfig, train};
 use dynlab_learn::{Model, ModelKind, World};
 use dynlab_sim::car::{
@@ -53,7 +57,7 @@ fn arg<T: std::str::FromStr>(name: &str, default: T) -> T {
 
 /// A hidden effect of the simulator: its switch, the library effect that models it (`None`:
 /// outside the library) and the strength to compare with (`(parameter, truth)`).
-#[derive(Clone, Copy)]
+#[derive(Clone, Copy, PartialEq)]
 enum Hidden {
     Drag,
     Lag,
@@ -128,15 +132,24 @@ impl Hidden {
 
 /// The simulator's car as a physics model, with the hidden effects at their true values: the
 /// error a model with every parameter right still makes on the held-out windows (pose noise,
-/// velocities estimated from poses, the chaos of 0.5 s open-loop rollouts). `None` when an
-/// effect is outside the library.
+/// velocities estimated from poses, the chaos of 0.5 s open-loop rollouts). The steering gain
+/// that falls with speed, outside the library, is the custom term `δ += −1·δ·vₓ²/(vₓ² + v₀²)`
+/// (the simulator's `δ/(1 + vₓ²/v₀²)` exactly). `None` for the band.
 fn true_model(car: &CarScenario, case: &[Hidden], like: &Model) -> Option<Model> {
     let effects: Vec<Effect> = case
         .iter()
+        .filter(|h| **h != Hidden::GainSpeed)
         .map(|h| h.library().and_then(|l| Effect::from_name(l.0)))
         .collect::<Option<_>>()?;
     let nominal = true_car_model(&car.car, like.dt()).ok()?;
     let mut p = nominal.physics()?.with_effects(&effects).ok()?;
+    if case.contains(&Hidden::GainSpeed) {
+        let v0 = car.effects.steering_gain_speed.as_ref()?.v0;
+        let toml = format!(
+            "name = \"gain\"\n[[term]]\nstate = \"delta\"\nfeature = \"delta*sat_vx2({v0})\"\ncoefficient = -1.0\n"
+        );
+        p.add_custom(CustomEffect::from_toml(&toml).ok()?).ok()?;
+    }
     for h in case {
         let values: &[(&str, f64)] = match h {
             Hidden::Drag => &[("aero_drag.c", 0.01)],
@@ -150,7 +163,8 @@ fn true_model(car: &CarScenario, case: &[Hidden], like: &Model) -> Option<Model>
                 ("grip_patch.r", 0.6),
                 ("grip_patch.k", 0.5),
             ],
-            _ => return None,
+            Hidden::GainSpeed => &[],
+            Hidden::Band => return None,
         };
         for &(name, v) in values {
             p.set_param(name, v).ok()?;
@@ -164,6 +178,22 @@ fn true_model(car: &CarScenario, case: &[Hidden], like: &Model) -> Option<Model>
         None,
         Some(p),
         like.physics_solver(),
+    )
+    .ok()
+}
+
+/// `model` with the custom effect `effect` added (its coefficients as fitted).
+fn with_custom(model: &Model, effect: &CustomEffect) -> Option<Model> {
+    let mut p = model.physics()?.clone();
+    p.add_custom(effect.clone()).ok()?;
+    Model::new(
+        ModelKind::Physics,
+        World::Car,
+        model.dt(),
+        None,
+        None,
+        Some(p),
+        model.physics_solver(),
     )
     .ok()
 }
@@ -302,17 +332,27 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             };
             let d = diagnose(&model, &data, &cfg)?;
             // the true model's error on the same held-out windows (same split and subsample)
-            let floor = match true_model(&car, &case, &model) {
-                Some(m) => {
-                    let tcfg = DiagnoseConfig {
-                        effects: Some(Vec::new()),
-                        refit_nominal: Some(false),
-                        discover: false,
-                        ..cfg.clone()
-                    };
-                    Some(diagnose(&m, &data, &tcfg)?.held_out_errors)
-                }
+            let tcfg = DiagnoseConfig {
+                effects: Some(Vec::new()),
+                refit_nominal: Some(false),
+                discover: false,
+                ..cfg.clone()
+            };
+            let floor = match true_model(&hidden, &case, &model) {
+                Some(m) => Some(diagnose(&m, &data, &tcfg)?.held_out_errors),
                 None => None,
+            };
+            // with no library effect named, the discovered terms' share of the removable, on
+            // the same held-out windows and in the same units as the floor
+            let term_errors = match (
+                &d.joint,
+                d.discovery.as_ref().and_then(|x| x.effect.as_ref()),
+            ) {
+                (None, Some(e)) => match with_custom(&model, e) {
+                    Some(m) => Some(diagnose(&m, &data, &tcfg)?.held_out_errors),
+                    None => None,
+                },
+                _ => None,
             };
             let share = |before: f64, after: f64, floor: f64| {
                 (before - after) / (before - floor).max(1e-12)
@@ -324,6 +364,19 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     .collect();
                 removable.push(share(j.model_error, j.error_after, mean(f)));
                 removable_calm.push(share(j.model_error_calm, j.error_after_calm, mean(&kept)));
+            } else if let (Some(f), Some(t)) = (&floor, &term_errors) {
+                let base = mean(&d.held_out_errors);
+                removable.push(share(base, mean(t), mean(f)));
+                if verbose {
+                    println!(
+                        "the discovered terms: held-out error {:.4} → {:.4} ({:.1} % removed; true model {:.4}: {:.0} % of the removable)",
+                        base,
+                        mean(t),
+                        100.0 * (1.0 - mean(t) / base),
+                        mean(f),
+                        100.0 * share(base, mean(t), mean(f))
+                    );
+                }
             } else if floor.is_some() && !case.is_empty() {
                 removable.push(0.0);
                 removable_calm.push(0.0);
@@ -374,12 +427,18 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                         strength.push((key, *v));
                     }
                 }
+            } else if let Some(t) = &term_errors {
+                // what the discovered terms remove, every held-out window counted
+                removed.push(1.0 - mean(t) / mean(&d.held_out_errors).max(1e-12));
             } else {
                 removed.push(0.0);
                 removed_calm.push(0.0);
             }
         }
         let spread = |v: &[f64]| {
+            if v.is_empty() {
+                return format!("{:>8} {:>7} {:>7}", "—", "—", "—");
+            }
             let lo = v.iter().copied().fold(f64::INFINITY, f64::min);
             let hi = v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
             format!(
@@ -408,12 +467,19 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         }
         if !removable.is_empty() {
             let min = |v: &[f64]| v.iter().copied().fold(f64::INFINITY, f64::min);
+            let calm = if removable_calm.is_empty() {
+                String::new()
+            } else {
+                format!(
+                    " (w/o spins {:.0} %, {:.0} %)",
+                    100.0 * mean(&removable_calm),
+                    100.0 * min(&removable_calm)
+                )
+            };
             fitted.push(format!(
-                "of the error above the true model's: {:.0} % mean, {:.0} % min (w/o spins {:.0} %, {:.0} %)",
+                "of the error above the true model's: {:.0} % mean, {:.0} % min{calm}",
                 100.0 * mean(&removable),
                 100.0 * min(&removable),
-                100.0 * mean(&removable_calm),
-                100.0 * min(&removable_calm)
             ));
         }
         if !beyond.is_empty() {

@@ -129,6 +129,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let only: String = arg("--only", String::new());
     let jitter_deg: f64 = arg("--jitter-deg", 180.0);
     let no_library = std::env::args().any(|a| a == "--no-library");
+    let refit: String = arg("--refit", String::new());
     let verbose = std::env::var("VERBOSE").is_ok();
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
     println!(
@@ -148,6 +149,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let diag_cfg = |seed: u64| DiagnoseConfig {
         seed,
         effects: no_library.then(Vec::new),
+        refit_params: (!refit.is_empty()).then(|| refit.split(',').map(String::from).collect()),
         ..DiagnoseConfig::default()
     };
     // the fitted model of a seed's world, and that world

@@ -44,6 +44,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     // the significance rule of the previous version, for before/after tables
     let no_refit = std::env::args().any(|a| a == "--no-refit");
     let no_bonferroni = std::env::args().any(|a| a == "--no-bonferroni");
+    let refit: String = arg("--refit", String::new());
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
     println!(
         "recovery over {seeds} seeds, noise ×{noise}: car {car_eps} × {car_dur} s, pushing {push_eps} × 10 pushes"
@@ -136,6 +137,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 seed,
                 steps: (steps > 0).then_some(steps),
                 refit_nominal: no_refit.then_some(false),
+                refit_params: (!refit.is_empty())
+                    .then(|| refit.split(',').map(String::from).collect()),
                 correct_for_candidates: !no_bonferroni,
                 ..DiagnoseConfig::default()
             };

@@ -15,7 +15,10 @@
 //!    the commands and the speed, `μ` only features of the position (a region of other grip;
 //!    [`Target::searched_with`]). Besides the library's coarse lattice of bumps and bands,
 //!    `μ` takes the band and the bump whose shape, screened on a fine lattice, explains the most
-//!    of its residual alone (a region's edges then fall where the data put them).
+//!    of its residual alone (a region's edges then fall where the data put them), and `δ` the
+//!    saturating steering term `δ·vₓ²/(vₓ² + v₀²)` whose speed scale `v₀` does (an
+//!    understeering car's steady-state gain `1/(1 + vₓ²/v₀²)`, which `δ·vₓ` and `δ·vₓ²` follow
+//!    only over part of the speeds).
 //! 2. **Screen** per target: every feature regressed alone on the residual; a (target, feature)
 //!    pair passes when its coefficient's t-value (standard error clustered by trajectory,
 //!    [`cluster_std`]) clears the Bonferroni threshold for the `M` pairs tried; the strongest
@@ -601,9 +604,13 @@ impl RowSums {
 
     /// The squared residual the region `phi` removes fitted alone, and its coefficient.
     fn fit(&self, phi: impl Fn([f64; 2]) -> f64) -> Option<(f64, f64)> {
+        self.fit_column(self.pos.iter().map(|&p| phi(p)))
+    }
+
+    /// The same for any feature's values per transition.
+    fn fit_column(&self, column: impl Iterator<Item = f64>) -> Option<(f64, f64)> {
         let (mut sy, mut sg) = (0.0, 0.0);
-        for ((p, gy), gg) in self.pos.iter().zip(&self.gy).zip(&self.gg) {
-            let v = phi(*p);
+        for ((v, gy), gg) in column.zip(&self.gy).zip(&self.gg) {
             sy += v * gy;
             sg += v * v * gg;
         }
@@ -670,6 +677,52 @@ fn fitted_regions(reg: &Regression, one: &OneStep) -> Vec<Feature> {
         .flatten()
         .filter_map(|(_, name)| Feature::parse(&name).ok())
         .collect()
+}
+
+/// The steering term `δ·vₓ²/(vₓ² + v₀²)` whose speed scale `v₀`, screened on a fine lattice
+/// (geometric, from a tenth to twice the fit half's largest `|vₓ|`), explains the most of the
+/// steering regression `reg` alone: a steering gain that falls with speed as an understeering
+/// car's steady-state gain `1/(1 + vₓ²/v₀²)` does is `δ += −1·δ·vₓ²/(vₓ² + v₀²)`, which the
+/// library's polynomials `δ·vₓ`, `δ·vₓ²` follow only over part of the speeds. It joins the
+/// library as one more candidate on `δ`.
+fn fitted_speed_scale(
+    reg: &Regression,
+    one: &OneStep,
+    physics: &PhysicsModel,
+    du: usize,
+) -> Option<Feature> {
+    const SCALES: usize = 40;
+    let n = one.trans.len();
+    let top = one
+        .s0
+        .chunks(one.dp)
+        .map(|s| s[3].abs())
+        .fold(0.0, f64::max);
+    if top <= 0.05 {
+        return None;
+    }
+    let sums = RowSums::of(reg, one.positions());
+    let params = physics.params();
+    let round = |v: f64| (v * 1000.0).round() / 1000.0;
+    let (lo, hi) = (0.1 * top, 2.0 * top);
+    let mut best: Option<(f64, Feature)> = None;
+    for i in 0..SCALES {
+        let v0 = round(lo * (hi / lo).powf(i as f64 / (SCALES - 1) as f64)).max(1e-3);
+        let Ok(feature) = Feature::parse(&format!("delta*sat_vx2({v0})")) else {
+            continue;
+        };
+        let column = (0..n).map(|i| {
+            let s = &one.s0[i * one.dp..(i + 1) * one.dp];
+            let u = &one.u0[i * du..(i + 1) * du];
+            feature.eval(Robot::Car, params, s, u)
+        });
+        if let Some((gain, _)) = sums.fit_column(column)
+            && best.as_ref().is_none_or(|b| gain > b.0)
+        {
+            best = Some((gain, feature));
+        }
+    }
+    best.map(|b| b.1)
 }
 
 /// A disc of other tire grip ([`grip_discs`]): the `grip_patch` effect's centre, radius and
@@ -922,16 +975,25 @@ pub fn discover_terms_split(
     // features
     let area = area_of(&one.positions());
     let mut feats: Vec<Feature> = library(robot, Some(area), cfg.grid);
-    // the regions fitted to the grip's residual are tried on the grip alone
+    // the shapes fitted to one input's residual are tried on that input alone: the regions on
+    // the grip, the speed scale on the steering
     let fitted_from = feats.len();
+    let mut fitted_for: Vec<Target> = Vec::new();
     if cfg.grid > 0
         && let Some(reg) = regs.iter().find(|r| r.target == Target::Grip)
     {
         for f in fitted_regions(reg, &one) {
             if !feats.contains(&f) {
                 feats.push(f);
+                fitted_for.push(Target::Grip);
             }
         }
+    }
+    if let Some(reg) = regs.iter().find(|r| r.target == Target::Delta)
+        && let Some(f) = fitted_speed_scale(reg, &one, physics, du)
+    {
+        feats.push(f);
+        fitted_for.push(Target::Delta);
     }
     // (target, feature) pairs with the shape of a nominal parameter's own term are that
     // parameter, not an effect, and the inputs take only their own shapes: not tried
@@ -939,7 +1001,7 @@ pub fn discover_terms_split(
         among(&feats[f])
             && t.searched_with(&feats[f])
             && t.nominal_parameter(&feats[f]).is_none()
-            && (f < fitted_from || t == Target::Grip)
+            && (f < fitted_from || fitted_for[f - fitted_from] == t)
     };
     let nf = feats.len();
     let params = physics.params();

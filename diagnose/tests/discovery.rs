@@ -306,12 +306,16 @@ fn a_nominal_parameter_change_is_not_reported_as_a_term() {
     // each bump alone and times the saturating slip of each axle
     let features = library(Robot::Car, None, 0).len() + 3 * grid * grid;
     // the steering angle takes features of the commands and the speed, but not `1` (the
-    // library's steering offset)
+    // library's steering offset), and the saturating steering term fitted to its residual
     let steering = library(Robot::Car, None, 0)
         .iter()
         .filter(|f| Target::Delta.searched_with(f) && Target::Delta.nominal_parameter(f).is_none())
-        .count();
-    assert!(steering >= 5, "δ·vₓ, δ·vₓ², δ·|v|, … are tried on δ");
+        .count()
+        + 1;
+    assert!(
+        steering >= 6,
+        "δ·vₓ, δ·vₓ², δ·|v|, …, δ·vₓ²/(vₓ² + v₀²) are tried on δ"
+    );
     // the grip takes the position alone: `x`, `y`, each bump and the bands (4 directions ×
     // `grid` offsets, tried on the grip only), the band and the bump fitted to its residual,
     // but not `1` (the peak forces)

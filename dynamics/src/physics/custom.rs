@@ -161,7 +161,7 @@ impl Target {
 
     /// Whether the term search tries `feature` on this target: every feature on a derivative;
     /// on the steering angle `δ` only features of the commands and the speed (`δ`, `d`, `vₓ`,
-    /// `|vₓ|`, `|v|`), the shapes of an input's nonlinearity. With a slip angle, `ω`, `v_y` or
+    /// `|vₓ|`, `|v|`, `vₓ²/(vₓ² + v₀²)`), the shapes of an input's nonlinearity. With a slip angle, `ω`, `v_y` or
     /// a position in it a `δ` term is a change of the tire model (on a car whose tires were
     /// 10 % off the model's, `δ += 0.48·α_r·vₓ` passed the search's test). A custom effect file
     /// may still put any feature on `δ`. On the grip `μ` only features of the position (`x`,
@@ -174,7 +174,12 @@ impl Target {
             Target::Delta => all(|a| {
                 matches!(
                     a,
-                    Atom::Delta | Atom::Throttle | Atom::Vx | Atom::AbsVx | Atom::Speed
+                    Atom::Delta
+                        | Atom::Throttle
+                        | Atom::Vx
+                        | Atom::AbsVx
+                        | Atom::Speed
+                        | Atom::SatVx2 { .. }
                 )
             }),
             Target::Grip => all(Atom::is_position),

@@ -20,6 +20,7 @@
 //! | `alpha_f`, `alpha_r` | `α_f`, `α_r` | rad | slip angles exactly as the nominal model computes them (`v_reg`-regularised) |
 //! | `sat_alpha_f`, `sat_alpha_r` | `tanh(α_f/α₀)` | - | saturating slip, `α₀` = [`SLIP_SCALE_RAD`] |
 //! | `beta` | `β` | rad | sideslip `atan(vy/√(vx² + v_reg²))` |
+//! | `sat_vx2(v0)` | `vₓ²/(vₓ² + v₀²)` | - | saturating speed with the scale `v₀` \[m/s\] (> 0): `δ·(1 − vₓ²/(vₓ² + v₀²))` is the steady-state steering gain `1/(1 + vₓ²/v₀²)` of a car that understeers with the characteristic speed `v₀` |
 //! | `cos_psi`, `sin_psi` | `cos ψ`, `sin ψ` | - | heading |
 //!
 //! Atoms of the pusher (state `(x, y, θ)`, action `(p, φ, ℓ)`): `p`, `phi` (`φ`, rad), `l`
@@ -167,6 +168,13 @@ pub enum Atom {
     SatAlphaR,
     /// Car: sideslip `β`.
     Beta,
+    /// Car: saturating speed `vₓ²/(vₓ² + v₀²)` with the scale `v₀` \[m/s\]: 0 at rest, ½ at
+    /// `v₀`, 1 far above it. A steering gain that falls with speed as an understeering car's
+    /// steady-state gain `1/(1 + vₓ²/v₀²)` is `δ·(1 − vₓ²/(vₓ² + v₀²))`.
+    SatVx2 {
+        /// Speed scale \[m/s\].
+        v0: f64,
+    },
     /// Car: `cos ψ`.
     CosPsi,
     /// Car: `sin ψ`.
@@ -227,7 +235,8 @@ enum Owner {
     Both,
 }
 
-/// Name, symbol, unit and owner of every atom but `gauss`.
+/// Name, symbol, unit and owner of every atom but those with parameters (`gauss`, `band`,
+/// `sat_vx2`).
 const TABLE: [(Atom, &str, &str, Unit, Owner); 27] = [
     (Atom::Vx, "vx", "vₓ", Unit::new(1, -1), Owner::Car),
     (Atom::Vy, "vy", "v_y", Unit::new(1, -1), Owner::Car),
@@ -343,6 +352,7 @@ impl Atom {
                 format!("gauss({},{},{})", short(*cx), short(*cy), short(*r))
             }
             Atom::Band { a, d, w } => format!("band({},{},{})", short(*a), short(*d), short(*w)),
+            Atom::SatVx2 { v0 } => format!("sat_vx2({})", short(*v0)),
             a => entry(a).map(|e| e.1).unwrap_or("?").to_string(),
         }
     }
@@ -362,6 +372,7 @@ impl Atom {
                 short(*d).replace('-', "−"),
                 short(*w)
             ),
+            Atom::SatVx2 { v0 } => format!("vₓ²/(vₓ² + {}²)", short(*v0)),
             a => entry(a).map(|e| e.2).unwrap_or("?").to_string(),
         }
     }
@@ -369,7 +380,7 @@ impl Atom {
     /// Unit.
     pub fn unit(&self) -> Unit {
         match self {
-            Atom::Gauss { .. } | Atom::Band { .. } => Unit::default(),
+            Atom::Gauss { .. } | Atom::Band { .. } | Atom::SatVx2 { .. } => Unit::default(),
             a => entry(a).map(|e| e.3).unwrap_or_default(),
         }
     }
@@ -378,6 +389,7 @@ impl Atom {
     pub fn belongs_to(&self, robot: Robot) -> bool {
         let owner = match self {
             Atom::Gauss { .. } | Atom::Band { .. } => Owner::Both,
+            Atom::SatVx2 { .. } => Owner::Car,
             a => entry(a).map(|e| e.4).unwrap_or(Owner::Both),
         };
         match owner {
@@ -395,12 +407,15 @@ impl Atom {
         )
     }
 
-    /// Names of the atoms of `robot` (`gauss(cx,cy,r)`, `band(a,d,w)` last).
+    /// Names of the atoms of `robot` (those with parameters last: `sat_vx2(v0)` of the car,
+    /// `gauss(cx,cy,r)`, `band(a,d,w)`).
     pub fn names(robot: Robot) -> Vec<String> {
+        let car_only = (robot == Robot::Car).then(|| "sat_vx2(v0)".to_string());
         TABLE
             .iter()
             .filter(|e| e.0.belongs_to(robot))
             .map(|e| e.1.to_string())
+            .chain(car_only)
             .chain(["gauss(cx,cy,r)".to_string(), "band(a,d,w)".to_string()])
             .collect()
     }
@@ -433,6 +448,12 @@ impl Atom {
         if let Some(v) = args("band(") {
             let [a, d, w] = v?;
             return Ok(Atom::Band { a, d, w });
+        }
+        if let Some(inner) = n.strip_prefix("sat_vx2(").and_then(|r| r.strip_suffix(')')) {
+            return match inner.trim().parse::<f64>() {
+                Ok(v0) if v0.is_finite() && v0 > 0.0 => Ok(Atom::SatVx2 { v0 }),
+                _ => Err(FeatureError::BadSpeedScale(n.to_string())),
+            };
         }
         Err(FeatureError::UnknownAtom {
             name: n.to_string(),
@@ -489,6 +510,10 @@ fn car_atom<R: Real>(a: &Atom, p: &[R], s: &[R], u: &[R]) -> R {
         Atom::SatAlphaF => (alpha_f() / SLIP_SCALE_RAD).tanh(),
         Atom::SatAlphaR => (alpha_r() / SLIP_SCALE_RAD).tanh(),
         Atom::Beta => (vy / (vx * vx + reg).sqrt()).atan(),
+        Atom::SatVx2 { v0 } => {
+            let v2 = vx * vx;
+            v2 / (v2 + *v0 * *v0)
+        }
         Atom::CosPsi => s[2].cos(),
         Atom::SinPsi => s[2].sin(),
         _ => R::cst(0.0),
@@ -532,6 +557,9 @@ pub enum FeatureError {
         "bad position basis '{0}'; write gauss(cx,cy,r) or band(a,d,w) with finite numbers and r, w > 0 (metres, a in rad)"
     )]
     BadRegion(String),
+    /// A malformed saturating speed.
+    #[error("bad saturating speed '{0}'; write sat_vx2(v0) with a finite speed scale v0 > 0 (m/s)")]
+    BadSpeedScale(String),
     /// No factors or too many.
     #[error("feature '{name}' has {got} factors; use 1 to {max} atoms joined by '*'")]
     FactorCount {
@@ -846,6 +874,43 @@ mod tests {
     }
 
     #[test]
+    fn the_saturating_speed_is_an_understeering_cars_steering_gain() {
+        let f = Feature::parse("delta*sat_vx2(2.5)").unwrap();
+        assert_eq!(f.factors(), &[Atom::Delta, Atom::SatVx2 { v0: 2.5 }]);
+        assert_eq!(Feature::parse(&f.name()).unwrap(), f);
+        assert_eq!(f.symbol(), "δ·vₓ²/(vₓ² + 2.5²)");
+        assert_eq!(f.unit(), Unit::default());
+        f.check_robot(Robot::Car).unwrap();
+        assert!(f.check_robot(Robot::Pushing).is_err());
+        assert!(!f.depends_on_position());
+        // δ − 1·δ·vₓ²/(vₓ² + v₀²) = δ/(1 + vₓ²/v₀²): ½ of δ at v₀, ⅕ at 2·v₀
+        let p = crate::physics::PhysicsModel::car(&[])
+            .unwrap()
+            .params()
+            .to_vec();
+        let u = [0.2, 0.5];
+        for (vx, gain) in [(0.0, 1.0), (2.5, 0.5), (5.0, 0.2), (-5.0, 0.2)] {
+            let s = [0.0, 0.0, 0.0, vx, 0.0, 0.0];
+            let v = f.eval(Robot::Car, &p, &s, &u);
+            assert!((u[0] - v - gain * u[0]).abs() < 1e-12, "vx {vx}: {v}");
+        }
+        for bad in [
+            "sat_vx2(0)",
+            "sat_vx2(-1)",
+            "sat_vx2(nan)",
+            "sat_vx2()",
+            "sat_vx2(1,2)",
+        ] {
+            assert!(
+                matches!(Atom::parse(bad), Err(FeatureError::BadSpeedScale(_))),
+                "{bad}"
+            );
+        }
+        assert!(Atom::names(Robot::Car).contains(&"sat_vx2(v0)".to_string()));
+        assert!(!Atom::names(Robot::Pushing).contains(&"sat_vx2(v0)".to_string()));
+    }
+
+    #[test]
     fn region_features_are_told_from_global_ones() {
         let area = Area {
             lo: [-1.0, -1.0],
@@ -928,7 +993,8 @@ mod tests {
             .collect();
         let s = [0.3, -0.2, 0.4, 1.2, 0.1, 0.8];
         let u = [0.15, 0.4];
-        for f in library(Robot::Car, None, 0) {
+        let fitted = Feature::parse("delta*sat_vx2(0.9)").unwrap();
+        for f in library(Robot::Car, None, 0).into_iter().chain([fitted]) {
             let pd: Vec<Dual<8>> = p.iter().map(|&v| Dual::cst(v)).collect();
             let sd: Vec<Dual<8>> = (0..6).map(|i| Dual::var(s[i], i)).collect();
             let ud: Vec<Dual<8>> = (0..2).map(|i| Dual::var(u[i], 6 + i)).collect();
