@@ -37,7 +37,9 @@
 //!
 //! `cargo run --release -p dynlab-diagnose --example push_open_world -- [--seeds N]
 //! [--first-seed N] [--nominal-seeds N] [--perturb F] [--episodes N] [--noise X] [--ratio R]
-//! [--angle-deg G | --random-angle] [--jitter-deg D] [--no-library] [--only aniso|nominal]`
+//! [--angle-deg G | --random-angle] [--jitter-deg D] [--no-library] [--only aniso|nominal]
+//! [--refit a,c,kappa]` (`--refit`: the nominal parameters the diagnosis refits, default `c`,
+//! `kappa`)
 //! (defaults 5 seeds from 0, 10 nominal seeds, f = 0.1, 100 × 10 pushes, noise ×2, ratio 2,
 //! γ = 30°, start headings within ±180°; `--random-angle` draws γ per seed, uniform in
 //! [0°, 180°), from the seed; `--jitter-deg 45` is the explorer's default; `--no-library` runs

@@ -4,8 +4,9 @@
 //!
 //! `cargo run --release -p dynlab-diagnose --example recovery -- [--seeds N] [--noise X]
 //! [--car-episodes N] [--car-duration S] [--push-episodes N] [--only NAME] [--world car|push]
-//! [--steps K] [--fit-baseline] [--no-refit] [--no-bonferroni]`
+//! [--steps K] [--fit-baseline] [--no-refit] [--no-bonferroni] [--refit a,c,kappa]`
 //!
+//! `--refit` names the nominal parameters the diagnosis refits (default: the model's free ones).
 //! `--no-refit` holds the nominal parameters (no joint refit of the pushing `c`, `κ`),
 //! `--no-bonferroni` tests every candidate at the plain confidence: both together are the
 //! diagnosis of the previous version.
