@@ -35,7 +35,7 @@ use std::time::Instant;
 use dynlab_control::racing::true_car_model;
 use dynlab_diagnose::diagnosis::simdata::{car_dataset, low_grip_band, over_low_grip_band};
 use dynlab_diagnose::diagnosis::{DiagnoseConfig, diagnose};
-use dynlab_learn::dynamics::physics::{CustomEffect, Effect, Target};
+use dynlab_learn::dynamics::physics::{CustomEffect, Effect, PhysicsModel, Target};
 use dynlab_learn::train::{KindDefaults, TrainConfig, train};
 use dynlab_learn::{Model, ModelKind, World};
 use dynlab_sim::car::{
@@ -170,30 +170,26 @@ fn true_model(car: &CarScenario, case: &[Hidden], like: &Model) -> Option<Model>
             p.set_param(name, v).ok()?;
         }
     }
-    Model::new(
-        ModelKind::Physics,
-        World::Car,
-        like.dt(),
-        None,
-        None,
-        Some(p),
-        like.physics_solver(),
-    )
-    .ok()
+    physics_like(like, p)
 }
 
 /// `model` with the custom effect `effect` added (its coefficients as fitted).
 fn with_custom(model: &Model, effect: &CustomEffect) -> Option<Model> {
     let mut p = model.physics()?.clone();
     p.add_custom(effect.clone()).ok()?;
+    physics_like(model, p)
+}
+
+/// A car physics model of `physics` with the step and solver of `like`.
+fn physics_like(like: &Model, physics: PhysicsModel) -> Option<Model> {
     Model::new(
         ModelKind::Physics,
         World::Car,
-        model.dt(),
+        like.dt(),
         None,
         None,
-        Some(p),
-        model.physics_solver(),
+        Some(physics),
+        like.physics_solver(),
     )
     .ok()
 }
