@@ -161,10 +161,10 @@ impl Target {
 
     /// Whether the term search tries `feature` on this target: every feature on a derivative;
     /// on the steering angle `δ` only features of the commands and the speed (`δ`, `d`, `vₓ`,
-    /// `|vₓ|`, `|v|`, `vₓ²/(vₓ² + v₀²)`), the shapes of an input's nonlinearity. With a slip angle, `ω`, `v_y` or
-    /// a position in it a `δ` term is a change of the tire model (on a car whose tires were
-    /// 10 % off the model's, `δ += 0.48·α_r·vₓ` passed the search's test). A custom effect file
-    /// may still put any feature on `δ`. On the grip `μ` only features of the position (`x`,
+    /// `|vₓ|`, `|v|`, `vₓ²/(vₓ² + v₀²)`), the shapes of an input's nonlinearity. With a slip
+    /// angle, `ω`, `v_y` or a position in it a `δ` term is a change of the tire model (on a car
+    /// whose tires were 10 % off the model's, `δ += 0.48·α_r·vₓ` passed the search's test). A
+    /// custom effect file may still put any feature on `δ`. On the grip `μ` only features of the position (`x`,
     /// `y`, the bumps and bands): a grip that changes everywhere alike is the tires' own
     /// parameters, a grip that changes with the motion is a tire model's shape. The bands are
     /// tried on `μ` only (a strip of other grip across a floor).
