@@ -74,6 +74,49 @@ fn world_line_pusher_matches_the_simulator_far_better_than_a_block_frame_pusher(
     assert!(p_new < 0.003, "one-push position error {p_new} m");
 }
 
+/// Limit-surface ratio `c` of a uniformly loaded `a × b` rectangle: the mean distance of its
+/// area from the centre (`m_max/f_max`; 0.383 a for a square).
+fn uniform_c(a: f64, b: f64) -> f64 {
+    let n = 200;
+    let mut sum = 0.0;
+    for i in 0..n {
+        for j in 0..n {
+            let x = a * ((i as f64 + 0.5) / n as f64 - 0.5);
+            let y = b * ((j as f64 + 0.5) / n as f64 - 0.5);
+            sum += (x * x + y * y).sqrt();
+        }
+    }
+    sum / (n * n) as f64
+}
+
+#[test]
+fn a_rectangular_block_needs_its_depth_and_its_width() {
+    // the simulator's block 8 cm deep and 12 cm wide, pushed on its long face
+    let mut s = push_scenario(None, 0.0);
+    s.block.size = [0.08, 0.12];
+    let d = push_dataset(&s, 8, 10, 31, 2).unwrap();
+    let error = |a: f64, b: f64| {
+        let mut m = PhysicsModel::pushing(&[]).unwrap();
+        m.set_param("a", a).unwrap();
+        m.set_param("b", b).unwrap();
+        m.set_param("c", uniform_c(a, b)).unwrap();
+        let (p, t) = one_push_error(&m, &d, true);
+        (p / 0.1 + t, format!("a {a}, b {b}: {p:.4} m, {t:.4} rad"))
+    };
+    let (right, msg) = error(0.08, 0.12);
+    for (a, b) in [(0.1, 0.1), (0.08, 0.08), (0.12, 0.12), (0.12, 0.08)] {
+        let (wrong, wmsg) = error(a, b);
+        assert!(right < 0.7 * wrong, "{msg}; {wmsg}");
+    }
+    // as good on the rectangle as the square's model on the square's pushes
+    let square = data(None, 0.0, 8, 31);
+    let (p, t) = one_push_error(&PhysicsModel::pushing(&[]).unwrap(), &square, true);
+    assert!(
+        right < 1.5 * (p / 0.1 + t),
+        "{msg}; the square: {p:.4} m, {t:.4} rad"
+    );
+}
+
 /// Each effect term at the simulator's value explains the simulator's pushes with that effect
 /// much better than the nominal model: signs, frames and units agree.
 fn effect_term_matches_simulator(e: Effect, seed: u64) {

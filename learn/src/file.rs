@@ -274,6 +274,30 @@ pub fn read_meta(dir: &Path) -> Result<ModelFile, LearnError> {
     })
 }
 
+/// The physics parameters of a model file, with the block width `b` of a pushing model written
+/// before the block was a rectangle (its parameters `a, c, L, kappa, …` without `b`) set to the
+/// side `a` right after `kappa`: such a file describes a square block, and loads as one.
+fn with_block_width(expected: &[String], params: &[ParamEntry]) -> Vec<ParamEntry> {
+    let mut params = params.to_vec();
+    let square = ["a", "c", "L", "kappa"];
+    let is_pushing = expected.len() > square.len() && expected[..4] == square && expected[4] == "b";
+    if is_pushing
+        && params.len() + 1 == expected.len()
+        && params.iter().zip(square).all(|(e, n)| e.name == n)
+        && params.iter().all(|e| e.name != "b")
+    {
+        let side = &params[0];
+        let width = ParamEntry {
+            name: "b".into(),
+            value: side.value,
+            std: side.std,
+            unit: side.unit.clone(),
+        };
+        params.insert(4, width);
+    }
+    params
+}
+
 /// Loads a model directory, validating every part. `kind` and `world`, when given, must match.
 pub fn load_model(
     dir: &Path,
@@ -346,19 +370,16 @@ pub fn load_model(
                     .map_err(|e| corrupt(format!("physics.custom_effects: {e}")))?;
             }
             let expected = p.param_names();
-            let got: Vec<String> = pm.params.iter().map(|e| e.name.clone()).collect();
+            let params = with_block_width(&expected, &pm.params);
+            let got: Vec<String> = params.iter().map(|e| e.name.clone()).collect();
             if expected != got {
                 return Err(corrupt(format!(
                     "physics parameters {got:?} do not match the model's {expected:?}"
                 )));
             }
-            let values: Vec<f64> = pm.params.iter().map(|e| e.value).collect();
+            let values: Vec<f64> = params.iter().map(|e| e.value).collect();
             p.set_params(&values).map_err(|e| corrupt(e.to_string()))?;
-            let std: Vec<f64> = pm
-                .params
-                .iter()
-                .map(|e| e.std.unwrap_or(f64::NAN))
-                .collect();
+            let std: Vec<f64> = params.iter().map(|e| e.std.unwrap_or(f64::NAN)).collect();
             p.set_std_errors(Some(std))
                 .map_err(|e| corrupt(e.to_string()))?;
             (Some(p), pm.solver)

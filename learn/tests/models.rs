@@ -559,3 +559,48 @@ fn a_sample_budget_stops_training_mid_epoch_with_a_validated_record() {
     assert_eq!(last.samples, 128);
     assert!(out.best_validation_loss.is_finite());
 }
+
+#[test]
+fn a_square_block_model_file_loads_with_its_side_as_the_width() {
+    // a pushing model file written before the block had a width: parameters a, c, L, kappa
+    let tmp = tempfile::tempdir().unwrap();
+    let push = push_data(tmp.path());
+    let mut cfg = small(ModelKind::Physics, World::Push);
+    cfg.effects = vec!["com_offset".into()];
+    let m = train(&push, &cfg, &mut |_| {}).unwrap().model;
+    let dir = tmp.path().join("square");
+    save_model(&m, &dir, None, Default::default()).unwrap();
+    let mut v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join(MODEL_JSON)).unwrap()).unwrap();
+    let params = v["physics"]["params"].as_array_mut().unwrap();
+    let names: Vec<&str> = params.iter().map(|p| p["name"].as_str().unwrap()).collect();
+    assert_eq!(names[..5], ["a", "c", "L", "kappa", "b"]);
+    params[0]["value"] = serde_json::json!(0.09);
+    params[4]["value"] = serde_json::json!(0.09);
+    std::fs::write(dir.join(MODEL_JSON), serde_json::to_string(&v).unwrap()).unwrap();
+    let (expected, _) = load_model(&dir, None, None).unwrap();
+    v["physics"]["params"].as_array_mut().unwrap().remove(4);
+    let square = serde_json::to_string(&v).unwrap();
+    std::fs::write(dir.join(MODEL_JSON), &square).unwrap();
+    let (back, _) = load_model(&dir, None, None).unwrap();
+    let p = back.physics().unwrap();
+    for n in ["a", "b"] {
+        assert_eq!(p.params()[p.param_index(n).unwrap()], 0.09, "{n}");
+    }
+    // the same model as the file with a = b = 0.09
+    assert_eq!(p.params(), expected.physics().unwrap().params());
+    let (s, u) = ([0.4, 0.02, -0.3], [0.6, 0.2, 0.8]);
+    let (mut a, mut b) = ([0.0; 3], [0.0; 3]);
+    back.step(&s, &u, &mut a).unwrap();
+    expected.step(&s, &u, &mut b).unwrap();
+    assert_eq!(a, b);
+    // a file missing another parameter is still corrupt
+    let mut v: serde_json::Value = serde_json::from_str(&square).unwrap();
+    v["physics"]["params"].as_array_mut().unwrap().remove(3);
+    std::fs::write(dir.join(MODEL_JSON), serde_json::to_string(&v).unwrap()).unwrap();
+    let e = load_model(&dir, None, None).unwrap_err();
+    assert!(
+        matches!(e, LearnError::CorruptModel { .. }) && e.to_string().contains("kappa"),
+        "{e}"
+    );
+}

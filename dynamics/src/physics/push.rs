@@ -2,9 +2,11 @@
 //! Ruina & Papadopoulos 1991; Lee & Cutkosky 1991; Lynch & Mason 1992), written in the block
 //! frame and integrated over one push in normalised time `τ ∈ [0, 1]`.
 //!
-//! Geometry (the Tu & Lin set-up): a square block of side `a`; the pusher touches the face
-//! `x = −a/2` at `(p_x, p_y) = (−a/2, κ·p·a/2)` and moves along `(cos φ, sin φ)` (block frame) by
-//! `ℓ·L` over the push, so its velocity is `v_p = ℓ L (cos φ, sin φ)` per unit `τ`.
+//! Geometry: a rectangular block of depth `a` (along its x axis, the push direction at `φ = 0`)
+//! and width `b` (along the pushed face; Tu & Lin's block is a square, `a = b`); the pusher
+//! touches the face `x = −a/2` at `(p_x, p_y) = (−a/2, κ·p·b/2)` and moves along
+//! `(cos φ, sin φ)` (block frame) by `ℓ·L` over the push, so its velocity is
+//! `v_p = ℓ L (cos φ, sin φ)` per unit `τ`.
 //!
 //! Mechanics: with the limit surface `H(F) = (F_x² + F_y²)/f_max² + M²/m_max²` and
 //! `c = m_max/f_max`, a contact force `F` (normalised by `f_max`) applied at `(p_x, p_y)` moves
@@ -20,7 +22,7 @@
 //!
 //! **The pusher moves on a straight world line** (as the simulator's and a robot's pusher do):
 //! the push starts at the step's initial pose `(x₀, y₀, θ₀)`, so the pusher centre starts at
-//! `q = (x₀, y₀) + R(θ₀)·(−a/2 − r_p, κ·p·a/2)` (a disc of radius `r_p` touching the face) and
+//! `q = (x₀, y₀) + R(θ₀)·(−a/2 − r_p, κ·p·b/2)` (a disc of radius `r_p` touching the face) and
 //! moves along the world direction `ψ = θ₀ + φ`. These three step constants `(ψ, q)` are held in
 //! the world frame over the push (auxiliary states of the step's ODE, see
 //! [`PhysicsModel::integrate_step`](super::PhysicsModel::integrate_step)); the model state stays
@@ -29,7 +31,7 @@
 //! contact's lateral offset `p_y = t·(q + σ d − o)` (block axes `n`, `t`) and the pusher
 //! velocity in the block frame `v_p = ℓ L (cos(ψ − θ), sin(ψ − θ))` are known at every instant:
 //! the block may turn under the pusher and the contact slides along the face. The contact is
-//! lost when `p_y` leaves the face or the pusher stops approaching it (`cos(ψ − θ) ≤ 0`).
+//! lost when `p_y` leaves the face (`|p_y| > b/2`) or the pusher stops approaching it (`cos(ψ − θ) ≤ 0`).
 //!
 //! Evaluated at the step's start (the plain [`VectorField`](crate::ode::VectorField) of the
 //! model) the constants are those of the start pose, so `f(s, u)` is the instantaneous push
@@ -49,15 +51,17 @@
 //!   on or off the patch moves the same (quasi-static: friction scale does not change motion).
 //! * `pusher_friction`: sticking inside the motion cone, sliding on its edge (see above).
 //!
-//! Approximation, documented: `c = 0.383 a` (uniform pressure on a square) by default.
+//! Approximation, documented: `c = 0.383 a` (uniform pressure on a square) by default; the
+//! support grid of `com_offset` and `friction_patch` spans the `a × b` footprint.
 
 use super::car::{Slot, disc};
 use super::{Effect, ParamSpec, ps};
 use crate::conventions::PUSH_MAX_LENGTH_M;
 use crate::real::Real;
 
-/// Nominal pushing parameters (Tu & Lin's PyBullet block).
-pub static PUSH_NOMINAL_PARAMS: [ParamSpec; 4] = [
+/// Nominal pushing parameters (Tu & Lin's PyBullet block). The width `b` comes last so that
+/// the indices of the others are those of the square block's model.
+pub static PUSH_NOMINAL_PARAMS: [ParamSpec; 5] = [
     ps(
         "a",
         "a",
@@ -65,7 +69,7 @@ pub static PUSH_NOMINAL_PARAMS: [ParamSpec; 4] = [
         0.01,
         1.0,
         0.1,
-        "block side (Tu & Lin: 0.1 m cube)",
+        "block depth, across the pushed face (Tu & Lin: 0.1 m cube)",
     ),
     ps(
         "c",
@@ -94,11 +98,24 @@ pub static PUSH_NOMINAL_PARAMS: [ParamSpec; 4] = [
         0.95,
         "usable fraction of the half face (Tu & Lin leave a 5 % margin)",
     ),
+    ps(
+        "b",
+        "b",
+        "m",
+        0.01,
+        1.0,
+        0.1,
+        "block width, along the pushed face (Tu & Lin: 0.1 m cube)",
+    ),
 ];
 
 /// Nominal pushing parameters a fit frees by default: the limit-surface ratio `c` and the usable
-/// face fraction `κ`. The block side `a` is measured and the push length `L` is the commanded
-/// scale; both stay fixed.
+/// face fraction `κ`. The block's depth `a` and width `b` are measured (`dynlab train --set
+/// a=0.08 --set b=0.12` for a rectangular block) and the push length `L` is the commanded
+/// scale; they stay fixed. `κ` also absorbs what the quasi-static ellipsoidal model gets
+/// wrong about off-centre pushes (held at the simulator's 0.95 with `b` and `c` free, the term
+/// search finds `ẋ_b += ≈0.005·ℓ·p²` m/push on the simulator's nominal block), which is why it
+/// is fitted and often ends on its bound 1.
 pub static PUSH_FITTED_PARAMS: [&str; 2] = ["c", "kappa"];
 
 /// Pusher disc radius \[m\] (the simulator's default finger tip).
@@ -110,10 +127,10 @@ const PATCH_GRID: usize = 5;
 /// The step constants `(ψ, q_x, q_y)` of a push from pose `s` under action `u`: the world push
 /// direction and the pusher centre's start point (world frame).
 pub(crate) fn start_constants<R: Real>(p: &[R], s: &[R], u: &[R]) -> [R; 3] {
-    let (a, kappa) = (p[0], p[3]);
+    let (a, kappa, b) = (p[0], p[3], p[4]);
     let (x, y, th) = (s[0], s[1], s[2]);
     let bx = a * -0.5 - PUSHER_RADIUS_M;
-    let by = kappa * u[0] * a * 0.5;
+    let by = kappa * u[0] * b * 0.5;
     let (st, ct) = (th.sin(), th.cos());
     [th + u[1], x + ct * bx - st * by, y + st * bx + ct * by]
 }
@@ -142,7 +159,7 @@ pub(crate) fn rhs_line<R: Real>(
     ell: R,
     out: &mut [R],
 ) {
-    let [a, c, len, _kappa] = [0, 1, 2, 3].map(|i| p[i]);
+    let [a, c, len, _kappa, b] = [0, 1, 2, 3, 4].map(|i| p[i]);
     let (x, y, th) = (s[0], s[1], s[2]);
     let [psi, qx, qy] = line;
     let zero = R::cst(0.0);
@@ -170,7 +187,7 @@ pub(crate) fn rhs_line<R: Real>(
     let (ox, oy, c) = if com.is_none() && patch.is_none() {
         (zero, zero, c)
     } else {
-        support_friction(a, c, x, y, th, com, patch)
+        support_friction([a, b], c, [x, y, th], com, patch)
     };
     let (st, ct) = (th.sin(), th.cos());
     let rel = psi - th;
@@ -184,7 +201,7 @@ pub(crate) fn rhs_line<R: Real>(
     let t_rel = ct * ry - st * rx;
     let sigma = (a * -0.5 - PUSHER_RADIUS_M - n_rel) / nd;
     let lat = t_rel + sigma * td;
-    if lat.value().abs() > 0.5 * a.value() {
+    if lat.value().abs() > 0.5 * b.value() {
         return;
     }
     // contact point relative to the centre of friction, block frame
@@ -250,25 +267,23 @@ pub(crate) fn rhs_line<R: Real>(
     out[2] = om;
 }
 
-/// Centre of friction `(o_x, o_y)` (block frame) and limit-surface ratio of a block of side
-/// `a` at `(x, y, θ)` whose support is an `N × N` grid (as in the simulator) with friction
-/// weights `wᵢ = Nᵢ·μᵢ`: the normal load varies linearly so that its centroid is the centre of
-/// mass (`com_offset`: `Nᵢ ∝ max(0, 1 + o_x xᵢ/⟨x²⟩ + o_y yᵢ/⟨y²⟩)`, the simulator's load
-/// model), and `μᵢ/μ = 1 + (k − 1)·σ((r − ‖pᵢ − c‖)/w)` on a disc patch (`friction_patch`).
-/// The offset is the weighted centroid; the ratio is the nominal `c` scaled by the weighted mean
-/// distance from it over the uniform grid's mean distance from the centre.
+/// Centre of friction `(o_x, o_y)` (block frame) and limit-surface ratio of a block of depth
+/// `a` and width `b` at pose `(x, y, θ)` whose support is an `N × N` grid (as in the simulator)
+/// with friction weights `wᵢ = Nᵢ·μᵢ`: the normal load varies linearly so that its centroid is
+/// the centre of mass (`com_offset`: `Nᵢ ∝ max(0, 1 + o_x xᵢ/⟨x²⟩ + o_y yᵢ/⟨y²⟩)`, the
+/// simulator's load model), and `μᵢ/μ = 1 + (k − 1)·σ((r − ‖pᵢ − c‖)/w)` on a disc patch
+/// (`friction_patch`). The offset is the weighted centroid; the ratio is the nominal `c` scaled
+/// by the weighted mean distance from it over the uniform grid's mean distance from the centre.
 fn support_friction<R: Real>(
-    a: R,
+    [a, b]: [R; 2],
     c: R,
-    x: R,
-    y: R,
-    th: R,
+    [x, y, th]: [R; 3],
     com: Option<(R, R)>,
     patch: Option<&[R]>,
 ) -> (R, R, R) {
     let (st, ct) = (th.sin(), th.cos());
     let nn = PATCH_GRID as f64;
-    // ⟨x²⟩ of the grid, in units of a²
+    // ⟨x²⟩ of the grid in units of a², ⟨y²⟩ in units of b²
     let m2: f64 = (0..PATCH_GRID)
         .map(|i| ((i as f64 + 0.5) / nn - 0.5).powi(2))
         .sum::<f64>()
@@ -279,10 +294,10 @@ fn support_friction<R: Real>(
             let fx = (i as f64 + 0.5) / nn - 0.5;
             let fy = (j as f64 + 0.5) / nn - 0.5;
             let lx = a * fx;
-            let ly = a * fy;
+            let ly = b * fy;
             let mut wi = R::cst(1.0);
             if let Some((cx_, cy_)) = com {
-                let l = (cx_ * fx + cy_ * fy) / (a * m2) + 1.0;
+                let l = cx_ * fx / (a * m2) + cy_ * fy / (b * m2) + 1.0;
                 wi = if l.value() > 0.0 { l } else { R::cst(0.0) };
             }
             if let Some(q) = patch {
@@ -290,26 +305,27 @@ fn support_friction<R: Real>(
                 let wy = y + st * lx + ct * ly;
                 wi = wi * (disc(wx, wy, q[0], q[1], q[2], q[3]) * (q[4] - 1.0) + 1.0);
             }
-            pts.push((lx, ly, wi, (fx * fx + fy * fy).sqrt()));
+            pts.push((lx, ly, wi));
         }
     }
     let mut sw = R::cst(0.0);
     let mut swx = R::cst(0.0);
     let mut swy = R::cst(0.0);
-    let mut uniform = 0.0;
-    for &(lx, ly, wi, d) in &pts {
+    let mut uniform = R::cst(0.0);
+    for &(lx, ly, wi) in &pts {
         sw = sw + wi;
         swx = swx + wi * lx;
         swy = swy + wi * ly;
-        uniform += d;
+        // + 1e-12 as below: the distance of the grid's centre point has no derivative at 0
+        uniform = uniform + (lx * lx + ly * ly + 1e-12).sqrt();
     }
     let (ox, oy) = (swx / sw, swy / sw);
     let mut sd = R::cst(0.0);
-    for &(lx, ly, wi, _) in &pts {
+    for &(lx, ly, wi) in &pts {
         let (dx, dy) = (lx - ox, ly - oy);
         sd = sd + wi * (dx * dx + dy * dy + 1e-12).sqrt();
     }
     let mean = sd / sw;
-    let uniform_mean = a * (uniform / pts.len() as f64);
+    let uniform_mean = uniform / pts.len() as f64;
     (ox, oy, c * mean / uniform_mean)
 }
