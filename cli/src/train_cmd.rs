@@ -10,6 +10,7 @@ use clap::{Args, ValueEnum};
 use dynlab_learn::dynamics::conventions::LossNorm;
 use dynlab_learn::dynamics::data::SavGol;
 use dynlab_learn::dynamics::ode::Solver;
+use dynlab_learn::dynamics::physics::LimitSurface;
 use dynlab_learn::file::TrainingMeta;
 use dynlab_learn::{
     KindDefaults, Loss, ModelKind, Progress, Split, TrainConfig, World, load_bags_with, save_model,
@@ -51,6 +52,11 @@ pub struct TrainArgs {
     /// A physics parameter value set before the fit (repeatable), e.g. --set m=0.045 (kg).
     #[arg(long = "set", value_name = "NAME=VALUE")]
     set: Vec<String>,
+    /// Pushing physics: how the pusher's force moves the block, `ellipsoid` (the ellipsoidal
+    /// limit surface, closed form) or `support_points` (the support points' Coulomb friction
+    /// solved exactly: off-centre pushes as the points dictate, several times slower).
+    #[arg(long, value_name = "NAME", default_value = "ellipsoid")]
+    limit_surface: String,
     /// Epochs (default: per world and kind, car residual and node-* 40, otherwise 300).
     #[arg(long)]
     epochs: Option<usize>,
@@ -160,6 +166,15 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         ..Default::default()
     };
     cfg.physics_free = args.free.clone();
+    cfg.limit_surface = LimitSurface::from_name(&args.limit_surface).ok_or_else(|| {
+        anyhow::anyhow!(
+            "--limit-surface {}: choose ellipsoid or support_points",
+            args.limit_surface
+        )
+    })?;
+    if cfg.limit_surface != LimitSurface::default() && data.world != World::Push {
+        bail!("--limit-surface applies to the pushing physics model; the car has none");
+    }
     cfg.physics_max_windows = args.physics_windows.max(1);
     for kv in &args.set {
         let (k, v) = kv

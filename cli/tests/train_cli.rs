@@ -226,6 +226,40 @@ fn bad_input_gets_clear_errors() {
         o_,
     ]);
     assert!(stderr(&o).contains("too little data"), "{}", stderr(&o));
+    // a limit surface that does not exist, and one for the car
+    let o = dynlab(&[
+        "train",
+        "--bag",
+        good.to_str().unwrap(),
+        "--kind",
+        "physics",
+        "--limit-surface",
+        "cube",
+        "--out",
+        o_,
+    ]);
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("--limit-surface cube: choose ellipsoid or support_points"),
+        "{}",
+        stderr(&o)
+    );
+    let car_dir = tmp.path().join("limit_surface");
+    std::fs::create_dir(&car_dir).unwrap();
+    let car = car_bag(&car_dir);
+    let o = dynlab(&[
+        "train",
+        "--bag",
+        car.to_str().unwrap(),
+        "--kind",
+        "physics",
+        "--limit-surface",
+        "support_points",
+        "--out",
+        o_,
+    ]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("the car has none"), "{}", stderr(&o));
     // effects on a network-only kind
     let o = dynlab(&[
         "train",

@@ -38,8 +38,11 @@
 //! `cargo run --release -p dynlab-diagnose --example push_open_world -- [--seeds N]
 //! [--first-seed N] [--nominal-seeds N] [--perturb F] [--episodes N] [--noise X] [--ratio R]
 //! [--angle-deg G | --random-angle] [--jitter-deg D] [--no-library] [--only aniso|nominal]
-//! [--refit a,c,kappa]` (`--refit`: the nominal parameters the diagnosis refits, default `c`,
-//! `kappa`)
+//! [--refit a,c,kappa] [--pusher-speed V] [--pusher-acceleration A]
+//! [--limit-surface support_points]` (`--refit`: the nominal parameters the fit of the world's
+//! model frees and the diagnosis refits, default: training `a`, `c`, `kappa`, the diagnosis `c`, `kappa`; `--limit-surface`: the pushing
+//! model's, default `ellipsoid`; the pusher's cruise speed \[m/s\] and acceleration \[m/s²\], default the
+//! simulator's 0.1 and 0.4)
 //! (defaults 5 seeds from 0, 10 nominal seeds, f = 0.1, 100 × 10 pushes, noise ×2, ratio 2,
 //! γ = 30°, start headings within ±180°; `--random-angle` draws γ per seed, uniform in
 //! [0°, 180°), from the seed; `--jitter-deg 45` is the explorer's default; `--no-library` runs
@@ -51,7 +54,7 @@ use std::time::Instant;
 use dynlab_diagnose::diagnosis::simdata::{push_dataset_with, push_scenario};
 use dynlab_diagnose::diagnosis::{DiagnoseConfig, Diagnosis, diagnose, push_level_dataset};
 use dynlab_learn::dynamics::data::SplitMix64;
-use dynlab_learn::dynamics::physics::Target;
+use dynlab_learn::dynamics::physics::{LimitSurface, Target};
 use dynlab_learn::eval::evaluate;
 use dynlab_learn::train::{TrainConfig, train};
 use dynlab_learn::{Dataset, Model, ModelKind};
@@ -132,6 +135,17 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let jitter_deg: f64 = arg("--jitter-deg", 180.0);
     let no_library = std::env::args().any(|a| a == "--no-library");
     let refit: String = arg("--refit", String::new());
+    let refit: Option<Vec<String>> =
+        (!refit.is_empty()).then(|| refit.split(',').map(String::from).collect());
+    let defaults = PushScenario::default().pusher;
+    let pusher_speed: f64 = arg("--pusher-speed", defaults.speed);
+    let pusher_acceleration: f64 = arg("--pusher-acceleration", defaults.acceleration);
+    let surface: String = arg(
+        "--limit-surface",
+        LimitSurface::default().name().to_string(),
+    );
+    let limit_surface = LimitSurface::from_name(&surface)
+        .ok_or_else(|| format!("--limit-surface {surface}: choose ellipsoid or support_points"))?;
     let verbose = std::env::var("VERBOSE").is_ok();
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
     println!(
@@ -144,6 +158,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         ..PushExplorer::default()
     };
     let pushes = |s: &PushScenario, seed: u64| -> Result<Dataset, Box<dyn std::error::Error>> {
+        // a slower pusher needs longer between pushes
+        let explorer = PushExplorer {
+            push_period: explorer.push_period.max(s.max_push_time().ceil()),
+            ..explorer.clone()
+        };
         Ok(push_level_dataset(push_dataset_with(
             s, &explorer, episodes, seed, threads,
         )?))
@@ -151,12 +170,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let diag_cfg = |seed: u64| DiagnoseConfig {
         seed,
         effects: no_library.then(Vec::new),
-        refit_params: (!refit.is_empty()).then(|| refit.split(',').map(String::from).collect()),
+        refit_params: refit.clone(),
         ..DiagnoseConfig::default()
     };
     // the fitted model of a seed's world, and that world
     let world = |seed: u64| -> Result<(PushScenario, Model), Box<dyn std::error::Error>> {
         let mut s = push_scenario(None, noise);
+        s.pusher.speed = pusher_speed;
+        s.pusher.acceleration = pusher_acceleration;
         if perturb > 0.0 {
             s = s.perturbed(7000 + seed, perturb)?;
         }
@@ -164,6 +185,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let tc = TrainConfig {
             kind: ModelKind::Physics,
             seed,
+            physics_free: refit.clone(),
+            limit_surface,
             ..TrainConfig::default()
         };
         Ok((s, train(&nominal, &tc, &mut |_| {})?.model))
@@ -247,6 +270,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     let tc = TrainConfig {
                         kind: ModelKind::Physics,
                         seed,
+                        physics_free: refit.clone(),
+                        limit_surface,
                         ..TrainConfig::default()
                     };
                     let without = train(&data, &tc, &mut |_| {})?.model;

@@ -150,6 +150,12 @@ pub enum DiagnosisError {
 /// effect with them refitted, 83 % for both without).
 const CAR_HELD: [&str; 2] = ["Bf", "Br"];
 
+/// Pushing parameters the diagnosis holds where training fits them: the block's depth `a` is
+/// the contact's arm, which a `com_offset` along the push moves as well; refitted together they
+/// trade off (on data with an offset of (0.02, 0.01) m: `ox` 0.037 ± 0.007, `oy` 0.016 ±
+/// 0.003). Training fits the depth on data without the effect, and the diagnosis keeps it.
+const PUSH_HELD: [&str; 1] = ["a"];
+
 /// Settings of [`diagnose`]; every field has a documented default.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
@@ -179,8 +185,9 @@ pub struct DiagnoseConfig {
     pub iterations: usize,
     /// Candidate effects (default: every effect of the world's library).
     pub effects: Option<Vec<Effect>>,
-    /// Refit the model's free nominal parameters (pushing: `c`, `κ`; car: the tires and the
-    /// drivetrain, [`CAR_FITTED_PARAMS`](dynlab_learn::dynamics::physics::CAR_FITTED_PARAMS)) on
+    /// Refit the model's free nominal parameters (pushing: `c`, `κ`, the trained depth `a`
+    /// held; car: the tires and the drivetrain,
+    /// [`CAR_FITTED_PARAMS`](dynlab_learn::dynamics::physics::CAR_FITTED_PARAMS)) on
     /// the fit half, for the baseline and jointly with every candidate, so that an effect is
     /// credited only with what the nominal model cannot absorb (default: pushing physics models
     /// yes; the car no — with 3 × 15 s of data the five refitted car parameters let the LM
@@ -1662,7 +1669,13 @@ pub fn diagnose(
                 owner.is_none()
                     && match &cfg.refit_params {
                         Some(names) => names.iter().any(|n| n == spec.name),
-                        None => **f && !(world == World::Car && CAR_HELD.contains(&spec.name)),
+                        None => {
+                            let held: &[&str] = match world {
+                                World::Car => &CAR_HELD,
+                                World::Push => &PUSH_HELD,
+                            };
+                            **f && !held.contains(&spec.name)
+                        }
                     }
             })
             .map(|(i, _)| names[i].clone())

@@ -6,13 +6,16 @@
 //! Data are generated in process (seeded, the simulator's scenarios of
 //! `diagnosis::simdata::push_scenario`): 20 episodes × 10 pushes, a few seconds per test.
 
-use dynlab_diagnose::diagnosis::simdata::{nominal_model, push_dataset, push_scenario};
+use dynlab_diagnose::diagnosis::simdata::{
+    nominal_model, push_dataset, push_dataset_with, push_scenario,
+};
 use dynlab_diagnose::diagnosis::{DiagnoseConfig, Diagnosis, diagnose};
 use dynlab_learn::dynamics::conventions::wrap_angle;
 use dynlab_learn::dynamics::ode;
-use dynlab_learn::dynamics::physics::{Effect, PhysicsModel};
+use dynlab_learn::dynamics::physics::{Effect, LimitSurface, PhysicsModel};
 use dynlab_learn::train::default_physics_solver;
 use dynlab_learn::{Dataset, Model, ModelKind, World};
+use dynlab_sim::PushExplorer;
 
 /// The simulator's value of each effect (`push_scenario`), as model parameters.
 fn truth(e: Effect) -> Vec<(&'static str, f64)> {
@@ -294,4 +297,33 @@ fn refit_tolerance_keeps_the_nominal_parameters_near_the_models_values() {
         let err = diagnose(&model, &d, &cfg).unwrap_err().to_string();
         assert!(err.contains("refit_tolerance"), "{err}");
     }
+}
+
+#[test]
+fn the_support_points_limit_surface_predicts_quasi_static_pushes_better_than_the_ellipsoid() {
+    // a slow pusher (0.02 m/s): the simulator's pushes are quasi-static, as the model assumes
+    let mut s = push_scenario(None, 0.0);
+    s.pusher.speed = 0.02;
+    s.pusher.acceleration = 0.08;
+    let explorer = PushExplorer {
+        pushes_per_episode: 10,
+        push_period: s.max_push_time().ceil(),
+        ..PushExplorer::default()
+    };
+    let d = push_dataset_with(&s, &explorer, 8, 11, 2).unwrap();
+    let error = |surface: LimitSurface| {
+        let mut m = PhysicsModel::pushing(&[]).unwrap();
+        m.set_limit_surface(surface).unwrap();
+        one_push_error(&m, &d, true)
+    };
+    let (pe, te) = error(LimitSurface::Ellipsoid);
+    let (ps, ts) = error(LimitSurface::SupportPoints);
+    let msg = format!("ellipsoid {pe:.5} m, {te:.4} rad; support points {ps:.5} m, {ts:.4} rad");
+    assert!(ps < 0.75 * pe && ts < 0.5 * te, "{msg}");
+    // the car has no limit surface
+    let mut car = PhysicsModel::car(&[]).unwrap();
+    let e = car
+        .set_limit_surface(LimitSurface::SupportPoints)
+        .unwrap_err();
+    assert!(e.to_string().contains("car model has none"), "{e}");
 }

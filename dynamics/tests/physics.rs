@@ -163,9 +163,21 @@ fn car_jacobians_wrt_state_input_and_parameters_match_finite_differences() {
 
 #[test]
 fn pushing_jacobians_match_finite_differences_sliding_and_sticking() {
-    check_field_jacobians(&push_all(0.2), &PUSH_S, &PUSH_U); // sliding on the cone edge
-    check_field_jacobians(&push_all(1.5), &PUSH_S, &PUSH_U); // sticking
-    check_field_jacobians(&PhysicsModel::pushing(&[]).unwrap(), &PUSH_S, &PUSH_U);
+    for m in [
+        push_all(0.2),
+        push_all(1.5),
+        PhysicsModel::pushing(&[]).unwrap(),
+    ] {
+        // sliding on the cone edge, sticking, frictionless; both limit surfaces
+        check_field_jacobians(&m, &PUSH_S, &PUSH_U);
+        check_field_jacobians(&support_points(m), &PUSH_S, &PUSH_U);
+    }
+}
+
+/// The model with the support points' limit surface.
+fn support_points(mut m: PhysicsModel) -> PhysicsModel {
+    m.set_limit_surface(LimitSurface::SupportPoints).unwrap();
+    m
 }
 
 #[test]
@@ -283,8 +295,9 @@ fn car_fit_freed_non_identifiable_mass() {
     }
     let p = PhysicsModel::pushing(&[]).unwrap();
     let pf = p.default_free();
-    // a, c, L, kappa, b: the geometry and the push length are measured, c and κ fitted
-    assert_eq!(pf, vec![false, true, false, true, false]);
+    // a, c, L, kappa, b: the width and the push length are measured, the depth (the contact's
+    // arm), c and κ fitted
+    assert_eq!(pf, vec![true, true, false, true, false]);
 }
 
 /// The rear axle saturates on the friction circle like the simulator's: at full throttle the
@@ -333,6 +346,8 @@ fn push_step_derivatives_match_finite_differences() {
         PhysicsModel::pushing(&[]).unwrap(),
         push_all(0.2),
         push_all(1.5),
+        support_points(push_all(0.2)),
+        support_points(push_all(1.5)),
     ] {
         let np = m.params().len();
         let step = |m: &PhysicsModel, s: &[f64], u: &[f64]| {

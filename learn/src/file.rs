@@ -6,7 +6,7 @@
 use std::path::{Path, PathBuf};
 
 use dynlab_dynamics::ode::Solver;
-use dynlab_dynamics::physics::{CustomEffect, PhysicsModel};
+use dynlab_dynamics::physics::{CustomEffect, LimitSurface, PhysicsModel};
 use dynlab_nn::Mlp;
 use serde::{Deserialize, Serialize};
 
@@ -66,6 +66,9 @@ pub struct PhysicsMeta {
     /// parameters are `custom.<name>.<j>` after the effects'. Absent: none.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub custom_effects: Vec<CustomEffect>,
+    /// Pushing: how the pusher's force moves the block (absent: the ellipsoidal limit surface).
+    #[serde(default, skip_serializing_if = "is_ellipsoid")]
+    pub limit_surface: LimitSurface,
     /// Every parameter (nominal, effects, then custom terms) in vector order.
     pub params: Vec<ParamEntry>,
     /// The model's equations as printed by the physics crate (for reading only).
@@ -150,6 +153,7 @@ impl ModelFile {
             effects: p.effects().iter().map(|e| e.name().to_string()).collect(),
             solver: model.physics_solver(),
             custom_effects: p.custom_effects(),
+            limit_surface: p.limit_surface(),
             params: p
                 .param_names()
                 .into_iter()
@@ -274,6 +278,10 @@ pub fn read_meta(dir: &Path) -> Result<ModelFile, LearnError> {
     })
 }
 
+fn is_ellipsoid(s: &LimitSurface) -> bool {
+    *s == LimitSurface::Ellipsoid
+}
+
 /// The physics parameters of a model file, with the block width `b` of a pushing model written
 /// before the block was a rectangle (its parameters `a, c, L, kappa, …` without `b`) set to the
 /// side `a` right after `kappa`: such a file describes a square block, and loads as one.
@@ -369,6 +377,8 @@ pub fn load_model(
                 p.add_custom(c.clone())
                     .map_err(|e| corrupt(format!("physics.custom_effects: {e}")))?;
             }
+            p.set_limit_surface(pm.limit_surface)
+                .map_err(|e| corrupt(format!("physics.limit_surface: {e}")))?;
             let expected = p.param_names();
             let params = with_block_width(&expected, &pm.params);
             let got: Vec<String> = params.iter().map(|e| e.name.clone()).collect();

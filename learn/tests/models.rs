@@ -604,3 +604,55 @@ fn a_square_block_model_file_loads_with_its_side_as_the_width() {
         "{e}"
     );
 }
+
+#[test]
+fn the_limit_surface_is_saved_and_a_bad_one_is_rejected() {
+    use dynlab_dynamics::physics::LimitSurface;
+    let tmp = tempfile::tempdir().unwrap();
+    let push = push_data(tmp.path());
+    let mut cfg = small(ModelKind::Physics, World::Push);
+    cfg.physics_iterations = 2;
+    cfg.physics_max_windows = 50;
+    cfg.limit_surface = LimitSurface::SupportPoints;
+    let m = train(&push, &cfg, &mut |_| {}).unwrap().model;
+    assert_eq!(
+        m.physics().unwrap().limit_surface(),
+        LimitSurface::SupportPoints
+    );
+    let dir = tmp.path().join("support");
+    save_model(&m, &dir, None, Default::default()).unwrap();
+    let json = std::fs::read_to_string(dir.join(MODEL_JSON)).unwrap();
+    assert!(
+        json.contains("\"limit_surface\": \"support_points\""),
+        "{json}"
+    );
+    let (back, _) = load_model(&dir, None, None).unwrap();
+    assert_eq!(
+        back.physics().unwrap().limit_surface(),
+        LimitSurface::SupportPoints
+    );
+    let (s, u) = ([0.4, 0.02, -0.3], [0.6, 0.2, 0.8]);
+    let (mut a, mut b) = ([0.0; 3], [0.0; 3]);
+    m.step(&s, &u, &mut a).unwrap();
+    back.step(&s, &u, &mut b).unwrap();
+    assert_eq!(a, b);
+    // a file without the entry is the ellipsoid, a misspelt one is corrupt
+    std::fs::write(
+        dir.join(MODEL_JSON),
+        json.replace("\"limit_surface\": \"support_points\",", ""),
+    )
+    .unwrap();
+    let (back, _) = load_model(&dir, None, None).unwrap();
+    assert_eq!(
+        back.physics().unwrap().limit_surface(),
+        LimitSurface::Ellipsoid
+    );
+    std::fs::write(dir.join(MODEL_JSON), json.replace("support_points", "cube")).unwrap();
+    let e = load_model(&dir, None, None).unwrap_err();
+    assert!(
+        matches!(e, LearnError::CorruptModel { .. })
+            && e.to_string().contains("cube")
+            && e.to_string().contains("support_points"),
+        "{e}"
+    );
+}

@@ -31,13 +31,14 @@ mod fit;
 mod model;
 mod push;
 mod step;
+mod support;
 
 pub use car::{CAR_FITTED_PARAMS, CAR_NOMINAL_PARAMS, MOTOR_LAG_STATE, STEERING_LAG_STATE};
 pub use custom::{CustomEffect, CustomError, CustomTerm, Target};
 pub use features::{Feature, FeatureError};
 pub use fit::{ResidualJacobian, Transition, residuals, residuals_and_jacobian};
 pub use model::{EffectTerm, ModelError, PhysicsModel};
-pub use push::{PUSH_FITTED_PARAMS, PUSH_NOMINAL_PARAMS, PUSHER_RADIUS_M};
+pub use push::{LimitSurface, PUSH_FITTED_PARAMS, PUSH_NOMINAL_PARAMS, PUSHER_RADIUS_M};
 pub use step::StepTape;
 
 /// Which robot a model or effect belongs to.

@@ -2,7 +2,7 @@
 
 use super::car::{self, CAR_NOMINAL_PARAMS, Slot};
 use super::custom::{CustomEffect, CustomError, Target};
-use super::push::{self, PUSH_NOMINAL_PARAMS};
+use super::push::{self, LimitSurface, PUSH_NOMINAL_PARAMS};
 use super::{Effect, ParamSpec, Robot};
 use crate::ode::{InputTape, VectorField};
 use crate::real::{Dual, Real};
@@ -27,6 +27,9 @@ pub enum ModelError {
         /// Effects available for the model.
         choices: String,
     },
+    /// A limit surface chosen for the car.
+    #[error("the limit surface '{0}' is a pushing model's; the car model has none")]
+    NotPushing(LimitSurface),
     /// An effect listed twice.
     #[error("effect {0} is listed twice; list each effect once")]
     DuplicateEffect(Effect),
@@ -115,6 +118,8 @@ pub struct PhysicsModel {
     dim_s: usize,
     /// Custom effects (their coefficients follow the library effects' parameters).
     custom: Vec<CustomEffect>,
+    /// Pushing: how the pusher's force moves the block.
+    limit_surface: LimitSurface,
 }
 
 impl PartialEq for Slot {
@@ -162,7 +167,23 @@ impl PhysicsModel {
             std_errors: None,
             dim_s,
             custom: Vec::new(),
+            limit_surface: LimitSurface::default(),
         })
+    }
+
+    /// Pushing: how the pusher's force moves the block (default
+    /// [`LimitSurface::Ellipsoid`]).
+    pub fn limit_surface(&self) -> LimitSurface {
+        self.limit_surface
+    }
+
+    /// Chooses how the pushing model moves the block; the car has no limit surface.
+    pub fn set_limit_surface(&mut self, surface: LimitSurface) -> Result<(), ModelError> {
+        if self.robot != Robot::Pushing && surface != LimitSurface::default() {
+            return Err(ModelError::NotPushing(surface));
+        }
+        self.limit_surface = surface;
+        Ok(())
     }
 
     /// The car model (dynamic bicycle, Pacejka tires, drivetrain) with the given effects.
@@ -377,6 +398,7 @@ impl PhysicsModel {
         let mut effects = self.effects();
         effects.extend_from_slice(extra);
         let mut m = PhysicsModel::new(self.robot, &effects)?;
+        m.limit_surface = self.limit_surface;
         for c in self.custom_effects() {
             m.add_custom(c)?;
         }
@@ -494,7 +516,7 @@ impl PhysicsModel {
                 };
                 car::rhs(p, &self.slots, active, s, u, inputs, out)
             }
-            Robot::Pushing => push::rhs(p, &self.slots, active, s, u, out),
+            Robot::Pushing => push::rhs(p, self, active, s, u, out),
         }
         self.add_custom_terms(p, s, u, out);
     }
@@ -932,13 +954,19 @@ impl PhysicsModel {
                 }
             }
             Robot::Pushing => {
+                let surface = match self.limit_surface {
+                    LimitSurface::Ellipsoid => "ellipsoidal limit surface",
+                    LimitSurface::SupportPoints => {
+                        "the 5 × 5 support points' Coulomb friction solved exactly"
+                    }
+                };
                 let _ = writeln!(
                     o,
-                    "pushing: quasi-static pusher–slider, ellipsoidal limit surface (time in pushes)"
+                    "pushing: quasi-static pusher–slider, {surface} (time in pushes)"
                 );
                 let _ = writeln!(
                     o,
-                    "  pusher on a world line: ψ = θ₀ + φ, start q = (x₀, y₀) + R(θ₀)·(−a/2 − r_p, κ·p·a/2), speed ℓ·L"
+                    "  pusher on a world line: ψ = θ₀ + φ, start q = (x₀, y₀) + R(θ₀)·(−a/2 − r_p, κ·p·b/2), speed ℓ·L"
                 );
                 let _ = writeln!(
                     o,

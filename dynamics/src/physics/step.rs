@@ -30,7 +30,7 @@ impl PushLine<'_> {
         let act = vec![true; self.model.slots().len()];
         push::rhs_line(
             p,
-            self.model.slots(),
+            self.model,
             &act,
             &z[..DS],
             [z[DS], z[DS + 1], z[DS + 2]],
