@@ -40,7 +40,7 @@
 //! [--angle-deg G | --random-angle] [--jitter-deg D] [--no-library] [--only aniso|nominal]
 //! [--refit a,c,kappa] [--pusher-speed V] [--pusher-acceleration A]
 //! [--limit-surface support_points]` (`--refit`: the nominal parameters the fit of the world's
-//! model frees and the diagnosis refits, default: training `a`, `c`, `kappa`, the diagnosis `c`, `kappa`; `--limit-surface`: the pushing
+//! model frees and the diagnosis refits, default `c`, `kappa`; `--limit-surface`: the pushing
 //! model's, default `ellipsoid`; the pusher's cruise speed \[m/s\] and acceleration \[m/s²\], default the
 //! simulator's 0.1 and 0.4)
 //! (defaults 5 seeds from 0, 10 nominal seeds, f = 0.1, 100 × 10 pushes, noise ×2, ratio 2,

@@ -150,10 +150,10 @@ pub enum DiagnosisError {
 /// effect with them refitted, 83 % for both without).
 const CAR_HELD: [&str; 2] = ["Bf", "Br"];
 
-/// Pushing parameters the diagnosis holds where training fits them: the block's depth `a` is
-/// the contact's arm, which a `com_offset` along the push moves as well; refitted together they
-/// trade off (on data with an offset of (0.02, 0.01) m: `ox` 0.037 ± 0.007, `oy` 0.016 ±
-/// 0.003). Training fits the depth on data without the effect, and the diagnosis keeps it.
+/// Pushing parameters the diagnosis holds where training fits them (`--free a,c,kappa`): the
+/// block's depth `a` is the contact's arm, which a `com_offset` along the push moves as well;
+/// refitted together they trade off (on data with an offset of (0.02, 0.01) m: `ox` 0.037 ±
+/// 0.007, `oy` 0.016 ± 0.003).
 const PUSH_HELD: [&str; 1] = ["a"];
 
 /// Settings of [`diagnose`]; every field has a documented default.
@@ -185,8 +185,8 @@ pub struct DiagnoseConfig {
     pub iterations: usize,
     /// Candidate effects (default: every effect of the world's library).
     pub effects: Option<Vec<Effect>>,
-    /// Refit the model's free nominal parameters (pushing: `c`, `κ`, the trained depth `a`
-    /// held; car: the tires and the drivetrain,
+    /// Refit the model's free nominal parameters (pushing: `c`, `κ`, a trained depth `a` held;
+    /// car: the tires and the drivetrain,
     /// [`CAR_FITTED_PARAMS`](dynlab_learn::dynamics::physics::CAR_FITTED_PARAMS)) on
     /// the fit half, for the baseline and jointly with every candidate, so that an effect is
     /// credited only with what the nominal model cannot absorb (default: pushing physics models

@@ -295,9 +295,8 @@ fn car_fit_freed_non_identifiable_mass() {
     }
     let p = PhysicsModel::pushing(&[]).unwrap();
     let pf = p.default_free();
-    // a, c, L, kappa, b: the width and the push length are measured, the depth (the contact's
-    // arm), c and κ fitted
-    assert_eq!(pf, vec![true, true, false, true, false]);
+    // a, c, L, kappa, b: the geometry and the push length are measured, c and κ fitted
+    assert_eq!(pf, vec![false, true, false, true, false]);
 }
 
 /// The rear axle saturates on the friction circle like the simulator's: at full throttle the
