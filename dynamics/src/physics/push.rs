@@ -115,8 +115,7 @@ pub static PUSH_NOMINAL_PARAMS: [ParamSpec; 5] = [
 /// a=0.08 --set b=0.12` for a rectangular block) and the push length `L` is the commanded
 /// scale; they stay fixed. A depth off by 8–10 % is taken up by a `com_offset` along the push
 /// in the diagnosis (3 of 20 perturbed worlds); `--free a,c,kappa` fits it (1 of 20), but to
-/// ±8 mm on 100 pushes, and the `com_offset` found on top of a fitted depth came out 50 % off
-/// (the diagnosis holds a trained depth). `κ` also absorbs what the ellipsoid gets wrong about
+/// ±8 mm on 100 pushes (the diagnosis holds a trained depth). `κ` also absorbs what the ellipsoid gets wrong about
 /// off-centre pushes (held at the simulator's 0.95 with `b` and `c` free, the term search
 /// finds `ẋ_b += ≈0.005·ℓ·p²` m/push on the simulator's nominal block), which is why it is
 /// fitted and often ends on its bound 1.
@@ -130,8 +129,10 @@ pub enum LimitSurface {
     #[default]
     Ellipsoid,
     /// The Coulomb friction of the `5 × 5` support points solved exactly (Newton's method in
-    /// every evaluation; derivatives by the implicit-function theorem), their arms scaled so that their mean distance from the
-    /// centre is `c`: off-centre pushes as the points dictate, at several times the cost.
+    /// every evaluation, started from the ellipsoid's motion, which stays where it finds no
+    /// solution; derivatives by the implicit-function theorem), their arms scaled so that their
+    /// mean distance from the centre is `c`: off-centre pushes as the points dictate, at
+    /// several times the cost.
     SupportPoints,
 }
 
@@ -320,6 +321,7 @@ pub(crate) fn rhs_line<R: Real>(
             (om / vpx).value(),
             1.0 / (1.0 + (py * py / c2).value()).sqrt(),
         ];
+        // the ellipsoid's motion where Newton finds no pressing solution (it starts from it)
         match super::support::pushed_twist(&pts, [a * -0.5, lat], [vpx, vpy], tw, mu, guess) {
             Some([vx, vy, om]) => (vx, vy, om),
             None => (vx, vy, om),
