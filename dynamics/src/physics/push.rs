@@ -202,7 +202,6 @@ pub(crate) fn rhs_line<R: Real>(
     out: &mut [R],
 ) {
     let [a, c, len, _kappa, b] = [0, 1, 2, 3, 4].map(|i| p[i]);
-    let c0 = c;
     let (x, y, th) = (s[0], s[1], s[2]);
     let [psi, qx, qy] = line;
     let zero = R::cst(0.0);
@@ -226,13 +225,18 @@ pub(crate) fn rhs_line<R: Real>(
             _ => {}
         }
     }
+    // the support points where the friction model needs them, computed once
+    let exact = model.limit_surface() == LimitSurface::SupportPoints;
+    let pts = (exact || com.is_some() || patch.is_some())
+        .then(|| support_points([a, b], c, [x, y, th], com, patch));
     // centre of friction and limit-surface ratio of the support distribution
-    let (ox, oy, c) = if com.is_none() && patch.is_none() {
-        (zero, zero, c)
-    } else {
-        support_friction([a, b], c, [x, y, th], com, patch)
+    let (ox, oy, c) = match &pts {
+        Some(pts) if com.is_some() || patch.is_some() => support_friction(pts),
+        _ => (zero, zero, c),
     };
     let (st, ct) = (th.sin(), th.cos());
+    // tilt force in the block frame, normalised by the friction limit
+    let tilt = tilt.map(|(gx, gy)| (ct * gx + st * gy, ct * gy - st * gx));
     let rel = psi - th;
     let (nd, td) = (rel.cos(), rel.sin());
     if nd.value() <= 1e-6 {
@@ -276,11 +280,9 @@ pub(crate) fn rhs_line<R: Real>(
         }
     };
     let mut mz = px * fy - py * fx;
-    if let Some((gx, gy)) = tilt {
-        // tilt force in the block frame, normalised by the friction limit; the wrench
-        // f·(F̂, m̂) + (t, 0) on the unit limit surface, then scaled to the contact kinematics
-        let tx = ct * gx + st * gy;
-        let ty = ct * gy - st * gx;
+    if let Some((tx, ty)) = tilt {
+        // the wrench f·(F̂, m̂) + (t, 0) on the unit limit surface, then scaled to the contact
+        // kinematics
         let qa = fx * fx + fy * fy + mz * mz / c2;
         let qb = fx * tx + fy * ty;
         let qc = tx * tx + ty * ty - 1.0;
@@ -305,15 +307,10 @@ pub(crate) fn rhs_line<R: Real>(
     // velocity of the geometric centre: v_cof + ω × (centre − cof)
     let vx = fx + om * oy;
     let vy = fy - om * ox;
-    let (vx, vy, om) = if model.limit_surface() == LimitSurface::SupportPoints {
-        let pts = support_points([a, b], c0, [x, y, th], com, patch);
+    let (vx, vy, om) = if let Some(pts) = pts.as_deref().filter(|_| exact) {
         let (cx_, cy_) = com.unwrap_or((zero, zero));
         let tw = match tilt {
-            Some((gx, gy)) => {
-                let tx = ct * gx + st * gy;
-                let ty = ct * gy - st * gx;
-                [tx, ty, cx_ * ty - cy_ * tx]
-            }
+            Some((tx, ty)) => [tx, ty, cx_ * ty - cy_ * tx],
             None => [zero; 3],
         };
         let guess = [
@@ -322,10 +319,8 @@ pub(crate) fn rhs_line<R: Real>(
             1.0 / (1.0 + (py * py / c2).value()).sqrt(),
         ];
         // the ellipsoid's motion where Newton finds no pressing solution (it starts from it)
-        match super::support::pushed_twist(&pts, [a * -0.5, lat], [vpx, vpy], tw, mu, guess) {
-            Some([vx, vy, om]) => (vx, vy, om),
-            None => (vx, vy, om),
-        }
+        super::support::pushed_twist(pts, [a * -0.5, lat], [vpx, vpy], tw, mu, guess)
+            .map_or((vx, vy, om), |[vx, vy, om]| (vx, vy, om))
     } else {
         (vx, vy, om)
     };
@@ -395,14 +390,7 @@ fn support_points<R: Real>(
 
 /// Centre of friction `(o_x, o_y)` (block frame) and limit-surface ratio of the
 /// [`support_points`]: their weighted centroid and weighted mean distance from it.
-fn support_friction<R: Real>(
-    size: [R; 2],
-    c: R,
-    pose: [R; 3],
-    com: Option<(R, R)>,
-    patch: Option<&[R]>,
-) -> (R, R, R) {
-    let pts = support_points(size, c, pose, com, patch);
+fn support_friction<R: Real>(pts: &[[R; 3]]) -> (R, R, R) {
     let zero = R::cst(0.0);
     let ox = pts.iter().fold(zero, |s, p| s + p[0] * p[2]);
     let oy = pts.iter().fold(zero, |s, p| s + p[1] * p[2]);
