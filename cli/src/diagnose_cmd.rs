@@ -35,7 +35,7 @@ pub struct DiagnoseArgs {
     #[arg(long, default_value_t = 0.1)]
     min_reduction: f64,
     /// Hold the model's nominal parameters (pushing physics models otherwise refit `c`, `κ`
-    /// with every candidate).
+    /// with every candidate, and the block's measured depth `a` within ±10 % for the baseline).
     #[arg(long)]
     no_refit: bool,
     /// Refit these nominal parameters with every candidate (comma-separated; the car's grip and
@@ -43,7 +43,7 @@ pub struct DiagnoseArgs {
     #[arg(long, value_delimiter = ',')]
     refit: Option<Vec<String>>,
     /// A refitted nominal parameter stays within this fraction of the model's value (e.g. 0.15;
-    /// default: within its physical bounds).
+    /// default: within its physical bounds, pushing's measured depth `a` within ±10 %).
     #[arg(long)]
     refit_tolerance: Option<f64>,
     /// Forward selection adds at most this many effects.

@@ -53,7 +53,11 @@
 //! with every candidate. The nominal pusher–slider's structural error (an ellipsoidal limit
 //! surface against a support of discrete points) is then not credited to an effect that
 //! happens to absorb part of it (`com_offset` did on nominal data), and an effect is scored
-//! against the best nominal model, not against the documented values.
+//! against the best nominal model, not against the documented values. A measured parameter
+//! (pushing: the block's depth `a`) is refitted for the baseline alone, within ±10 % of the
+//! model's value, and held there with the candidates: a depth off its measure is then not
+//! named a `com_offset` along the push, which moves the contact's arm exactly as the depth
+//! does.
 
 pub mod html;
 pub mod simdata;
@@ -150,11 +154,14 @@ pub enum DiagnosisError {
 /// effect with them refitted, 83 % for both without).
 const CAR_HELD: [&str; 2] = ["Bf", "Br"];
 
-/// Pushing parameters the diagnosis holds where training fits them (`--free a,c,kappa`): the
-/// block's depth `a` is the contact's arm, which a `com_offset` along the push moves as well;
-/// refitted together they trade off (on data with an offset of (0.02, 0.01) m: `ox` 0.037 ±
-/// 0.007, `oy` 0.016 ± 0.003).
-const PUSH_HELD: [&str; 1] = ["a"];
+/// Measured pushing parameters the diagnosis refits within a tolerance of the model's value
+/// (unless [`DiagnoseConfig::refit_tolerance`] sets one for all): the block's depth `a`, within
+/// ±10 %. The depth is the contact's arm, which a `com_offset` along the push moves exactly as
+/// much (the pusher works one face): held at a value 8–10 % off the block's, the diagnosis
+/// named a `com_offset` of half the depth's error on 3 of 20 perturbed worlds; refitted
+/// without a bound, the two trade off freely (on data with an offset of (0.02, 0.01) m: `ox`
+/// 0.037 ± 0.007, `oy` 0.016 ± 0.003).
+const PUSH_MEASURED: [(&str, f64); 1] = [("a", 0.1)];
 
 /// Settings of [`diagnose`]; every field has a documented default.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -185,7 +192,8 @@ pub struct DiagnoseConfig {
     pub iterations: usize,
     /// Candidate effects (default: every effect of the world's library).
     pub effects: Option<Vec<Effect>>,
-    /// Refit the model's free nominal parameters (pushing: `c`, `κ`, a trained depth `a` held;
+    /// Refit the model's free nominal parameters (pushing: `c`, `κ`, and the measured depth `a`
+    /// for the baseline alone, within ±10 %;
     /// car: the tires and the drivetrain,
     /// [`CAR_FITTED_PARAMS`](dynlab_learn::dynamics::physics::CAR_FITTED_PARAMS)) on
     /// the fit half, for the baseline and jointly with every candidate, so that an effect is
@@ -195,13 +203,13 @@ pub struct DiagnoseConfig {
     /// or `dynlab diagnose --refit Df,Dr,Cm1,Cm2,Cr0`, on longer data; network and hybrid models
     /// are never refitted).
     pub refit_nominal: Option<bool>,
-    /// Which nominal parameters are refitted (default: the model's default free ones; for the
-    /// car without the tire stiffness `Bf`, `Br`: the peak forces `Df`, `Dr` and the drivetrain
+    /// Which nominal parameters are refitted (default: the model's default free ones and, for
+    /// pushing, the measured depth `a`; for the car without the tire stiffness `Bf`, `Br`: the peak forces `Df`, `Dr` and the drivetrain
     /// `Cm1`, `Cm2`, `Cr0`).
     pub refit_params: Option<Vec<String>>,
     /// A refitted nominal parameter stays within this fraction of the model's value, e.g. 0.15
     /// for a model fitted on nominal data or a datasheet known to ±15 % (default: within the
-    /// parameter's physical bounds). Tried on the car with drag hidden: even ±15 % of the
+    /// parameter's physical bounds; a measured one, pushing's depth `a`, within ±10 %). Tried on the car with drag hidden: even ±15 % of the
     /// drivetrain (`Cm1`, `Cm2`, `Cr0`) absorbed the drag (3.7 % left for `aero_drag`, not
     /// significant, against 34 % with the drivetrain held).
     pub refit_tolerance: Option<f64>,
@@ -535,11 +543,16 @@ pub struct Diagnosis {
     /// The baseline's refitted nominal parameters (empty: the model as given).
     #[serde(default)]
     pub nominal_refit: BTreeMap<String, f64>,
+    /// Measured nominal parameters among those: refitted for the baseline alone, within this
+    /// fraction of the model's value, and held there with the candidates (pushing: the
+    /// block's depth `a`, ±10 %).
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub nominal_measured: BTreeMap<String, f64>,
     /// Refitted nominal parameters of the baseline that end on a bound of their range: the
     /// nominal model does not follow these data there, and an effect found may stand in for
     /// what it lacks (pushing: `κ` ends on its bound 1 on the simulator's data, perturbed or
-    /// not; on perturbed worlds whose pushed face is wider than deep, `com_offset` took up part
-    /// of the rest in 4 of 20).
+    /// not; a depth `a` on its bound is a block more than 10 % off its measure, or an offset
+    /// along the push).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub nominal_on_bound: Vec<String>,
     /// Per held-out window, the baseline's k-step error (normalised units, capped): with
@@ -816,6 +829,8 @@ struct Ctx<'a> {
     pure_physics: bool,
     /// Names of the refitted nominal parameters.
     refit: Vec<String>,
+    /// Measured nominal parameters and the fraction of their value they are refitted within.
+    measured: &'static [(&'static str, f64)],
     /// The effects the model already has.
     have: Vec<Effect>,
     fit_w: Vec<Window>,
@@ -952,9 +967,13 @@ impl<'a> Ctx<'a> {
         // start at their defaults
         let with = cur.physics.with_effects(&Vec::from_iter(cand))?;
         let p0 = with.params().to_vec();
+        // a measured parameter is refitted for the baseline alone: with an effect that moves
+        // the same way (the depth and a `com_offset` along the push) the pair is degenerate
+        let baseline = cand.is_none() && !joint;
         let mut idx: Vec<usize> = self
             .refit
             .iter()
+            .filter(|n| baseline || !self.measured.iter().any(|(m, _)| m == n))
             .filter_map(|n| with.param_index(n))
             .collect();
         let free_effects: Vec<Effect> = if joint {
@@ -975,15 +994,24 @@ impl<'a> Ctx<'a> {
         let specs: Vec<_> = idx.iter().map(|&i| all_specs[i].1).collect();
         let owners: Vec<Option<Effect>> = idx.iter().map(|&i| all_specs[i].0).collect();
         // nominal parameters within the tolerance of the model's own values
-        let tol = self.cfg.refit_tolerance.unwrap_or(f64::INFINITY);
         let with_names = with.param_names();
+        let tol = |i: usize| {
+            self.cfg
+                .refit_tolerance
+                .or_else(|| {
+                    let name = with_names[i].as_str();
+                    self.measured.iter().find(|(n, _)| *n == name).map(|m| m.1)
+                })
+                .unwrap_or(f64::INFINITY)
+        };
         let given = |i: usize| {
             self.base
                 .param_index(&with_names[i])
                 .map(|j| self.base.params()[j])
         };
         let bound = |i: usize, spec: f64, side: f64| match (all_specs[i].0, given(i)) {
-            (None, Some(v)) if tol.is_finite() => {
+            (None, Some(v)) if tol(i).is_finite() => {
+                let tol = tol(i);
                 let b = v + side * tol * v.abs();
                 if side < 0.0 { b.max(spec) } else { b.min(spec) }
             }
@@ -1214,9 +1242,20 @@ impl<'a> Ctx<'a> {
             .collect())
     }
 
+    /// The tolerance a measured nominal parameter is refitted within, where it is refitted.
+    fn measured_tolerance(&self, name: &str) -> Option<f64> {
+        let (_, t) = self.measured.iter().find(|(n, _)| *n == name)?;
+        self.refit
+            .iter()
+            .any(|n| n == name)
+            .then(|| self.cfg.refit_tolerance.unwrap_or(*t))
+    }
+
     /// Why a fitted effect is not a physical explanation, if it is not: a parameter on its
     /// bound, a patch that covers (nearly) all the data (a global change, which the refitted
-    /// nominal parameters stand for), or one wider than the data (a straight boundary).
+    /// nominal parameters stand for), or one wider than the data (a straight boundary); a
+    /// pushed block's centre of mass moved along the push by no more than the measured depth's
+    /// tolerance moves the contact's arm, and nothing across it.
     fn implausible(&self, e: Effect, f: &Fitted) -> Option<String> {
         let mine: Vec<usize> = (0..f.names.len())
             .filter(|&i| f.owners[i] == Some(e))
@@ -1225,6 +1264,27 @@ impl<'a> Ctx<'a> {
             return Some(format!(
                 "{at}: the data ask for more than this effect can give, so it is not counted"
             ));
+        }
+        if e == Effect::ComOffset
+            && let (Some(tol), Some(j)) = (self.measured_tolerance("a"), self.base.param_index("a"))
+        {
+            let at = |n: &str| mine.iter().copied().find(|&i| f.names[i] == n);
+            if let (Some(x), Some(y)) = (at("ox"), at("oy")) {
+                let arm = 0.5 * tol * self.base.params()[j];
+                let (ox, oy, s_oy) = (f.theta[x], f.theta[y], f.std[y]);
+                // an undetermined σ does not make the lateral part significant
+                let across = s_oy.is_finite() && oy.abs() > 2.0 * s_oy;
+                if ox.abs() <= arm && !across {
+                    return Some(format!(
+                        "the offset (ox = {} m, oy = {} ± {} m) lies along the push within half the measured depth's ±{:.0} % ({} m): the pusher works one face, where a depth off its measure moves the contact's arm as much (a depth known better: hold it, `--refit c,kappa`)",
+                        g4(ox),
+                        g4(oy),
+                        g4(s_oy),
+                        100.0 * tol,
+                        g4(arm)
+                    ));
+                }
+            }
         }
         if e.is_regional() && !self.positions.is_empty() {
             let get = |n: &str| {
@@ -1426,6 +1486,7 @@ impl<'a> Ctx<'a> {
             base: self.base.clone(),
             pure_physics: self.pure_physics,
             refit: self.refit.clone(),
+            measured: self.measured,
             have: self.have.clone(),
             fit_w: self.swap[0].clone(),
             test_w: self.swap[1].clone(),
@@ -1660,6 +1721,10 @@ pub fn diagnose(
     let pure_physics = model.physics().is_some() && model.network().is_none();
     // nominal parameters refitted with every candidate and for the baseline (physics models)
     let names = base.param_names();
+    let measured: &'static [(&'static str, f64)] = match world {
+        World::Car => &[],
+        World::Push => &PUSH_MEASURED,
+    };
     let refit: Vec<String> = if pure_physics && cfg.refit_nominal_for(world) {
         base.default_free()
             .iter()
@@ -1670,11 +1735,8 @@ pub fn diagnose(
                     && match &cfg.refit_params {
                         Some(names) => names.iter().any(|n| n == spec.name),
                         None => {
-                            let held: &[&str] = match world {
-                                World::Car => &CAR_HELD,
-                                World::Push => &PUSH_HELD,
-                            };
-                            **f && !held.contains(&spec.name)
+                            (**f && !CAR_HELD.contains(&spec.name))
+                                || measured.iter().any(|(n, _)| *n == spec.name)
                         }
                     }
             })
@@ -1708,6 +1770,7 @@ pub fn diagnose(
         base: base.clone(),
         pure_physics,
         refit,
+        measured,
         have: have.clone(),
         fit_w,
         test_w,
@@ -1941,6 +2004,12 @@ pub fn diagnose(
         segments: [split.train.len(), split.validation.len()],
         windows: [ctx.fit_w.len(), ctx.test_w.len()],
         baseline_error,
+        nominal_measured: ctx
+            .measured
+            .iter()
+            .filter(|(n, _)| nominal_refit.contains_key(*n))
+            .map(|&(n, t)| (n.to_string(), cfg.refit_tolerance.unwrap_or(t)))
+            .collect(),
         nominal_refit,
         nominal_on_bound,
         held_out_errors: baseline.test.clone(),
@@ -2447,14 +2516,27 @@ impl Diagnosis {
                 .iter()
                 .map(|(k, v)| format!("{k} = {}", g4(*v)))
                 .collect();
+            let (measured, joint): (Vec<&String>, Vec<&String>) = self
+                .nominal_refit
+                .keys()
+                .partition(|k| self.nominal_measured.contains_key(*k));
+            let measured: Vec<String> = measured
+                .into_iter()
+                .map(|k| {
+                    format!(
+                        ", the measured {k} (±{:.0} %)",
+                        100.0 * self.nominal_measured[k]
+                    )
+                })
+                .collect();
             let _ = writeln!(
                 o,
-                "baseline and candidates with the nominal {} refitted on the fit half (baseline: {})",
-                self.nominal_refit
-                    .keys()
-                    .cloned()
-                    .collect::<Vec<_>>()
-                    .join(", "),
+                "baseline and candidates with the nominal {} refitted on the fit half{} (baseline: {})",
+                joint.into_iter().cloned().collect::<Vec<_>>().join(", "),
+                match measured.is_empty() {
+                    true => String::new(),
+                    false => format!("{} for the baseline alone", measured.concat()),
+                },
                 p.join(", ")
             );
         }

@@ -327,3 +327,94 @@ fn the_support_points_limit_surface_predicts_quasi_static_pushes_better_than_the
         .unwrap_err();
     assert!(e.to_string().contains("car model has none"), "{e}");
 }
+
+#[test]
+fn a_block_depth_off_its_measure_is_refitted_not_named_a_com_offset() {
+    // the simulator's block is 0.1 m deep, the model's 8 % less: the pusher works one face, so
+    // a centre of mass moved along the push shortens the contact's arm exactly as the depth does
+    let d = data(None, 1.0, 20, 407);
+    let mut physics = PhysicsModel::pushing(&[]).unwrap();
+    physics.set_param("a", 0.092).unwrap();
+    let model = Model::new(
+        ModelKind::Physics,
+        World::Push,
+        d.pose_dt_s,
+        None,
+        None,
+        Some(physics),
+        default_physics_solver(World::Push),
+    )
+    .unwrap();
+    let cfg = DiagnoseConfig {
+        seed: 7,
+        discover: false,
+        ..DiagnoseConfig::default()
+    };
+    // the depth refitted within ±10 % of the model's: nothing named, the depth moves towards
+    // the block's
+    let diag = diagnose(&model, &d, &cfg).unwrap();
+    assert_eq!(diag.verdict, None, "{}", diag.table());
+    let a = diag.nominal_refit["a"];
+    assert!(
+        a > 0.096 && a <= 0.092 * 1.1 + 1e-12,
+        "a = {a}\n{}",
+        diag.table()
+    );
+    // … for the baseline alone: the candidates hold it
+    assert_eq!(diag.nominal_measured.get("a"), Some(&0.1));
+    assert!(
+        diag.table()
+            .contains("the measured a (±10 %) for the baseline alone")
+    );
+    for c in &diag.candidates {
+        assert!(c.nominal_params.contains_key("c"), "{}", diag.table());
+        assert!(!c.nominal_params.contains_key("a"), "{}", diag.table());
+    }
+    // held as given, the depth's error is named an offset along the push of about half of it
+    let held = DiagnoseConfig {
+        refit_params: Some(vec!["c".into(), "kappa".into()]),
+        ..cfg.clone()
+    };
+    let diag = diagnose(&model, &d, &held).unwrap();
+    assert_eq!(
+        diag.verdict.as_deref(),
+        Some("com_offset"),
+        "{}",
+        diag.table()
+    );
+    let ox = diag.candidates[0].params["ox"];
+    assert!(ox > 0.002 && ox < 0.006, "ox = {ox}\n{}", diag.table());
+    // 15 % short, beyond the tolerance: the depth ends on its bound and the offset takes the
+    // rest, along the push and within the tolerance's half depth, so it is not counted
+    let mut short = model.physics().unwrap().clone();
+    short.set_param("a", 0.085).unwrap();
+    let model = Model::new(
+        ModelKind::Physics,
+        World::Push,
+        d.pose_dt_s,
+        None,
+        None,
+        Some(short),
+        default_physics_solver(World::Push),
+    )
+    .unwrap();
+    let diag = diagnose(&model, &d, &cfg).unwrap();
+    assert_eq!(diag.verdict, None, "{}", diag.table());
+    assert!(
+        (diag.nominal_refit["a"] - 0.0935).abs() < 1e-6,
+        "{}",
+        diag.table()
+    );
+    let com = diag
+        .candidates
+        .iter()
+        .find(|c| c.effect == "com_offset")
+        .unwrap();
+    let note = com.note.as_deref().unwrap_or_default();
+    assert!(note.contains("lies along the push"), "{}", diag.table());
+    assert!(
+        com.params["ox"] > 0.0 && com.params["ox"] <= 0.5 * 0.1 * 0.085,
+        "{}",
+        diag.table()
+    );
+}

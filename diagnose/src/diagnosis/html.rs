@@ -53,10 +53,22 @@ pub fn diagnosis_html(d: &Diagnosis) -> String {
             .iter()
             .map(|(k, v)| format!("{} = {}", esc(k), g4(*v)))
             .collect();
+        let measured: Vec<String> = d
+            .nominal_measured
+            .iter()
+            .map(|(k, t)| format!("{} within ±{:.0} %", esc(k), 100.0 * t))
+            .collect();
         let _ = writeln!(
             o,
-            "<p>The model's nominal parameters are refitted on the fit half for the baseline ({}) and jointly with every candidate, so an effect is credited only with what the nominal model cannot absorb.</p>",
-            p.join(", ")
+            "<p>The model's nominal parameters are refitted on the fit half for the baseline ({}) and jointly with every candidate, so an effect is credited only with what the nominal model cannot absorb.{}</p>",
+            p.join(", "),
+            match measured.is_empty() {
+                true => String::new(),
+                false => format!(
+                    " Measured ones are refitted for the baseline alone and held there with the candidates: {}.",
+                    measured.join(", ")
+                ),
+            }
         );
     }
     for b in &d.nominal_on_bound {
