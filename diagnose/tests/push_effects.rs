@@ -418,3 +418,68 @@ fn a_block_depth_off_its_measure_is_refitted_not_named_a_com_offset() {
         diag.table()
     );
 }
+
+#[test]
+fn the_second_look_counts_an_effect_the_held_out_half_cannot_bound_and_not_a_nominal_fit() {
+    // 6 episodes: 3 held-out segments, too few for the held-out half alone to bound a
+    // reduction; the second look fits on the held-out half and scores both
+    let diag = |effect: Option<Effect>, seed: u64| {
+        let d = push_dataset(&push_scenario(effect, 1.0), 6, 10, 900 + seed, 2).unwrap();
+        let model = nominal_model(World::Push, d.pose_dt_s).unwrap();
+        let cfg = DiagnoseConfig {
+            seed,
+            discover: false,
+            ..DiagnoseConfig::default()
+        };
+        diagnose(&model, &d, &cfg).unwrap()
+    };
+    let tilted = diag(Some(Effect::TableTilt), 4);
+    let first = &tilted.selection[0].candidates;
+    let tilt = first.iter().find(|c| c.effect == "table_tilt").unwrap();
+    assert!(
+        tilt.error_reduction >= 0.1 && tilt.ci_lower <= 0.0,
+        "{}",
+        tilted.table()
+    );
+    let look = tilt.cross_fit.as_ref().expect("a second look");
+    assert!(look.counts(0.1), "{}", tilted.table());
+    assert_eq!(look.segments, 6, "{}", tilted.table());
+    assert!(tilt.significant, "{}", tilted.table());
+    assert_eq!(
+        tilted.verdict.as_deref(),
+        Some("table_tilt"),
+        "{}",
+        tilted.table()
+    );
+    // the slope from the fit half, downhill along +x from the held-out half's three episodes
+    let truth = 0.02f64.tan() / 0.1;
+    assert!(
+        (tilt.params["gx"] - truth).abs() < 0.05,
+        "{}",
+        tilted.table()
+    );
+    assert!(look.params["gx"] > 0.05, "{}", tilted.table());
+    // nominal data: a candidate that removes enough on the held-out half but is not bounded
+    // there gains nothing from the other half
+    let nominal = diag(None, 2);
+    let looked: Vec<_> = nominal
+        .selection
+        .iter()
+        .flat_map(|s| &s.candidates)
+        .filter(|c| c.cross_fit.is_some())
+        .collect();
+    assert!(!looked.is_empty(), "{}", nominal.table());
+    for c in looked {
+        assert!(
+            c.error_reduction >= 0.1 && c.ci_lower <= 0.0,
+            "{}",
+            nominal.table()
+        );
+        assert!(
+            !c.cross_fit.as_ref().unwrap().counts(0.1),
+            "{}",
+            nominal.table()
+        );
+    }
+    assert_eq!(nominal.verdict, None, "{}", nominal.table());
+}
