@@ -55,9 +55,10 @@
 //! happens to absorb part of it (`com_offset` did on nominal data), and an effect is scored
 //! against the best nominal model, not against the documented values. A measured parameter
 //! (pushing: the block's depth `a`) is refitted for the baseline alone, within ±10 % of the
-//! model's value, and held there with the candidates: a depth off its measure is then not
-//! named a `com_offset` along the push, which moves the contact's arm exactly as the depth
-//! does.
+//! model's value, and held at the model's value with the candidates: a `com_offset` must beat
+//! the best depth, since along the push it moves the contact's arm as the depth does; one that
+//! moves the centre only along the push, by no more than the depth's tolerance moves the arm,
+//! is not counted.
 
 pub mod html;
 pub mod simdata;
@@ -544,8 +545,8 @@ pub struct Diagnosis {
     #[serde(default)]
     pub nominal_refit: BTreeMap<String, f64>,
     /// Measured nominal parameters among those: refitted for the baseline alone, within this
-    /// fraction of the model's value, and held there with the candidates (pushing: the
-    /// block's depth `a`, ±10 %).
+    /// fraction of the model's value, and held at the model's value with the candidates
+    /// (pushing: the block's depth `a`, ±10 %).
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub nominal_measured: BTreeMap<String, f64>,
     /// Refitted nominal parameters of the baseline that end on a bound of their range: the
@@ -966,10 +967,19 @@ impl<'a> Ctx<'a> {
         // every parameter keeps its value by name (custom terms included); the candidate's
         // start at their defaults
         let with = cur.physics.with_effects(&Vec::from_iter(cand))?;
-        let p0 = with.params().to_vec();
-        // a measured parameter is refitted for the baseline alone: with an effect that moves
-        // the same way (the depth and a `com_offset` along the push) the pair is degenerate
+        let mut p0 = with.params().to_vec();
+        // a measured parameter is refitted for the baseline alone and held at its measure
+        // with the effects: with an effect that moves the same way (the depth and a
+        // `com_offset` along the push) the pair is degenerate, and a baseline's value, which
+        // took up part of the effect, would bias the effect's fit
         let baseline = cand.is_none() && !joint;
+        if !baseline {
+            for (name, _) in self.measured {
+                if let (Some(i), Some(j)) = (with.param_index(name), self.base.param_index(name)) {
+                    p0[i] = self.base.params()[j];
+                }
+            }
+        }
         let mut idx: Vec<usize> = self
             .refit
             .iter()

@@ -65,7 +65,7 @@ pub fn diagnosis_html(d: &Diagnosis) -> String {
             match measured.is_empty() {
                 true => String::new(),
                 false => format!(
-                    " Measured ones are refitted for the baseline alone and held there with the candidates: {}.",
+                    " Measured ones are refitted for the baseline alone and held at the model's value with the candidates: {}.",
                     measured.join(", ")
                 ),
             }
