@@ -157,11 +157,11 @@ const CAR_HELD: [&str; 2] = ["Bf", "Br"];
 
 /// Measured pushing parameters the diagnosis refits within a tolerance of the model's value
 /// (unless [`DiagnoseConfig::refit_tolerance`] sets one for all): the block's depth `a`, within
-/// ±10 %. The depth is the contact's arm, which a `com_offset` along the push moves exactly as
-/// much (the pusher works one face): held at a value 8–10 % off the block's, the diagnosis
-/// named a `com_offset` of half the depth's error on 3 of 20 perturbed worlds; refitted
-/// without a bound, the two trade off freely (on data with an offset of (0.02, 0.01) m: `ox`
-/// 0.037 ± 0.007, `oy` 0.016 ± 0.003).
+/// ±10 %, for the baseline alone. The depth is the contact's arm, which a `com_offset` along
+/// the push moves as much (the pusher works one face): held at a value 8–10 % off the
+/// block's, the diagnosis named a `com_offset` of half the depth's error on 3 of 20 perturbed
+/// worlds; refitted with the candidates, the two trade off (on data with an offset of (0.02,
+/// 0.01) m: `ox` 0.037 ± 0.012, `oy` 0.016 ± 0.004, the depth on its bound).
 const PUSH_MEASURED: [(&str, f64); 1] = [("a", 0.1)];
 
 /// Settings of [`diagnose`]; every field has a documented default.

@@ -113,9 +113,9 @@ pub static PUSH_NOMINAL_PARAMS: [ParamSpec; 5] = [
 /// Nominal pushing parameters a fit frees by default: the limit-surface ratio `c` and the usable
 /// face fraction `κ`. The block's depth `a` and width `b` are measured (`dynlab train --set
 /// a=0.08 --set b=0.12` for a rectangular block) and the push length `L` is the commanded
-/// scale; they stay fixed. A depth off by 8–10 % is taken up by a `com_offset` along the push
-/// in the diagnosis (3 of 20 perturbed worlds); `--free a,c,kappa` fits it (1 of 20), but to
-/// ±8 mm on 100 pushes (the diagnosis holds a trained depth). `κ` also absorbs what the ellipsoid gets wrong about
+/// scale; they stay fixed (the diagnosis refits the depth within ±10 % for its baseline;
+/// `--free a,c,kappa` fits it in training, to ±8 mm on 100 pushes). `κ` also absorbs what the
+/// ellipsoid gets wrong about
 /// off-centre pushes (held at the simulator's 0.95 with `b` and `c` free, the term search
 /// finds `ẋ_b += ≈0.005·ℓ·p²` m/push on the simulator's nominal block), which is why it is
 /// fitted and often ends on its bound 1.
