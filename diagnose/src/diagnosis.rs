@@ -194,8 +194,7 @@ pub struct DiagnoseConfig {
     /// Candidate effects (default: every effect of the world's library).
     pub effects: Option<Vec<Effect>>,
     /// Refit the model's free nominal parameters (pushing: `c`, `κ`, and the measured depth `a`
-    /// for the baseline alone, within ±10 %;
-    /// car: the tires and the drivetrain,
+    /// for the baseline alone, within ±10 %; car: the tires and the drivetrain,
     /// [`CAR_FITTED_PARAMS`](dynlab_learn::dynamics::physics::CAR_FITTED_PARAMS)) on
     /// the fit half, for the baseline and jointly with every candidate, so that an effect is
     /// credited only with what the nominal model cannot absorb (default: pushing physics models
@@ -205,14 +204,15 @@ pub struct DiagnoseConfig {
     /// are never refitted).
     pub refit_nominal: Option<bool>,
     /// Which nominal parameters are refitted (default: the model's default free ones and, for
-    /// pushing, the measured depth `a`; for the car without the tire stiffness `Bf`, `Br`: the peak forces `Df`, `Dr` and the drivetrain
-    /// `Cm1`, `Cm2`, `Cr0`).
+    /// pushing, the measured depth `a`; for the car without the tire stiffness `Bf`, `Br`: the
+    /// peak forces `Df`, `Dr` and the drivetrain `Cm1`, `Cm2`, `Cr0`).
     pub refit_params: Option<Vec<String>>,
     /// A refitted nominal parameter stays within this fraction of the model's value, e.g. 0.15
     /// for a model fitted on nominal data or a datasheet known to ±15 % (default: within the
-    /// parameter's physical bounds; a measured one, pushing's depth `a`, within ±10 %). Tried on the car with drag hidden: even ±15 % of the
-    /// drivetrain (`Cm1`, `Cm2`, `Cr0`) absorbed the drag (3.7 % left for `aero_drag`, not
-    /// significant, against 34 % with the drivetrain held).
+    /// parameter's physical bounds; a measured one, pushing's depth `a`, within ±10 %). Tried on
+    /// the car with drag hidden: even ±15 % of the drivetrain (`Cm1`, `Cm2`, `Cr0`) absorbed
+    /// the drag (3.7 % left for `aero_drag`, not significant, against 34 % with the drivetrain
+    /// held).
     pub refit_tolerance: Option<f64>,
     /// Divide the bootstrap's error probability `1 − confidence` by the number of candidates
     /// tested (Bonferroni), so that the chance of *any* false candidate stays at
@@ -983,7 +983,7 @@ impl<'a> Ctx<'a> {
         let mut idx: Vec<usize> = self
             .refit
             .iter()
-            .filter(|n| baseline || !self.measured.iter().any(|(m, _)| m == n))
+            .filter(|n| baseline || self.measured_tolerance(n).is_none())
             .filter_map(|n| with.param_index(n))
             .collect();
         let free_effects: Vec<Effect> = if joint {
@@ -1006,12 +1006,8 @@ impl<'a> Ctx<'a> {
         // nominal parameters within the tolerance of the model's own values
         let with_names = with.param_names();
         let tol = |i: usize| {
-            self.cfg
-                .refit_tolerance
-                .or_else(|| {
-                    let name = with_names[i].as_str();
-                    self.measured.iter().find(|(n, _)| *n == name).map(|m| m.1)
-                })
+            self.measured_tolerance(&with_names[i])
+                .or(self.cfg.refit_tolerance)
                 .unwrap_or(f64::INFINITY)
         };
         let given = |i: usize| {
@@ -1252,13 +1248,10 @@ impl<'a> Ctx<'a> {
             .collect())
     }
 
-    /// The tolerance a measured nominal parameter is refitted within, where it is refitted.
+    /// The tolerance a measured nominal parameter is refitted within (`None`: not measured).
     fn measured_tolerance(&self, name: &str) -> Option<f64> {
         let (_, t) = self.measured.iter().find(|(n, _)| *n == name)?;
-        self.refit
-            .iter()
-            .any(|n| n == name)
-            .then(|| self.cfg.refit_tolerance.unwrap_or(*t))
+        Some(self.cfg.refit_tolerance.unwrap_or(*t))
     }
 
     /// Why a fitted effect is not a physical explanation, if it is not: a parameter on its
@@ -1276,6 +1269,7 @@ impl<'a> Ctx<'a> {
             ));
         }
         if e == Effect::ComOffset
+            && self.refit.iter().any(|n| n == "a")
             && let (Some(tol), Some(j)) = (self.measured_tolerance("a"), self.base.param_index("a"))
         {
             let at = |n: &str| mine.iter().copied().find(|&i| f.names[i] == n);
@@ -1745,7 +1739,11 @@ pub fn diagnose(
                     && match &cfg.refit_params {
                         Some(names) => names.iter().any(|n| n == spec.name),
                         None => {
-                            (**f && !CAR_HELD.contains(&spec.name))
+                            let held: &[&str] = match world {
+                                World::Car => &CAR_HELD,
+                                World::Push => &[],
+                            };
+                            (**f && !held.contains(&spec.name))
                                 || measured.iter().any(|(n, _)| *n == spec.name)
                         }
                     }
@@ -2014,11 +2012,9 @@ pub fn diagnose(
         segments: [split.train.len(), split.validation.len()],
         windows: [ctx.fit_w.len(), ctx.test_w.len()],
         baseline_error,
-        nominal_measured: ctx
-            .measured
-            .iter()
-            .filter(|(n, _)| nominal_refit.contains_key(*n))
-            .map(|&(n, t)| (n.to_string(), cfg.refit_tolerance.unwrap_or(t)))
+        nominal_measured: nominal_refit
+            .keys()
+            .filter_map(|n| Some((n.clone(), ctx.measured_tolerance(n)?)))
             .collect(),
         nominal_refit,
         nominal_on_bound,
