@@ -42,7 +42,11 @@
 //!    bootstrap interval over held-out segments (resampled whole; of the total error's and of
 //!    the typical segment's improvement, the larger) of its improvement is above
 //!    zero at error probability `(1 − confidence)/M` (Bonferroni; with enough resamples that ten
-//!    lie beyond the bound), and its coefficient is more
+//!    lie beyond the bound) — or, where that bound is not above zero, a second look as the
+//!    library's candidates get ([`CrossFit`]: the term and those before it fitted on the
+//!    held-out half and scored on the fit half, both halves' improvement at least
+//!    `min_reduction` with its bound above zero at half that error probability) —, and its
+//!    coefficient is more
 //!    than the same threshold's `z` standard errors (clustered by trajectory) from zero. The
 //!    search stops at the first term that is not significant or after
 //!    [`DiscoveryConfig::max_terms`]. Chaotic windows (a rollout near a spin, far more
@@ -72,7 +76,9 @@ use dynlab_learn::{Dataset, LearnError, Model, World};
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
-use crate::diagnosis::{SplitFailure, WindowSplit, bootstrap_lower, robust_windows, split_windows};
+use crate::diagnosis::{
+    CrossFit, SplitFailure, WindowSplit, bootstrap_lower, robust_windows, split_windows,
+};
 use crate::report::{Chart, LineChart, Series, escape};
 
 /// Errors of a term search (finding nothing is an outcome, not an error).
@@ -311,6 +317,12 @@ pub struct DiscoveredTerm {
     pub ci_lower: f64,
     /// Significant (see the [module docs](self)).
     pub significant: bool,
+    /// The second look, where the held-out half alone could not bound a large enough
+    /// reduction: the term (and those before it) fitted on the held-out half and scored on the
+    /// fit half, pooled with the first look (`params`: the coefficient fitted on the held-out
+    /// half).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cross_fit: Option<CrossFit>,
     /// `|θ|/σ` of the one-step regression that selected the term.
     pub one_step_t: f64,
     /// Share of the target's one-step residual (sum of squares) the term explains.
@@ -1108,6 +1120,9 @@ pub fn discover_terms_split(
     let mut prev_test = base_test.clone();
     let mut final_fit: Option<(CustomEffect, Vec<f64>, Vec<f64>)> = None;
     let mut out_terms: Vec<DiscoveredTerm> = Vec::new();
+    // the fit half's windows scored in a second look (spins left out as on the held-out half)
+    // and the model's errors there
+    let mut fit_scored: Option<(Vec<Window>, Vec<f64>)> = None;
     // each round tries the best term that holds everywhere first and a region's term (a feature
     // of the position) only when that one is not significant: a bump times a slip angle fitted
     // the fit half of `bags/car_steering_gain` better than `tanh(α_f/α₀)` and removed half as
@@ -1186,7 +1201,74 @@ pub fn discover_terms_split(
             );
             let j = theta.len() - 1;
             let t_ok = (theta[j] / std[j]).abs() > z;
-            let significant = reduction >= cfg.min_reduction && lower > 0.0 && t_ok;
+            // a large reduction the held-out half cannot bound: both halves scored
+            let cross_fit = if reduction >= cfg.min_reduction && t_ok && lower <= 0.0 {
+                let (fit_s, base_fit) = fit_scored.get_or_insert_with(|| {
+                    let ws = spin_free_windows(physics, &ctx, fit_w);
+                    let e = ctx.errors(physics, &ws, None);
+                    (ws, e)
+                });
+                let on_held_out = |terms: Vec<CustomTerm>| -> Result<PhysicsModel, DiscoveryError> {
+                    let mut m = physics.clone();
+                    if !terms.is_empty() {
+                        let e = CustomEffect::new(&name, terms)
+                            .map_err(|e| DiscoveryError::Physics(ModelError::Custom(e)))?;
+                        let (th, _) = fit_effect(physics, &e, &ctx, test_w, cfg.iterations)?;
+                        m.add_custom(e.with_coefficients(&th))?;
+                    }
+                    Ok(m)
+                };
+                let before_m = on_held_out(accepted.clone())?;
+                let after_m = on_held_out(effect.terms().to_vec())?;
+                let coefficient = after_m
+                    .custom_effects()
+                    .last()
+                    .map(|c| c.terms()[j].coefficient);
+                let b2 = ctx.errors(&before_m, fit_s, None);
+                let a2 = ctx.errors(&after_m, fit_s, None);
+                let ws: Vec<Window> = test_w.iter().chain(fit_s.iter()).copied().collect();
+                let before: Vec<f64> = prev_test.iter().chain(&b2).copied().collect();
+                let after: Vec<f64> = test.iter().chain(&a2).copied().collect();
+                let e0_both = e0 + sum(base_fit);
+                let mut segs: Vec<usize> = ws.iter().map(|w| w.trajectory).collect();
+                segs.sort_unstable();
+                segs.dedup();
+                Some(CrossFit {
+                    other_reduction: if sum(&b2) > 0.0 {
+                        1.0 - sum(&a2) / sum(&b2)
+                    } else {
+                        0.0
+                    },
+                    reduction: if e0_both > 0.0 {
+                        (sum(&before) - sum(&after)) / e0_both
+                    } else {
+                        0.0
+                    },
+                    ci_lower: bootstrap_lower(
+                        &ws,
+                        &before,
+                        &after,
+                        cfg.bootstrap,
+                        0.5 * alpha,
+                        cfg.seed
+                            ^ (round as u64 + 1 + 1000 * u64::from(positional))
+                                .wrapping_mul(0x6C62_272E_07BB_0142),
+                    ),
+                    segments: segs.len(),
+                    params: coefficient
+                        .into_iter()
+                        .map(|c| ("coefficient".to_string(), c))
+                        .collect(),
+                })
+            } else {
+                None
+            };
+            let significant = reduction >= cfg.min_reduction
+                && t_ok
+                && (lower > 0.0
+                    || cross_fit
+                        .as_ref()
+                        .is_some_and(|c| c.counts(cfg.min_reduction)));
             let unit_time = time_unit(robot);
             out_terms.push(DiscoveredTerm {
                 state: pick.target.name().to_string(),
@@ -1199,6 +1281,7 @@ pub fn discover_terms_split(
                 error_reduction: reduction,
                 ci_lower: lower,
                 significant,
+                cross_fit,
                 one_step_t: pick.t,
                 one_step_share: pick.share,
                 plot: term_plot(
@@ -1578,6 +1661,9 @@ impl Discovery {
                     100.0 * t.ci_lower.max(-9.99),
                     if t.significant { "yes" } else { "no" }
                 );
+                if let Some(x) = &t.cross_fit {
+                    let _ = writeln!(o, "    {}", crate::diagnosis::cross_fit_text(x));
+                }
             }
         }
         let _ = writeln!(o, "{}", self.summary);
@@ -1641,6 +1727,13 @@ pub fn discovery_html(d: &Discovery) -> String {
             100.0 * t.ci_lower.max(-9.99),
             if t.significant { "yes" } else { "no" }
         );
+        if let Some(x) = &t.cross_fit {
+            let _ = writeln!(
+                o,
+                "<tr><td></td><td colspan=3>{}</td></tr>",
+                escape(&crate::diagnosis::cross_fit_text(x))
+            );
+        }
     }
     let _ = writeln!(o, "</table>");
     for t in &d.terms {
