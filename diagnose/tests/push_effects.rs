@@ -174,6 +174,20 @@ fn pusher_friction_term_matches_the_simulator() {
     effect_term_matches_simulator(Effect::PusherFriction, 24);
 }
 
+/// A pushing physics model with the default solver.
+fn physics_model(physics: PhysicsModel, dt: f64) -> Model {
+    Model::new(
+        ModelKind::Physics,
+        World::Push,
+        dt,
+        None,
+        None,
+        Some(physics),
+        default_physics_solver(World::Push),
+    )
+    .unwrap()
+}
+
 fn run(effect: Option<Effect>, seed: u64) -> Diagnosis {
     let d = data(effect, 1.0, 20, 400 + seed);
     let model = nominal_model(World::Push, d.pose_dt_s).unwrap();
@@ -255,16 +269,7 @@ fn refit_tolerance_keeps_the_nominal_parameters_near_the_models_values() {
         .into_iter()
         .zip(physics.params().iter().copied())
         .collect();
-    let model = Model::new(
-        ModelKind::Physics,
-        World::Push,
-        d.pose_dt_s,
-        None,
-        None,
-        Some(physics),
-        default_physics_solver(World::Push),
-    )
-    .unwrap();
+    let model = physics_model(physics, d.pose_dt_s);
     let tol = 0.02;
     let cfg = DiagnoseConfig {
         seed: 3,
@@ -331,20 +336,11 @@ fn the_support_points_limit_surface_predicts_quasi_static_pushes_better_than_the
 #[test]
 fn a_block_depth_off_its_measure_is_refitted_not_named_a_com_offset() {
     // the simulator's block is 0.1 m deep, the model's 8 % less: the pusher works one face, so
-    // a centre of mass moved along the push shortens the contact's arm exactly as the depth does
+    // a centre of mass moved along the push moves the contact's arm as the depth does
     let d = data(None, 1.0, 20, 407);
     let mut physics = PhysicsModel::pushing(&[]).unwrap();
     physics.set_param("a", 0.092).unwrap();
-    let model = Model::new(
-        ModelKind::Physics,
-        World::Push,
-        d.pose_dt_s,
-        None,
-        None,
-        Some(physics),
-        default_physics_solver(World::Push),
-    )
-    .unwrap();
+    let model = physics_model(physics, d.pose_dt_s);
     let cfg = DiagnoseConfig {
         seed: 7,
         discover: false,
@@ -389,16 +385,7 @@ fn a_block_depth_off_its_measure_is_refitted_not_named_a_com_offset() {
     // it is not counted
     let mut short = model.physics().unwrap().clone();
     short.set_param("a", 0.09).unwrap();
-    let model = Model::new(
-        ModelKind::Physics,
-        World::Push,
-        d.pose_dt_s,
-        None,
-        None,
-        Some(short),
-        default_physics_solver(World::Push),
-    )
-    .unwrap();
+    let model = physics_model(short, d.pose_dt_s);
     let diag = diagnose(&model, &d, &cfg).unwrap();
     assert_eq!(diag.verdict, None, "{}", diag.table());
     assert!(
