@@ -1208,15 +1208,15 @@ pub fn discover_terms_split(
                     let e = ctx.errors(physics, &ws, None);
                     (ws, e)
                 });
+                // the terms' coefficients refitted on the held-out half
                 let on_held_out = |terms: Vec<CustomTerm>| -> Result<PhysicsModel, DiscoveryError> {
-                    let mut m = physics.clone();
-                    if !terms.is_empty() {
-                        let e = CustomEffect::new(&name, terms)
-                            .map_err(|e| DiscoveryError::Physics(ModelError::Custom(e)))?;
-                        let (th, _) = fit_effect(physics, &e, &ctx, test_w, cfg.iterations)?;
-                        m.add_custom(e.with_coefficients(&th))?;
+                    if terms.is_empty() {
+                        return with_terms(terms);
                     }
-                    Ok(m)
+                    let e = CustomEffect::new(&name, terms)
+                        .map_err(|e| DiscoveryError::Physics(ModelError::Custom(e)))?;
+                    let (th, _) = fit_effect(physics, &e, &ctx, test_w, cfg.iterations)?;
+                    with_terms(e.with_coefficients(&th).terms().to_vec())
                 };
                 let before_m = on_held_out(accepted.clone())?;
                 let after_m = on_held_out(effect.terms().to_vec())?;
