@@ -14,11 +14,11 @@
 //!    the feature times the derivatives' sensitivity to the input; `δ` takes only features of
 //!    the commands and the speed, `μ` only features of the position (a region of other grip;
 //!    [`Target::searched_with`]). Besides the library's coarse lattice of bumps and bands,
-//!    `μ` takes the band and the bump whose shape, screened on a fine lattice, explains the most
-//!    of its residual alone (a region's edges then fall where the data put them), and `δ` the
-//!    saturating steering term `δ·vₓ²/(vₓ² + v₀²)` whose speed scale `v₀` does (an
-//!    understeering car's steady-state gain `1/(1 + vₓ²/v₀²)`, which `δ·vₓ` and `δ·vₓ²` follow
-//!    only over part of the speeds).
+//!    `μ` takes the strip (flat, with sharp edges) and the bump whose shape, screened on a fine
+//!    lattice, explains the most of its residual alone (a region's edges then fall where the
+//!    data put them), and `δ` the saturating steering term `δ·vₓ²/(vₓ² + v₀²)` whose speed
+//!    scale `v₀` does (an understeering car's steady-state gain `1/(1 + vₓ²/v₀²)`, which `δ·vₓ`
+//!    and `δ·vₓ²` follow only over part of the speeds).
 //! 2. **Screen** per target: every feature regressed alone on the residual; a (target, feature)
 //!    pair passes when its coefficient's t-value (standard error clustered by trajectory,
 //!    [`cluster_std`]) clears the Bonferroni threshold for the `M` pairs tried; the strongest
@@ -66,7 +66,7 @@ use dynlab_learn::dynamics::conventions::wrap_angle;
 use dynlab_learn::dynamics::data::{DataError, SplitMix64, StateTrajectory, Window};
 use dynlab_learn::dynamics::ode::Solver;
 use dynlab_learn::dynamics::physics::custom::fmt_num;
-use dynlab_learn::dynamics::physics::features::{Area, Feature, library, time_unit};
+use dynlab_learn::dynamics::physics::features::{Area, Atom, Feature, library, time_unit};
 use dynlab_learn::dynamics::physics::{
     CustomEffect, CustomTerm, ModelError, PhysicsModel, Robot, Target, lattice,
 };
@@ -642,53 +642,69 @@ pub(crate) fn area_of(points: &[[f64; 2]]) -> Area {
     Area { lo, hi }
 }
 
-/// The band and the bump that explain the most of the grip regression `reg` alone, their
-/// shapes (a band's direction, offset and width; a bump's centre and width) screened on a fine
+/// The strip and the bump that explain the most of the grip regression `reg` alone, their
+/// shapes (a strip's direction, offset and width; a bump's centre and width) screened on a fine
 /// lattice over the positions of `one`: the library's coarse lattice places a region's edges
 /// only to within its spacing (a band of the true direction, a third of the floor off, removed
-/// under half of what the band removes). They join the library as two more candidates.
+/// under half of what the band removes). A strip is flat inside with sharp edges, as a stripe
+/// of other grip is; a Gaussian band fitted the same way takes too much at its centre line and
+/// spreads past the edges. They join the library as two more candidates.
 fn fitted_regions(reg: &Regression, one: &OneStep) -> Vec<Feature> {
     const ANGLES: usize = 36;
     const OFFSETS: usize = 30;
     const CENTRES: usize = 15;
-    const WIDTHS: [f64; 4] = [0.04, 0.07, 0.1, 0.14];
+    const BUMP_WIDTHS: [f64; 4] = [0.04, 0.07, 0.1, 0.14];
+    // full widths of a strip: 12, geometric from 6 to 45 % of the area's larger side
+    const STRIP_WIDTHS: usize = 12;
     let sums = RowSums::of(reg, one.positions());
     let Area { lo, hi } = sums.area();
     let side = (hi[0] - lo[0]).max(hi[1] - lo[1]).max(1e-3);
     let round = |v: f64| (v * 1000.0).round() / 1000.0;
-    let mut best: [Option<(f64, String)>; 2] = [None, None];
-    let mut consider = |slot: usize, name: String, fit: Option<(f64, f64)>| {
-        if let Some((gain, _)) = fit
-            && best[slot].as_ref().is_none_or(|b| gain > b.0)
-        {
-            best[slot] = Some((gain, name));
+    let best_of = |atoms: &mut dyn Iterator<Item = Atom>| {
+        let mut best: Option<(f64, Atom)> = None;
+        for atom in atoms {
+            if let Some((gain, _)) = sums.fit(|p| atom.eval::<f64>(Robot::Car, &[], &p, &[]))
+                && best.is_none_or(|b| gain > b.0)
+            {
+                best = Some((gain, atom));
+            }
         }
+        best.and_then(|b| Feature::new(vec![b.1]).ok())
     };
-    for w in WIDTHS.map(|q| round(q * side).max(1e-3)) {
-        for i in 0..ANGLES {
+    let strips = (0..STRIP_WIDTHS).flat_map(|k| {
+        let q = 0.06 * (0.45f64 / 0.06).powf(k as f64 / (STRIP_WIDTHS - 1) as f64);
+        let w = round(q * side).max(1e-3);
+        (0..ANGLES).flat_map(move |i| {
             let a = round(i as f64 * std::f64::consts::PI / ANGLES as f64);
-            let nv = [-a.sin(), a.cos()];
-            let proj = |p: [f64; 2]| nv[0] * p[0] + nv[1] * p[1];
+            // the offsets span the area across the strip's direction
+            let proj = |p: [f64; 2]| p[1] * a.cos() - p[0] * a.sin();
             let corners = [lo, [lo[0], hi[1]], [hi[0], lo[1]], hi].map(proj);
             let pmin = corners.iter().copied().fold(f64::INFINITY, f64::min);
             let pmax = corners.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-            for j in 0..OFFSETS {
-                let d = round(pmin + (j as f64 + 0.5) / OFFSETS as f64 * (pmax - pmin));
-                let fit = sums.fit(|p| (-(proj(p) - d).powi(2) / (2.0 * w * w)).exp());
-                consider(0, format!("band({a},{d},{w})"), fit);
-            }
-        }
-        for c in lattice(lo, hi, CENTRES) {
-            let (cx, cy) = (round(c[0]), round(c[1]));
-            let fit =
-                sums.fit(|p| (-((p[0] - cx).powi(2) + (p[1] - cy).powi(2)) / (2.0 * w * w)).exp());
-            consider(1, format!("gauss({cx},{cy},{w})"), fit);
-        }
-    }
-    best.into_iter()
-        .flatten()
-        .filter_map(|(_, name)| Feature::parse(&name).ok())
-        .collect()
+            (0..OFFSETS).map(move |j| Atom::Strip {
+                a,
+                d: round(pmin + (j as f64 + 0.5) / OFFSETS as f64 * (pmax - pmin)),
+                w,
+            })
+        })
+    });
+    let bumps = BUMP_WIDTHS.into_iter().flat_map(|q| {
+        let r = round(q * side).max(1e-3);
+        lattice(lo, hi, CENTRES)
+            .into_iter()
+            .map(move |c| Atom::Gauss {
+                cx: round(c[0]),
+                cy: round(c[1]),
+                r,
+            })
+    });
+    [
+        best_of(&mut strips.into_iter()),
+        best_of(&mut bumps.into_iter()),
+    ]
+    .into_iter()
+    .flatten()
+    .collect()
 }
 
 /// The steering term `δ·vₓ²/(vₓ² + v₀²)` whose speed scale `v₀`, screened on a fine lattice

@@ -317,7 +317,7 @@ fn a_nominal_parameter_change_is_not_reported_as_a_term() {
         "δ·vₓ, δ·vₓ², δ·|v|, …, δ·vₓ²/(vₓ² + v₀²) are tried on δ"
     );
     // the grip takes the position alone: `x`, `y`, each bump and the bands (4 directions ×
-    // `grid` offsets, tried on the grip only), the band and the bump fitted to its residual,
+    // `grid` offsets, tried on the grip only), the strip and the bump fitted to its residual,
     // but not `1` (the peak forces)
     let grip = library(Robot::Car, None, 0)
         .iter()

@@ -171,7 +171,7 @@ pub fn low_grip_band() -> dynlab_sim::car::GripPatch {
 }
 
 /// Whether a term's feature has a position factor over [`low_grip_band`] on the 3 × 3 m
-/// floor: a bump centred in it, or a band whose centre line crosses it.
+/// floor: a bump centred in it, or a band or strip whose centre line crosses it.
 pub fn over_low_grip_band(feature: &str) -> bool {
     use dynlab_learn::dynamics::physics::features::{Atom, Feature};
     let band = low_grip_band().region;
@@ -184,7 +184,7 @@ pub fn over_low_grip_band(feature: &str) -> bool {
     };
     f.factors().iter().any(|a| match *a {
         Atom::Gauss { cx, cy, .. } => inside(cx, cy),
-        Atom::Band { a, d, .. } => (-15..=15).any(|i| {
+        Atom::Band { a, d, .. } | Atom::Strip { a, d, .. } => (-15..=15).any(|i| {
             let s = 0.1 * f64::from(i);
             let (x, y) = (-a.sin() * d + a.cos() * s, a.cos() * d + a.sin() * s);
             x.abs() <= 1.5 && y.abs() <= 1.5 && inside(x, y)

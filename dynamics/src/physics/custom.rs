@@ -183,7 +183,7 @@ impl Target {
                 )
             }),
             Target::Grip => all(Atom::is_position),
-            _ => all(|a| !matches!(a, Atom::Band { .. })),
+            _ => all(|a| !matches!(a, Atom::Band { .. } | Atom::Strip { .. })),
         }
     }
 
@@ -304,11 +304,7 @@ impl CustomTerm {
     /// coefficient below −1 would make the tires push, not grip), else `±`[`COEFFICIENT_BOUND`].
     pub fn bounds(&self) -> (f64, f64) {
         let region = !self.feature.factors().is_empty()
-            && self
-                .feature
-                .factors()
-                .iter()
-                .all(|a| matches!(a, Atom::Gauss { .. } | Atom::Band { .. }));
+            && self.feature.factors().iter().all(Atom::is_region);
         if self.target == Target::Grip && region {
             GRIP_REGION_BOUNDS
         } else {

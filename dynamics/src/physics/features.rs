@@ -225,6 +225,18 @@ pub enum Atom {
         /// Width \[m\].
         w: f64,
     },
+    /// Flat-topped strip `½·(tanh((e + w/2)/ε) − tanh((e − w/2)/ε))`, `e = n·(x, y) − d` as for
+    /// [`Atom::Band`], `ε = w/20`: a straight strip `w` wide with sharp edges (a wet stripe, a
+    /// rug, a painted line), 1 inside and 0 outside, which a Gaussian band follows only near
+    /// its centre line.
+    Strip {
+        /// Direction of the strip \[rad\].
+        a: f64,
+        /// Signed distance of its centre line from the origin \[m\].
+        d: f64,
+        /// Full width \[m\].
+        w: f64,
+    },
 }
 
 /// Which robots an atom belongs to.
@@ -352,6 +364,9 @@ impl Atom {
                 format!("gauss({},{},{})", short(*cx), short(*cy), short(*r))
             }
             Atom::Band { a, d, w } => format!("band({},{},{})", short(*a), short(*d), short(*w)),
+            Atom::Strip { a, d, w } => {
+                format!("strip({},{},{})", short(*a), short(*d), short(*w))
+            }
             Atom::SatVx2 { v0 } => format!("sat_vx2({})", short(*v0)),
             a => entry(a).map(|e| e.1).unwrap_or("?").to_string(),
         }
@@ -372,6 +387,12 @@ impl Atom {
                 short(*d).replace('-', "−"),
                 short(*w)
             ),
+            Atom::Strip { a, d, w } => format!(
+                "s({}, {}; {})",
+                short(*a).replace('-', "−"),
+                short(*d).replace('-', "−"),
+                short(*w)
+            ),
             Atom::SatVx2 { v0 } => format!("vₓ²/(vₓ² + {}²)", short(*v0)),
             a => entry(a).map(|e| e.2).unwrap_or("?").to_string(),
         }
@@ -380,7 +401,9 @@ impl Atom {
     /// Unit.
     pub fn unit(&self) -> Unit {
         match self {
-            Atom::Gauss { .. } | Atom::Band { .. } | Atom::SatVx2 { .. } => Unit::default(),
+            Atom::Gauss { .. } | Atom::Band { .. } | Atom::Strip { .. } | Atom::SatVx2 { .. } => {
+                Unit::default()
+            }
             a => entry(a).map(|e| e.3).unwrap_or_default(),
         }
     }
@@ -388,7 +411,7 @@ impl Atom {
     /// Whether the atom exists for `robot`.
     pub fn belongs_to(&self, robot: Robot) -> bool {
         let owner = match self {
-            Atom::Gauss { .. } | Atom::Band { .. } => Owner::Both,
+            Atom::Gauss { .. } | Atom::Band { .. } | Atom::Strip { .. } => Owner::Both,
             Atom::SatVx2 { .. } => Owner::Car,
             a => entry(a).map(|e| e.4).unwrap_or(Owner::Both),
         };
@@ -399,16 +422,22 @@ impl Atom {
         }
     }
 
-    /// Whether the atom is a function of the position alone (`x`, `y`, a bump, a band).
+    /// Whether the atom is a function of the position alone (`x`, `y`, a bump, a band, a
+    /// strip).
     pub fn is_position(&self) -> bool {
+        matches!(self, Atom::X | Atom::Y) || self.is_region()
+    }
+
+    /// Whether the atom is a region of the floor or table (a bump, a band, a strip).
+    pub fn is_region(&self) -> bool {
         matches!(
             self,
-            Atom::X | Atom::Y | Atom::Gauss { .. } | Atom::Band { .. }
+            Atom::Gauss { .. } | Atom::Band { .. } | Atom::Strip { .. }
         )
     }
 
     /// Names of the atoms of `robot` (those with parameters last: `sat_vx2(v0)` of the car,
-    /// `gauss(cx,cy,r)`, `band(a,d,w)`).
+    /// `gauss(cx,cy,r)`, `band(a,d,w)`, `strip(a,d,w)`).
     pub fn names(robot: Robot) -> Vec<String> {
         let car_only = (robot == Robot::Car).then(|| "sat_vx2(v0)".to_string());
         TABLE
@@ -416,7 +445,7 @@ impl Atom {
             .filter(|e| e.0.belongs_to(robot))
             .map(|e| e.1.to_string())
             .chain(car_only)
-            .chain(["gauss(cx,cy,r)".to_string(), "band(a,d,w)".to_string()])
+            .chain(["gauss(cx,cy,r)", "band(a,d,w)", "strip(a,d,w)"].map(String::from))
             .collect()
     }
 
@@ -449,6 +478,10 @@ impl Atom {
             let [a, d, w] = v?;
             return Ok(Atom::Band { a, d, w });
         }
+        if let Some(v) = args("strip(") {
+            let [a, d, w] = v?;
+            return Ok(Atom::Strip { a, d, w });
+        }
         if let Some(inner) = n.strip_prefix("sat_vx2(").and_then(|r| r.strip_suffix(')')) {
             return match inner.trim().parse::<f64>() {
                 Ok(v0) if v0.is_finite() && v0 > 0.0 => Ok(Atom::SatVx2 { v0 }),
@@ -477,6 +510,11 @@ impl Atom {
             (_, Atom::Band { a, d, w }) => {
                 let e = s[1] * a.cos() - s[0] * a.sin() - *d;
                 (-(e * e) / (2.0 * w * w)).exp()
+            }
+            (_, Atom::Strip { a, d, w }) => {
+                let e = s[1] * a.cos() - s[0] * a.sin() - *d;
+                let eps = 0.05 * *w;
+                (((e + 0.5 * *w) / eps).tanh() - ((e - 0.5 * *w) / eps).tanh()) * 0.5
             }
             (Robot::Car, a) => car_atom(a, p, s, u),
             (Robot::Pushing, a) => push_atom(a, s, u),
@@ -832,6 +870,39 @@ mod tests {
     use crate::real::Dual;
 
     #[test]
+    fn a_strip_is_flat_inside_and_falls_at_its_edges() {
+        // a strip 0.8 m wide along 0.5 rad whose centre line passes 0.3 m from the origin
+        let f = Feature::parse("strip(0.5,0.3,0.8)").unwrap();
+        assert_eq!(f.name(), "strip(0.5,0.3,0.8)");
+        assert_eq!(f.symbol(), "s(0.5, 0.3; 0.8)");
+        assert!(f.factors()[0].is_position() && f.factors()[0].is_region());
+        f.check_robot(Robot::Car).unwrap();
+        let (sn, cs) = 0.5f64.sin_cos();
+        // the point at distance e across the centre line, 0.7 m along it
+        let at = |e: f64| {
+            let p = [-sn * (0.3 + e) + cs * 0.7, cs * (0.3 + e) + sn * 0.7];
+            f.eval::<f64>(Robot::Car, &[], &[p[0], p[1], 0.0, 0.0, 0.0, 0.0], &[])
+        };
+        for e in [-0.3, 0.0, 0.3] {
+            assert!(at(e) > 0.95, "inside at {e}: {}", at(e));
+        }
+        for e in [-0.4, 0.4] {
+            assert!((at(e) - 0.5).abs() < 1e-3, "edge at {e}: {}", at(e));
+        }
+        for e in [-0.6, 0.6] {
+            assert!(at(e) < 0.02, "outside at {e}: {}", at(e));
+        }
+        // a Gaussian band of the same direction and offset is 1 only on its centre line
+        let band = Feature::parse("band(0.5,0.3,0.34)").unwrap();
+        let p = [-sn * 0.6 + cs * 0.7, cs * 0.6 + sn * 0.7];
+        let b = band.eval::<f64>(Robot::Car, &[], &[p[0], p[1], 0.0, 0.0, 0.0, 0.0], &[]);
+        assert!(b < 0.7 && at(0.3) > 0.95);
+        for bad in ["strip(0.5,0.3,0)", "strip(0.5,0.3)", "strip(0.5,nan,0.8)"] {
+            assert!(Feature::parse(bad).is_err(), "{bad}");
+        }
+    }
+
+    #[test]
     fn names_round_trip_and_units_multiply() {
         for robot in [Robot::Car, Robot::Pushing] {
             let area = Area {
@@ -993,8 +1064,10 @@ mod tests {
             .collect();
         let s = [0.3, -0.2, 0.4, 1.2, 0.1, 0.8];
         let u = [0.15, 0.4];
-        let fitted = Feature::parse("delta*sat_vx2(0.9)").unwrap();
-        for f in library(Robot::Car, None, 0).into_iter().chain([fitted]) {
+        // the fitted shapes, a strip's edge passing near the state's position
+        let fitted =
+            ["delta*sat_vx2(0.9)", "strip(0.5,0.07,0.8)"].map(|n| Feature::parse(n).unwrap());
+        for f in library(Robot::Car, None, 0).into_iter().chain(fitted) {
             let pd: Vec<Dual<8>> = p.iter().map(|&v| Dual::cst(v)).collect();
             let sd: Vec<Dual<8>> = (0..6).map(|i| Dual::var(s[i], i)).collect();
             let ud: Vec<Dual<8>> = (0..2).map(|i| Dual::var(u[i], 6 + i)).collect();
