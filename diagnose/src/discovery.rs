@@ -671,7 +671,7 @@ fn fitted_regions(reg: &Regression, one: &OneStep) -> Vec<Feature> {
         }
         best.and_then(|b| Feature::new(vec![b.1]).ok())
     };
-    let strips = (0..STRIP_WIDTHS).flat_map(|k| {
+    let mut strips = (0..STRIP_WIDTHS).flat_map(|k| {
         let q = 0.06 * (0.45f64 / 0.06).powf(k as f64 / (STRIP_WIDTHS - 1) as f64);
         let w = round(q * side).max(1e-3);
         (0..ANGLES).flat_map(move |i| {
@@ -688,7 +688,7 @@ fn fitted_regions(reg: &Regression, one: &OneStep) -> Vec<Feature> {
             })
         })
     });
-    let bumps = BUMP_WIDTHS.into_iter().flat_map(|q| {
+    let mut bumps = BUMP_WIDTHS.into_iter().flat_map(|q| {
         let r = round(q * side).max(1e-3);
         lattice(lo, hi, CENTRES)
             .into_iter()
@@ -698,13 +698,10 @@ fn fitted_regions(reg: &Regression, one: &OneStep) -> Vec<Feature> {
                 r,
             })
     });
-    [
-        best_of(&mut strips.into_iter()),
-        best_of(&mut bumps.into_iter()),
-    ]
-    .into_iter()
-    .flatten()
-    .collect()
+    [best_of(&mut strips), best_of(&mut bumps)]
+        .into_iter()
+        .flatten()
+        .collect()
 }
 
 /// The steering term `δ·vₓ²/(vₓ² + v₀²)` whose speed scale `v₀`, screened on a fine lattice
