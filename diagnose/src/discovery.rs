@@ -648,7 +648,8 @@ pub(crate) fn area_of(points: &[[f64; 2]]) -> Area {
 /// only to within its spacing (a band of the true direction, a third of the floor off, removed
 /// under half of what the band removes). A strip is flat inside with sharp edges, as a stripe
 /// of other grip is; a Gaussian band fitted the same way takes too much at its centre line and
-/// spreads past the edges. They join the library as two more candidates.
+/// spreads past the edges. The best strip is then refined off the lattice ([`refine`]). They
+/// join the library as two more candidates.
 fn fitted_regions(reg: &Regression, one: &OneStep) -> Vec<Feature> {
     const ANGLES: usize = 36;
     const OFFSETS: usize = 30;
@@ -698,10 +699,60 @@ fn fitted_regions(reg: &Regression, one: &OneStep) -> Vec<Feature> {
                 r,
             })
     });
-    [best_of(&mut strips), best_of(&mut bumps)]
-        .into_iter()
-        .flatten()
-        .collect()
+    let strip = best_of(&mut strips).and_then(|f| match f.factors()[0] {
+        Atom::Strip { a, d, w } => {
+            let gain = |[a, d, w]: [f64; 3]| {
+                let atom = Atom::Strip { a, d, w };
+                sums.fit(|p| atom.eval::<f64>(Robot::Car, &[], &p, &[]))
+                    .map_or(f64::NEG_INFINITY, |g| g.0)
+            };
+            // steps: half the lattice's direction and offset spacings, a tenth of the width
+            let steps = [
+                std::f64::consts::PI / 72.0,
+                0.5 * side / OFFSETS as f64,
+                0.1,
+            ];
+            let [a, d, w] = refine([a, d, w], steps, gain);
+            Feature::new(vec![Atom::Strip {
+                a: round(a),
+                d: round(d),
+                w: round(w),
+            }])
+            .ok()
+        }
+        _ => Some(f),
+    });
+    [strip, best_of(&mut bumps)].into_iter().flatten().collect()
+}
+
+/// Coordinate ascent of `score` over a strip's `[a, d, w]` from `start` (the width on a log
+/// scale): each round tries one step up and down in each coordinate and keeps what raises the
+/// score, halving the steps when nothing does; 40 rounds. The lattice's 5° between directions
+/// turn a strip's far edge by 13 cm over a 3 m floor: a strip 5° off the truth removed 56 % of
+/// the held-out error with a bound of −52 %, refined 65 % with 3.4 % (open-world band, seed 3).
+fn refine(start: [f64; 3], mut steps: [f64; 3], score: impl Fn([f64; 3]) -> f64) -> [f64; 3] {
+    let (mut x, mut best) = (start, score(start));
+    for _ in 0..40 {
+        let mut moved = false;
+        for k in 0..3 {
+            for sign in [-1.0, 1.0] {
+                let mut y = x;
+                if k == 2 {
+                    y[2] *= (sign * steps[2]).exp();
+                } else {
+                    y[k] += sign * steps[k];
+                }
+                let v = score(y);
+                if v > best {
+                    (x, best, moved) = (y, v, true);
+                }
+            }
+        }
+        if !moved {
+            steps = steps.map(|s| 0.5 * s);
+        }
+    }
+    x
 }
 
 /// The steering term `δ·vₓ²/(vₓ² + v₀²)` whose speed scale `v₀`, screened on a fine lattice
@@ -1815,6 +1866,25 @@ mod tests {
         assert!((normal_quantile(0.975) - 1.959_964).abs() < 1e-5);
         assert!((normal_quantile(0.5)).abs() < 1e-6);
         assert!((normal_quantile(1.0 - 1e-4) - 3.719_016).abs() < 1e-4);
+    }
+
+    /// The refinement climbs off the lattice to the best strip: on a score that peaks at the
+    /// truth's direction, offset and width, from a lattice point 5° and 6 cm off and 6 % too
+    /// wide, and stays put at a peak.
+    #[test]
+    fn the_strip_refinement_climbs_to_the_peak() {
+        let truth = [0.5, 0.263, 0.8];
+        let score = |x: [f64; 3]| {
+            -(((x[0] - truth[0]) / 0.05).powi(2)
+                + ((x[1] - truth[1]) / 0.1).powi(2)
+                + ((x[2] / truth[2]).ln() / 0.2).powi(2))
+        };
+        let steps = [std::f64::consts::PI / 72.0, 0.05, 0.1];
+        let x = refine([0.436, 0.324, 0.848], steps, score);
+        for k in 0..3 {
+            assert!((x[k] - truth[k]).abs() < 2e-3, "{x:?}");
+        }
+        assert_eq!(refine(truth, steps, score), truth);
     }
 }
 
