@@ -670,7 +670,7 @@ fn fitted_regions(reg: &Regression, one: &OneStep) -> Vec<Feature> {
                 best = Some((gain, atom));
             }
         }
-        best.and_then(|b| Feature::new(vec![b.1]).ok())
+        best.map(|b| b.1)
     };
     let mut strips = (0..STRIP_WIDTHS).flat_map(|k| {
         let q = 0.06 * (0.45f64 / 0.06).powf(k as f64 / (STRIP_WIDTHS - 1) as f64);
@@ -699,7 +699,7 @@ fn fitted_regions(reg: &Regression, one: &OneStep) -> Vec<Feature> {
                 r,
             })
     });
-    let strip = best_of(&mut strips).and_then(|f| match f.factors()[0] {
+    let strip = best_of(&mut strips).map(|atom| match atom {
         Atom::Strip { a, d, w } => {
             let gain = |[a, d, w]: [f64; 3]| {
                 let atom = Atom::Strip { a, d, w };
@@ -713,16 +713,19 @@ fn fitted_regions(reg: &Regression, one: &OneStep) -> Vec<Feature> {
                 0.1,
             ];
             let [a, d, w] = refine([a, d, w], steps, gain);
-            Feature::new(vec![Atom::Strip {
+            Atom::Strip {
                 a: round(a),
                 d: round(d),
                 w: round(w),
-            }])
-            .ok()
+            }
         }
-        _ => Some(f),
+        other => other,
     });
-    [strip, best_of(&mut bumps)].into_iter().flatten().collect()
+    [strip, best_of(&mut bumps)]
+        .into_iter()
+        .flatten()
+        .filter_map(|atom| Feature::new(vec![atom]).ok())
+        .collect()
 }
 
 /// Coordinate ascent of `score` over a strip's `[a, d, w]` from `start` (the width on a log
