@@ -17,7 +17,8 @@
 //! the library), the "removed" column is what the discovered terms remove, every held-out
 //! window counted as the selected effects' are. Beside it, the share of the error above the
 //! true model's (the simulator's car with its effects at their true values; the steering gain
-//! as the custom term `δ += −1·δ·vₓ²/(vₓ² + v₀²)`; none for the band) that is removed.
+//! as the custom term `δ += −1·δ·vₓ²/(vₓ² + v₀²)`; the band as the strip `μ += −0.5·s(0.5, 0.263; 0.8)`)
+//! that is removed.
 //!
 //! `cargo run --release -p dynlab-diagnose --example open_world -- [--seeds N]
 //! [--first-seed N] [--nominal-seeds N] [--perturb F] [--episodes N] [--duration S]
@@ -134,11 +135,12 @@ impl Hidden {
 /// error a model with every parameter right still makes on the held-out windows (pose noise,
 /// velocities estimated from poses, the chaos of 0.5 s open-loop rollouts). The steering gain
 /// that falls with speed, outside the library, is the custom term `δ += −1·δ·vₓ²/(vₓ² + v₀²)`
-/// (the simulator's `δ/(1 + vₓ²/v₀²)` exactly). `None` for the band.
+/// (the simulator's `δ/(1 + vₓ²/v₀²)` exactly); the band, the grip term `μ += (scale − 1)·s(a, d; w)`
+/// (the simulator's band with the strip's soft edges).
 fn true_model(car: &CarScenario, case: &[Hidden], like: &Model) -> Option<Model> {
     let effects: Vec<Effect> = case
         .iter()
-        .filter(|h| **h != Hidden::GainSpeed)
+        .filter(|h| !matches!(h, Hidden::GainSpeed | Hidden::Band))
         .map(|h| h.library().and_then(|l| Effect::from_name(l.0)))
         .collect::<Option<_>>()?;
     let nominal = true_car_model(&car.car, like.dt()).ok()?;
@@ -147,6 +149,20 @@ fn true_model(car: &CarScenario, case: &[Hidden], like: &Model) -> Option<Model>
         let v0 = car.effects.steering_gain_speed.as_ref()?.v0;
         let toml = format!(
             "name = \"gain\"\n[[term]]\nstate = \"delta\"\nfeature = \"delta*sat_vx2({v0})\"\ncoefficient = -1.0\n"
+        );
+        p.add_custom(CustomEffect::from_toml(&toml).ok()?).ok()?;
+    }
+    if case.contains(&Hidden::Band) {
+        // the band as a strip: its centre line's distance from the origin along its normal
+        let patch = car.effects.grip_patch.as_ref()?;
+        let r = &patch.region;
+        let (s, c) = r.angle.sin_cos();
+        let d = c * r.centre[1] - s * r.centre[0];
+        let toml = format!(
+            "name = \"band\"\n[[term]]\nstate = \"grip\"\nfeature = \"strip({},{d},{})\"\ncoefficient = {}\n",
+            r.angle,
+            r.width,
+            patch.scale - 1.0
         );
         p.add_custom(CustomEffect::from_toml(&toml).ok()?).ok()?;
     }
@@ -163,8 +179,7 @@ fn true_model(car: &CarScenario, case: &[Hidden], like: &Model) -> Option<Model>
                 ("grip_patch.r", 0.6),
                 ("grip_patch.k", 0.5),
             ],
-            Hidden::GainSpeed => &[],
-            Hidden::Band => return None,
+            Hidden::GainSpeed | Hidden::Band => &[],
         };
         for &(name, v) in values {
             p.set_param(name, v).ok()?;
@@ -375,7 +390,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 }
             } else if floor.is_some() && !case.is_empty() {
                 removable.push(0.0);
-                removable_calm.push(0.0);
+                // the spin-free share is the selected effects' (none outside the library)
+                if case.iter().all(|h| h.library().is_some()) {
+                    removable_calm.push(0.0);
+                }
             }
             if verbose {
                 println!("--- {name}, seed {seed}\n{}", d.table());
