@@ -158,7 +158,13 @@ pub fn run(args: DiagnoseArgs) -> anyhow::Result<()> {
     for b in &args.bags {
         train.extend(["--bag".into(), b.display().to_string()]);
     }
-    train.extend(["--kind".into(), kind.into()]);
+    // the model's world: bags under other topic names do not tell it
+    train.extend([
+        "--world".into(),
+        model.world().name().into(),
+        "--kind".into(),
+        kind.into(),
+    ]);
     if !d.effects.is_empty() {
         train.extend(["--effects".into(), d.effects.join(",")]);
     }

@@ -1,0 +1,121 @@
+#!/usr/bin/env python3
+"""The loop a user runs, on car data dynlab's simulator did not make (`foreign_car.py`): per car
+seed a nominal bag, `dynlab train --kind physics` on it, then per case a bag of the same car with
+hidden effects, `dynlab diagnose` on it. Prints per case and seed what was named, the held-out
+error removed, the fitted strengths against the truth and the terms found beyond the library;
+then per case how often the named set is exactly the hidden library effects.
+
+    eval_foreign.py [--seeds N] [--first-seed N] [--only CASE,CASE] [--jobs N] [--out DIR]
+"""
+import argparse
+import json
+import subprocess
+import sys
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+REPO = HERE.parent
+DYNLAB = REPO / "target" / "release" / "dynlab"
+TOPICS = ["--pose-topic", "/mocap/orca/pose", "--cmd-topic", "/orca/cmd"]
+# case: (generator effects, the library effects that model them; None: outside the library)
+CASES = {
+    "nominal": ("", ()),
+    "aero_drag": ("aero_drag", ("aero_drag",)),
+    "steering_offset": ("steering_offset", ("steering_offset",)),
+    "motor_lag": ("motor_lag", ("motor_lag",)),
+    "grip_patch": ("grip_patch", ("grip_patch",)),
+    "aero_drag + steering_offset": ("aero_drag,steering_offset", ("aero_drag", "steering_offset")),
+    "steering_offset + grip_patch": ("steering_offset,grip_patch", ("steering_offset", "grip_patch")),
+    "steering_gain_speed*": ("steering_gain_speed", None),
+    "grip_band*": ("grip_band", None),
+}
+TRUTH = {"aero_drag.c": 0.01, "steering_offset.delta0": 0.03, "motor_lag.tau": 0.2,
+         "grip_patch.k": 0.45, "grip_patch.cx": 0.5, "grip_patch.cy": 0.0, "grip_patch.r": 0.6}
+
+
+def run(*cmd):
+    p = subprocess.run([str(c) for c in cmd], capture_output=True, text=True)
+    if p.returncode != 0:
+        raise RuntimeError(f"{' '.join(map(str, cmd))} failed:\n{p.stderr[-2000:]}")
+    return p.stdout
+
+
+def bag(out, car_seed, seed, effects):
+    if not out.exists():
+        run(sys.executable, HERE / "foreign_car.py", out, "--car-seed", car_seed, "--seed", seed,
+            "--effects", effects)
+    return out
+
+
+def nominal_model(root, car_seed):
+    m = root / f"car{car_seed}" / "model"
+    if not m.exists():
+        b = bag(root / f"car{car_seed}" / "nominal", car_seed, 1000 * car_seed + 1, "")
+        run(DYNLAB, "train", "--world", "car", "--kind", "physics", "--bag", b, "--out", m, *TOPICS)
+    return m
+
+
+def one(root, case, car_seed):
+    effects, library = CASES[case]
+    model = nominal_model(root, car_seed)
+    idx = list(CASES).index(case)
+    tag = case.replace(" + ", "+").replace("*", "")
+    b = bag(root / f"car{car_seed}" / f"bag_{tag}", car_seed, 1000 * car_seed + 2 + idx, effects)
+    out = root / f"car{car_seed}" / f"diag_{tag}"
+    text = run(DYNLAB, "diagnose", "--model", model, "--bag", b, "--out", out, "--seed", car_seed, *TOPICS)
+    (out / "diagnose.txt").write_text(text)
+    j = json.loads((out / "diagnosis.json").read_text())
+    named = tuple(j.get("effects") or ())
+    joint = j.get("joint") or {}
+    disc = j.get("discovery") or {}
+    terms = [t["equation"].split("   [")[0] for t in disc.get("terms", []) if t["significant"]]
+    return {
+        "case": case, "seed": car_seed, "named": named,
+        "right": (named == () if library is None else set(named) == set(library)),
+        "removed": joint.get("reduction_vs_model"),
+        "params": joint.get("params", {}),
+        "terms": terms, "terms_removed": disc.get("error_reduction") if terms else None,
+    }
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--seeds", type=int, default=3)
+    ap.add_argument("--first-seed", type=int, default=0)
+    ap.add_argument("--only", default="")
+    ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--out", default=str(REPO / "out" / "eval_foreign"))
+    a = ap.parse_args()
+    cases = [c for c in CASES if not a.only or c in a.only.split(",")]
+    if not cases:
+        ap.error(f"no case in --only; cases: {', '.join(CASES)}")
+    root = Path(a.out)
+    root.mkdir(parents=True, exist_ok=True)
+    seeds = range(a.first_seed, a.first_seed + a.seeds)
+    # the nominal models first (one per car, shared by its cases)
+    with ThreadPoolExecutor(a.jobs) as ex:
+        list(ex.map(lambda s: nominal_model(root, s), seeds))
+        results = []
+        for r in ex.map(lambda cs: one(root, *cs), [(c, s) for c in cases for s in seeds]):
+            print(f"{r['case']}, seed {r['seed']}: {', '.join(r['named']) or 'none'}; "
+                  f"{'; '.join(r['terms']) or 'no term'}", file=sys.stderr, flush=True)
+            results.append(r)
+    print(f"{'case':30} {'seed':>4}  {'named':32} {'removed':>8}  fitted (truth) / terms beyond the library")
+    for r in results:
+        fitted = ", ".join(f"{k.split('.')[1]} {v:.4g} ({TRUTH[k]:g})" for k, v in r["params"].items()
+                           if k in TRUTH)
+        terms = "; ".join(r["terms"])
+        if terms:
+            terms += f" ({100 * r['terms_removed']:.0f} % removed)"
+        removed = f"{100 * r['removed']:.0f} %" if r["removed"] is not None else "—"
+        print(f"{r['case']:30} {r['seed']:>4}  {','.join(r['named']) or 'none':32} {removed:>8}  "
+              f"{' / '.join(x for x in (fitted, terms) if x)}")
+    print()
+    for c in cases:
+        rs = [r for r in results if r["case"] == c]
+        print(f"{c:30} right {sum(r['right'] for r in rs)}/{len(rs)}")
+
+
+if __name__ == "__main__":
+    main()
