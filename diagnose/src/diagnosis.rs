@@ -611,18 +611,20 @@ struct Fitted {
 }
 
 impl Fitted {
-    /// `("lower" | "upper", bound)` when the free parameter `i` ends within 10⁻³ of its range
-    /// from a bound.
+    /// `("lower" | "upper", bound)` when the free parameter `i` ends at a bound: within 10⁻³
+    /// of its range and 1 % of its size from it.
     fn bound_side(&self, i: usize) -> Option<(&'static str, f64)> {
         if !self.free[i] {
             return None;
         }
-        let span = self.upper[i] - self.lower[i];
-        let v = self.theta[i];
-        if v - self.lower[i] <= 1e-3 * span {
-            Some(("lower", self.lower[i]))
-        } else if self.upper[i] - v <= 1e-3 * span {
-            Some(("upper", self.upper[i]))
+        let (lo, hi, v) = (self.lower[i], self.upper[i], self.theta[i]);
+        // the range alone is not enough where it is wide: `C_m2` (0 … 100) fitted at 0.094
+        // was reported on its bound 0
+        let near = |b: f64| (v - b).abs() <= (1e-3 * (hi - lo)).min(0.01 * v.abs().max(b.abs()));
+        if near(lo) {
+            Some(("lower", lo))
+        } else if near(hi) {
+            Some(("upper", hi))
         } else {
             None
         }
@@ -2841,6 +2843,34 @@ mod tests {
         // a one-parameter effect at its default bound (no drag) is on its bound
         let drag = fitted_effect(Effect::AeroDrag, &[0.0]).effect_on_bound(Effect::AeroDrag);
         assert!(drag.is_some());
+    }
+
+    #[test]
+    fn a_small_value_in_a_wide_range_is_not_on_its_bound() {
+        // drag within 0 … 1: a tenth of the usual strength is a value, zero is the bound
+        let drag = |c: f64| fitted_effect(Effect::AeroDrag, &[c]).bound_side(0);
+        assert_eq!(drag(0.0), Some(("lower", 0.0)));
+        assert_eq!(drag(0.0009), None);
+        assert_eq!(drag(0.5), None);
+        assert_eq!(drag(0.9995), Some(("upper", 1.0)));
+        // a patch's radius within 0.01 … 100 m: 0.1 m is a small patch, not the bound
+        let r = Effect::GripPatch
+            .params()
+            .iter()
+            .position(|p| p.name == "r")
+            .unwrap();
+        let mut theta: Vec<f64> = Effect::GripPatch
+            .params()
+            .iter()
+            .map(|p| p.default)
+            .collect();
+        theta[r] = 0.1;
+        assert_eq!(fitted_effect(Effect::GripPatch, &theta).bound_side(r), None);
+        theta[r] = 0.01;
+        assert_eq!(
+            fitted_effect(Effect::GripPatch, &theta).bound_side(r),
+            Some(("lower", 0.01))
+        );
     }
 
     #[test]
