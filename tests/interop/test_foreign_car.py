@@ -1,0 +1,69 @@
+"""The diagnosis loop on car data dynlab's simulator did not make: `launch_scripts/foreign_car.py`
+(a numpy dynamic bicycle without a friction ellipse, RK4 at 1 kHz, a 120 Hz motion capture with
+jitter, noise and dropouts, written by `rosbags` under other topic names) makes a nominal bag and a
+bag of the same car, its parameters 10 % off the datasheet, with aero drag and a steering offset.
+`dynlab train` on the first, `dynlab diagnose --apply` on the second: only hidden effects named,
+with their strengths, nothing beyond the library, and the applied model predicts the bag better.
+"""
+import json
+import subprocess
+import sys
+
+import pytest
+
+from conftest import REPO, run
+
+TOPICS = ["--pose-topic", "/mocap/orca/pose", "--cmd-topic", "/orca/cmd"]
+
+
+def generate(out, seed, effects=""):
+    subprocess.run([sys.executable, str(REPO / "launch_scripts" / "foreign_car.py"), str(out),
+                    "--car-seed", "1", "--seed", str(seed), "--effects", effects,
+                    "--episodes", "3", "--duration", "12"], check=True, capture_output=True, timeout=120)
+    return out
+
+
+@pytest.fixture(scope="module")
+def foreign(tmp_path_factory):
+    d = tmp_path_factory.mktemp("foreign")
+    nominal = generate(d / "nominal", 11)
+    effects = generate(d / "drag_offset", 12, "aero_drag,steering_offset")
+    model = d / "model"
+    run("dynlab", "train", "--world", "car", "--kind", "physics", "--bag", nominal, "--out", model,
+        *TOPICS, timeout=300)
+    return d, model, effects
+
+
+def test_the_generator_rejects_an_unknown_effect(tmp_path):
+    p = subprocess.run([sys.executable, str(REPO / "launch_scripts" / "foreign_car.py"), str(tmp_path / "b"),
+                        "--effects", "aero_drag,wind"], capture_output=True, text=True, timeout=60)
+    assert p.returncode != 0 and "wind" in p.stderr, p.stderr
+
+
+def test_diagnose_names_both_hidden_effects_and_applies_them(foreign):
+    d, model, bag = foreign
+    out = d / "diagnosis"
+    proc = run("dynlab", "diagnose", "--model", model, "--bag", bag, "--out", out,
+               "--effects", "aero_drag,steering_offset,grip_patch", "--apply", *TOPICS, timeout=900)
+    j = json.loads((out / "diagnosis.json").read_text())
+    # what is named is hidden (on this short drive of a car whose geometry is off the datasheet
+    # the nominal fit's C_m2 takes much of the drag: the evaluation, launch_scripts/eval_foreign.sh,
+    # reports over seeds how often both are named)
+    named = set(j["effects"])
+    assert named and named <= {"aero_drag", "steering_offset"}, proc.stdout
+    params = j["joint"]["params"]
+    if "aero_drag" in named:
+        assert abs(params["aero_drag.c"] - 0.01) < 0.004, params
+    if "steering_offset" in named:
+        assert abs(params["steering_offset.delta0"] - 0.03) < 0.02, params
+    assert j["joint"]["reduction_vs_model"] > 0.1, j["joint"]
+    assert not any(t["significant"] for t in j["discovery"]["terms"]), j["discovery"]["summary"]
+    # the train command it ran names the world (the topics do not tell it)
+    assert "applying: dynlab train" in proc.stdout and "--world car" in proc.stdout, proc.stdout
+    applied = out / "model"
+    before = json.loads(run("dynlab", "eval-model", "--model", model, "--bag", bag, *TOPICS, "--json",
+                            timeout=300).stdout)
+    after = json.loads(run("dynlab", "eval-model", "--model", applied, "--bag", bag, *TOPICS, "--json",
+                           timeout=300).stdout)
+    # the trajectory validation error (open-loop position error over 3 s segments) falls
+    assert after["tve"]["tve"] < 0.5 * before["tve"]["tve"], (before["tve"], after["tve"])
