@@ -46,8 +46,8 @@ def grip(effects, x, y):
     if "grip_patch" in effects and (x - 0.5) ** 2 + y ** 2 < 0.6 ** 2:
         g *= 0.45
     if "grip_band" in effects:
-        a = 0.5
-        if abs(-(x - 0.0) * math.sin(a) + (y - 0.3) * math.cos(a)) < 0.4:
+        a = 0.5  # its centre line through (0, 0.3)
+        if abs(-x * math.sin(a) + (y - 0.3) * math.cos(a)) < 0.4:
             g *= 0.5
     return g
 
