@@ -6,9 +6,11 @@ error removed, the fitted strengths against the truth and the terms found beyond
 then per case how often the named set is exactly the hidden library effects.
 
     eval_foreign.py [--seeds N] [--first-seed N] [--only CASE,CASE] [--jobs N] [--out DIR]
+                    [--friction-ellipse]
 """
 import argparse
 import json
+import os
 import subprocess
 import sys
 from concurrent.futures import ThreadPoolExecutor
@@ -16,7 +18,7 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
-DYNLAB = REPO / "target" / "release" / "dynlab"
+DYNLAB = Path(os.environ.get("DYNLAB", REPO / "target" / "release" / "dynlab"))
 TOPICS = ["--pose-topic", "/mocap/orca/pose", "--cmd-topic", "/orca/cmd"]
 # case: (generator effects, the library effects that model them; None: outside the library)
 CASES = {
@@ -41,10 +43,13 @@ def run(*cmd):
     return p.stdout
 
 
+GENERATOR = []  # extra options of foreign_car.py (--friction-ellipse)
+
+
 def bag(out, car_seed, seed, effects):
     if not out.exists():
         run(sys.executable, HERE / "foreign_car.py", out, "--car-seed", car_seed, "--seed", seed,
-            "--effects", effects)
+            "--effects", effects, *GENERATOR)
     return out
 
 
@@ -74,6 +79,7 @@ def one(root, case, car_seed):
         "case": case, "seed": car_seed, "named": named,
         "right": (named == () if library is None else set(named) == set(library)),
         "removed": joint.get("reduction_vs_model"),
+        "before": j["baseline_error"], "after": joint.get("error_after"),
         "params": joint.get("params", {}),
         "terms": terms, "terms_removed": disc.get("error_reduction") if terms else None,
     }
@@ -86,7 +92,11 @@ def main():
     ap.add_argument("--only", default="")
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--out", default=str(REPO / "out" / "eval_foreign"))
+    ap.add_argument("--friction-ellipse", action="store_true",
+                    help="cars whose drive force takes the rear tire's lateral grip")
     a = ap.parse_args()
+    if a.friction_ellipse:
+        GENERATOR.append("--friction-ellipse")
     cases = [c for c in CASES if not a.only or c in a.only.split(",")]
     if not cases:
         ap.error(f"no case in --only; cases: {', '.join(CASES)}")
@@ -101,7 +111,10 @@ def main():
             print(f"{r['case']}, seed {r['seed']}: {', '.join(r['named']) or 'none'}; "
                   f"{'; '.join(r['terms']) or 'no term'}", file=sys.stderr, flush=True)
             results.append(r)
-    print(f"{'case':30} {'seed':>4}  {'named':32} {'removed':>8}  fitted (truth) / terms beyond the library")
+    # the nominal model's error on another drive without hidden effects: what no effect removes
+    floor = {r["seed"]: r["before"] for r in results if r["case"] == "nominal"}
+    print(f"{'case':30} {'seed':>4}  {'named':32} {'removed':>8} {'excess':>7}  "
+          "fitted (truth) / terms beyond the library")
     for r in results:
         fitted = ", ".join(f"{k.split('.')[1]} {v:.4g} ({TRUTH[k]:g})" for k, v in r["params"].items()
                            if k in TRUTH)
@@ -109,9 +122,13 @@ def main():
         if terms:
             terms += f" ({100 * r['terms_removed']:.0f} % removed)"
         removed = f"{100 * r['removed']:.0f} %" if r["removed"] is not None else "—"
-        print(f"{r['case']:30} {r['seed']:>4}  {','.join(r['named']) or 'none':32} {removed:>8}  "
+        f = floor.get(r["seed"])
+        excess = (f"{100 * (r['before'] - r['after']) / (r['before'] - f):.0f} %"
+                  if r["after"] is not None and f is not None and r["before"] > f else "—")
+        print(f"{r['case']:30} {r['seed']:>4}  {','.join(r['named']) or 'none':32} {removed:>8} {excess:>7}  "
               f"{' / '.join(x for x in (fitted, terms) if x)}")
-    print()
+    print("\nremoved: of the held-out 50-step error; excess: of what the error exceeds the nominal "
+          "model's on the nominal drive of the same car (the case nominal; — without it)")
     for c in cases:
         rs = [r for r in results if r["case"] == c]
         print(f"{c:30} right {sum(r['right'] for r in rs)}/{len(rs)}")

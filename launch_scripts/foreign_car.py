@@ -1,6 +1,8 @@
 #!/usr/bin/env python3
 """A car data generator that is not dynlab's simulator: the textbook dynamic bicycle of a 1:43 RC
-car (Pacejka lateral tyres, no friction ellipse, a DC drivetrain), integrated with RK4 at 1 kHz in
+car (Pacejka lateral tyres, a DC drivetrain; by default no friction ellipse, so the drive force
+never takes the rear tyres' lateral grip — `--friction-ellipse` caps the rear tyre's combined
+force at its peak instead), integrated with RK4 at 1 kHz in
 numpy, driven by a waypoint-chasing driver with sweeps and throttle steps, seen by a 120 Hz motion
 capture (jittered stamps, 1 mm / 0.004 rad noise, dropouts) and written by `rosbags` as a rosbag2
 MCAP bag under other topic names than dynlab's (`/mocap/orca/pose`, PoseStamped; `/orca/cmd`,
@@ -17,7 +19,7 @@ The car's parameters are the datasheet's scaled by seeded factors in [1 − f, 1
 effect bag of the same car differ only in the effect and the driving seed.
 
     foreign_car.py OUT_DIR --car-seed 3 --seed 7 [--effects aero_drag,steering_offset]
-                   [--episodes 4] [--duration 15] [--perturb 0.1]
+                   [--episodes 4] [--duration 15] [--perturb 0.1] [--friction-ellipse]
 """
 import argparse
 import math
@@ -67,7 +69,12 @@ def deriv(p, effects, s, steer, duty):
     g = grip(effects, x, y)
     ffy = g * p["Df"] * math.sin(p["Cf"] * math.atan(p["Bf"] * af))
     fry = g * p["Dr"] * math.sin(p["Cr"] * math.atan(p["Br"] * ar))
-    frx = (p["Cm1"] - p["Cm2"] * vx) * d - p["Cr0"] * math.tanh(vx / 0.02) - p["Cr2"] * vx * vx
+    drive = (p["Cm1"] - p["Cm2"] * vx) * d
+    if p["friction_ellipse"]:
+        total = math.hypot(drive, fry)
+        if total > g * p["Dr"]:
+            drive, fry = drive * g * p["Dr"] / total, fry * g * p["Dr"] / total
+    frx = drive - p["Cr0"] * math.tanh(vx / 0.02) - p["Cr2"] * vx * vx
     if "aero_drag" in effects:
         frx -= 0.01 * vx * abs(vx)
     m, iz = p["m"], p["Iz"]
@@ -138,12 +145,15 @@ def main():
     ap.add_argument("--episodes", type=int, default=4)
     ap.add_argument("--duration", type=float, default=15.0)
     ap.add_argument("--perturb", type=float, default=0.1)
+    ap.add_argument("--friction-ellipse", action="store_true",
+                    help="the drive force takes the rear tire's lateral grip (default: independent)")
     a = ap.parse_args()
     effects = {e for e in a.effects.split(",") if e}
     unknown = effects - set(EFFECTS)
     if unknown:
         ap.error(f"unknown effects {sorted(unknown)}; known: {', '.join(EFFECTS)}")
     p = car_params(a.car_seed, a.perturb)
+    p["friction_ellipse"] = a.friction_ellipse
     rng = np.random.default_rng(a.seed)
 
     ts = get_typestore(Stores.ROS2_JAZZY)

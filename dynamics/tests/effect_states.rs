@@ -56,7 +56,10 @@ fn steering_lag_is_a_rate_limited_first_order_servo_with_exact_jacobians() {
         &mut f,
     );
     assert!(f[7] < 2.0 && f[7] > 1.99, "{}", f[7]);
-    // Jacobians wrt state, input and parameters against central differences
+    // Jacobians wrt state, input and parameters against central differences (the ellipse's
+    // weight inside its range [0, 1])
+    let mut m = m;
+    m.set_param("ellipse", 0.8).unwrap();
     let (ds, du, np) = (m.dim_s(), m.dim_u(), m.n_params());
     let nz = ds + du + np;
     let mut j = vec![0.0; ds * nz];

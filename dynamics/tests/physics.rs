@@ -74,6 +74,12 @@ fn fd_jac(g: impl Fn(&[f64]) -> Vec<f64>, z: &[f64], h: f64) -> Vec<Vec<f64>> {
 }
 
 fn check_field_jacobians(model: &PhysicsModel, s: &[f64], u: &[f64]) {
+    // the ellipse's weight inside its range [0, 1], so that central differences stay in it
+    let mut model = model.clone();
+    if model.param_index("ellipse").is_some() {
+        model.set_param("ellipse", 0.8).unwrap();
+    }
+    let model = &model;
     let (ds, du, np) = (model.dim_s(), model.dim_u(), model.n_params());
     let nz = ds + du + np;
     let mut f = vec![0.0; ds];
@@ -312,6 +318,49 @@ fn rear_friction_ellipse_caps_the_drive_force() {
     // gentle throttle is unchanged: 0.1·C_m1
     m.eval_one(&[0.0, 0.0, 0.0, 0.0, 0.0, 0.0], &[0.0, 0.1], &mut f);
     assert!((f[3] * 0.041 - 0.0287).abs() < 1e-4, "{}", f[3] * 0.041);
+}
+
+/// The ellipse's weight: 0 leaves the drive force and the rear lateral force independent
+/// (Liniger's model), ½ takes half of what the full ellipse takes; inside the circle it changes
+/// nothing.
+#[test]
+fn the_friction_ellipse_weight_blends_the_coupling() {
+    let mut m = PhysicsModel::car(&[]).unwrap();
+    // sliding sideways at full throttle: both rear forces near their peaks
+    let (s, u) = ([0.0, 0.0, 0.0, 1.0, -0.3, 0.0], [0.0, 1.0]);
+    let mut rates = Vec::new();
+    for e in [1.0, 0.5, 0.0] {
+        m.set_param("ellipse", e).unwrap();
+        let mut f = [0.0; 6];
+        m.eval_one(&s, &u, &mut f);
+        rates.push(f);
+    }
+    let [full, half, none] = [rates[0], rates[1], rates[2]];
+    // without the ellipse the drive force is (C_m1 − C_m2·vx)·1 − C_r0 − C_r2 (vy·ω = 0)
+    let drive = 0.287 - 0.0545 - 0.0518 * (1.0f64 / 0.05).tanh() - 0.00035;
+    assert!(
+        (none[3] * 0.041 - drive).abs() < 1e-9,
+        "{}",
+        none[3] * 0.041
+    );
+    assert!(
+        full[3] < half[3] && half[3] < none[3],
+        "{full:?} {half:?} {none:?}"
+    );
+    for i in [3, 4, 5] {
+        assert!(
+            ((full[i] + none[i]) / 2.0 - half[i]).abs() < 1e-10,
+            "row {i}"
+        );
+    }
+    // gentle throttle, no slip: inside the circle the weight does not matter
+    let mut f = [[0.0; 6]; 2];
+    for (e, out) in [1.0, 0.0].into_iter().zip(&mut f) {
+        m.set_param("ellipse", e).unwrap();
+        m.eval_one(&[0.0, 0.0, 0.0, 1.0, 0.0, 0.0], &[0.0, 0.1], out);
+    }
+    assert!((f[0][3] - f[1][3]).abs() < 1e-5 * f[1][3].abs(), "{f:?}");
+    assert!(m.set_param("ellipse", 1.5).is_err());
 }
 
 #[test]
@@ -589,6 +638,7 @@ fn residual_jacobian_matches_finite_differences_and_vanishes_at_the_truth() {
     assert!(rj.failed.is_empty());
     let mut model = PhysicsModel::car(&[Effect::AeroDrag, Effect::SteeringOffset]).unwrap();
     model.set_param("aero_drag.c", 0.03).unwrap();
+    model.set_param("ellipse", 0.8).unwrap();
     let rj = residuals_and_jacobian(&model, &solver, &transitions, &w).unwrap();
     let np = rj.cols;
     assert_eq!(np, model.params().len());
@@ -678,7 +728,7 @@ fn bad_model_configurations_get_clear_errors() {
     let e = m.set_param("aero_drag.c", f64::NAN).unwrap_err();
     assert!(matches!(e, ModelError::ParamOutOfBounds { .. }), "{e}");
     let e = m.set_params(&[1.0]).unwrap_err();
-    assert!(e.to_string().contains("expected 16 parameters"), "{e}");
+    assert!(e.to_string().contains("expected 17 parameters"), "{e}");
     let e = m
         .effect_term(Effect::MotorLag, &CAR_S[..6], &CAR_U)
         .unwrap_err();

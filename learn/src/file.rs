@@ -282,9 +282,33 @@ fn is_ellipsoid(s: &LimitSurface) -> bool {
     *s == LimitSurface::Ellipsoid
 }
 
-/// The physics parameters of a model file, with the block width `b` of a pushing model written
-/// before the block was a rectangle (its parameters `a, c, L, kappa, …` without `b`) set to the
-/// side `a` right after `kappa`: such a file describes a square block, and loads as one.
+/// The physics parameters of a model file written by an earlier dynlab, completed:
+/// - a pushing model written before the block was a rectangle (its parameters `a, c, L, kappa,
+///   …` without `b`) gets the block width `b` = the side `a` right after `kappa`: such a file
+///   describes a square block, and loads as one;
+/// - a car model written before the friction ellipse had a weight (its nominal parameters end
+///   at `v_reg`) gets `ellipse` = 1 right after `v_reg`: such a model had the full ellipse.
+fn upgraded_params(expected: &[String], params: &[ParamEntry]) -> Vec<ParamEntry> {
+    let mut params = with_block_width(expected, params);
+    let at = expected.iter().position(|n| n == "ellipse");
+    if let Some(at) = at
+        && expected.get(at.wrapping_sub(1)).map(String::as_str) == Some("v_reg")
+        && params.len() + 1 == expected.len()
+        && params.iter().all(|e| e.name != "ellipse")
+        && params.get(at - 1).is_some_and(|e| e.name == "v_reg")
+    {
+        let full = ParamEntry {
+            name: "ellipse".into(),
+            value: 1.0,
+            std: Some(0.0),
+            unit: "-".into(),
+        };
+        params.insert(at, full);
+    }
+    params
+}
+
+/// [`upgraded_params`]' first part: the block width of a square block's file.
 fn with_block_width(expected: &[String], params: &[ParamEntry]) -> Vec<ParamEntry> {
     let mut params = params.to_vec();
     let square = ["a", "c", "L", "kappa"];
@@ -380,7 +404,7 @@ pub fn load_model(
             p.set_limit_surface(pm.limit_surface)
                 .map_err(|e| corrupt(format!("physics.limit_surface: {e}")))?;
             let expected = p.param_names();
-            let params = with_block_width(&expected, &pm.params);
+            let params = upgraded_params(&expected, &pm.params);
             let got: Vec<String> = params.iter().map(|e| e.name.clone()).collect();
             if expected != got {
                 return Err(corrupt(format!(

@@ -606,6 +606,48 @@ fn a_square_block_model_file_loads_with_its_side_as_the_width() {
 }
 
 #[test]
+fn a_car_model_file_without_the_ellipse_weight_loads_with_the_full_ellipse() {
+    // a car model file written before the friction ellipse had a weight: no `ellipse` entry
+    let tmp = tempfile::tempdir().unwrap();
+    let car = car_data(tmp.path());
+    let mut cfg = small(ModelKind::Physics, World::Car);
+    cfg.physics_iterations = 2;
+    let m = train(&car, &cfg, &mut |_| {}).unwrap().model;
+    let dir = tmp.path().join("before");
+    save_model(&m, &dir, None, Default::default()).unwrap();
+    let mut v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join(MODEL_JSON)).unwrap()).unwrap();
+    let params = v["physics"]["params"].as_array_mut().unwrap();
+    let at = params.iter().position(|p| p["name"] == "ellipse").unwrap();
+    assert_eq!(params[at - 1]["name"], "v_reg");
+    params[at]["value"] = serde_json::json!(1.0);
+    std::fs::write(dir.join(MODEL_JSON), serde_json::to_string(&v).unwrap()).unwrap();
+    let (expected, _) = load_model(&dir, None, None).unwrap();
+    v["physics"]["params"].as_array_mut().unwrap().remove(at);
+    let before = serde_json::to_string(&v).unwrap();
+    std::fs::write(dir.join(MODEL_JSON), &before).unwrap();
+    let (back, _) = load_model(&dir, None, None).unwrap();
+    assert_eq!(
+        back.physics().unwrap().params(),
+        expected.physics().unwrap().params()
+    );
+    let (s, u) = ([0.1, -0.2, 0.3, 1.2, -0.2, 0.5], [0.2, 0.9]);
+    let (mut a, mut b) = ([0.0; 6], [0.0; 6]);
+    back.step(&s, &u, &mut a).unwrap();
+    expected.step(&s, &u, &mut b).unwrap();
+    assert_eq!(a, b);
+    // a file missing another parameter is still corrupt
+    let mut v: serde_json::Value = serde_json::from_str(&before).unwrap();
+    v["physics"]["params"].as_array_mut().unwrap().remove(4);
+    std::fs::write(dir.join(MODEL_JSON), serde_json::to_string(&v).unwrap()).unwrap();
+    let e = load_model(&dir, None, None).unwrap_err();
+    assert!(
+        matches!(e, LearnError::CorruptModel { .. }) && e.to_string().contains("Bf"),
+        "{e}"
+    );
+}
+
+#[test]
 fn the_limit_surface_is_saved_and_a_bad_one_is_rejected() {
     use dynlab_dynamics::physics::LimitSurface;
     let tmp = tempfile::tempdir().unwrap();

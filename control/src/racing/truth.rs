@@ -12,10 +12,9 @@ use super::plant::CarDynamics;
 /// A `physics` car model with the simulator's parameters (`CarParams`), stepping `dt` seconds
 /// with RK4 — the "true model" baseline of `dynlab eval race`.
 ///
-/// It is the simulator's bicycle model with two documented differences, both small on a race
-/// line: the simulator's friction ellipse on the rear axle (full throttle in a corner trades
-/// lateral grip) is absent, and the low-speed regularisation differs below ≈ 0.05 m/s. Hidden
-/// effects of a scenario are not included.
+/// It is the simulator's bicycle model, with the simulator's friction ellipse on the rear axle
+/// when `params.friction_ellipse` is set; the low-speed regularisation differs below
+/// ≈ 0.05 m/s. Hidden effects of a scenario are not included.
 pub fn true_car_model(params: &CarParams, dt: f64) -> Result<Model, RacingError> {
     let mut p = PhysicsModel::car(&[]).map_err(|e| {
         RacingError::setting("physics", e.to_string(), "the nominal car model must build")
@@ -36,6 +35,7 @@ pub fn true_car_model(params: &CarParams, dt: f64) -> Result<Model, RacingError>
         ("Cr0", params.cr0),
         ("Cr2", params.cr2),
         ("v_reg", params.slip_speed_floor),
+        ("ellipse", if params.friction_ellipse { 1.0 } else { 0.0 }),
     ];
     for (name, v) in values {
         p.set_param(name, v)

@@ -25,7 +25,12 @@
 //! circle of radius `D_r` when it exceeds it, with a smooth maximum
 //! `s = D_r / smax(‖F_r‖, D_r)`, `smax(a, b) = ½(a + b + √((a − b)² + ε²))`, `ε = 10⁻³ D_r`, so
 //! that full throttle eats lateral grip (power oversteer) and the derivatives stay continuous.
-//! Rolling resistance and drag act outside the ellipse, as in the simulator.
+//! Rolling resistance and drag act outside the ellipse, as in the simulator. How much of it a
+//! car has is the fitted weight `e` (`ellipse`): both forces are scaled by `1 − e·(1 − s)`, so
+//! `e = 1` is the full ellipse (the default, and the simulator) and `e = 0` Liniger's model,
+//! whose drive force never takes lateral grip. Cars differ here (tires, differential, how the
+//! motor is limited), and a nominal model with the wrong coupling mistakes every low-grip
+//! region under throttle: the fit decides.
 //!
 //! **Measured and fitted parameters.** Mass, yaw inertia, axle distances, the quadratic drag
 //! `C_r2`, the tire shape factors and `v_reg` are measured or published values and stay fixed in a
@@ -43,7 +48,7 @@ pub const MOTOR_LAG_STATE: &str = "d_f";
 pub const STEERING_LAG_STATE: &str = "delta_w";
 
 /// Nominal car parameters, defaults from the ORCA 1:43 car (Liniger et al., MPCC project).
-pub static CAR_NOMINAL_PARAMS: [ParamSpec; 15] = [
+pub static CAR_NOMINAL_PARAMS: [ParamSpec; 16] = [
     ps("m", "m", "kg", 0.01, 10.0, 0.041, "mass (ORCA 1:43)"),
     ps(
         "Iz",
@@ -155,12 +160,21 @@ pub static CAR_NOMINAL_PARAMS: [ParamSpec; 15] = [
         0.05,
         "low-speed regularisation of slip angles and rolling resistance",
     ),
+    ps(
+        "ellipse",
+        "e",
+        "-",
+        0.0,
+        1.0,
+        1.0,
+        "weight of the rear friction ellipse (1: throttle takes lateral grip; 0: it does not)",
+    ),
 ];
 
-/// Nominal car parameters a fit frees by default: tire stiffness and peak forces and the
-/// drivetrain. The rest are measured (mass, inertia, geometry) or published (shape factors,
-/// quadratic drag) and held at their values.
-pub static CAR_FITTED_PARAMS: [&str; 7] = ["Bf", "Df", "Br", "Dr", "Cm1", "Cm2", "Cr0"];
+/// Nominal car parameters a fit frees by default: tire stiffness and peak forces, the drivetrain
+/// and the friction ellipse's weight. The rest are measured (mass, inertia, geometry) or
+/// published (shape factors, quadratic drag) and held at their values.
+pub static CAR_FITTED_PARAMS: [&str; 8] = ["Bf", "Df", "Br", "Dr", "Cm1", "Cm2", "Cr0", "ellipse"];
 
 /// Where an enabled effect's parameters and extra states live.
 #[derive(Clone, Copy, Debug)]
@@ -214,7 +228,8 @@ pub(crate) fn rhs<R: Real>(
         cr0,
         cr2,
         vreg,
-    ] = [0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14].map(|i| p[i]);
+        ellipse,
+    ] = [0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15].map(|i| p[i]);
     let (x, y, psi, vx, vy, om) = (s[0], s[1], s[2], s[3], s[4], s[5]);
     let mut delta = steering_target(p, slots, active, u);
     let mut d = u[1];
@@ -246,14 +261,14 @@ pub(crate) fn rhs<R: Real>(
     let alpha_r = -((vy - lr * om) / (vx * vx + reg).sqrt()).atan();
     let ffy = grip * df * (cf * (bf * alpha_f).atan()).sin();
     let mut fry = grip * dr * (cr * (br * alpha_r).atan()).sin();
-    // friction ellipse on the driven rear axle (smooth saturation at the peak force)
+    // friction ellipse on the driven rear axle (smooth saturation at the peak force), weighted
     let mut drive = (cm1 - cm2 * vx) * d;
     let dr_eff = grip * dr;
     let total = (drive * drive + fry * fry + 1e-12).sqrt();
     let eps = dr_eff * 1e-3 + 1e-9;
     let diff = total - dr_eff;
     let smax = (total + dr_eff + (diff * diff + eps * eps).sqrt()) * 0.5;
-    let scale = dr_eff / smax;
+    let scale = R::cst(1.0) - ellipse * (R::cst(1.0) - dr_eff / smax);
     drive = drive * scale;
     fry = fry * scale;
     let frx = drive - cr0 * (vx / vreg).tanh() - cr2 * vx.mul_abs();
