@@ -34,13 +34,12 @@ pub struct DiagnoseArgs {
     /// Smallest held-out error reduction that counts (fraction).
     #[arg(long, default_value_t = 0.1)]
     min_reduction: f64,
-    /// Hold the model's nominal parameters (physics models otherwise refit, for the baseline and
-    /// with every candidate: pushing `c`, `κ`, and the block's measured depth `a` within ±10 %
-    /// for the baseline; the car its friction ellipse's weight `ellipse`).
+    /// Hold the model's nominal parameters (pushing physics models otherwise refit `c`, `κ`
+    /// with every candidate, and the block's measured depth `a` within ±10 % for the baseline).
     #[arg(long)]
     no_refit: bool,
-    /// Refit these nominal parameters with every candidate (comma-separated; the car's ellipse,
-    /// grip and drivetrain: `ellipse,Df,Dr,Cm1,Cm2,Cr0`).
+    /// Refit these nominal parameters with every candidate (comma-separated; the car's grip and
+    /// drivetrain: `Df,Dr,Cm1,Cm2,Cr0`).
     #[arg(long, value_delimiter = ',')]
     refit: Option<Vec<String>>,
     /// A refitted nominal parameter stays within this fraction of the model's value (e.g. 0.15;

@@ -47,10 +47,10 @@
 //! then the report says so and lists what the residual correlates with (state and input features,
 //! and inputs at lags).
 //!
-//! **Nominal parameters refitted** ([`DiagnoseConfig::refit_nominal`], default for physics
-//! models): the model's free nominal parameters (pushing: the limit-surface ratio `c` and the
-//! usable face fraction `κ`; the car: the friction ellipse's weight) are refitted on the fit
-//! half for the baseline and jointly with every candidate. The nominal pusher–slider's structural error (an ellipsoidal limit
+//! **Nominal parameters refitted** ([`DiagnoseConfig::refit_nominal`], default for pushing
+//! physics models): the model's free nominal parameters (pushing: the limit-surface ratio `c`
+//! and the usable face fraction `κ`) are refitted on the fit half for the baseline and jointly
+//! with every candidate. The nominal pusher–slider's structural error (an ellipsoidal limit
 //! surface against a support of discrete points) is then not credited to an effect that
 //! happens to absorb part of it (`com_offset` did on nominal data), and an effect is scored
 //! against the best nominal model, not against the documented values. A measured parameter
@@ -148,14 +148,26 @@ pub enum DiagnosisError {
     Simulator(String),
 }
 
-/// The car parameters the diagnosis refits by default, for the baseline and with every
-/// candidate: the friction ellipse's weight alone. Nominal data rarely take the rear tire to its
-/// peak, so the nominal fit leaves the weight where it started (fitted values 0–1 on the same kind
-/// of car); a low-grip region under throttle takes it there, and a grip patch fitted with the
-/// wrong coupling was found on 2 of 5 cars without a friction ellipse. The grip and the
-/// drivetrain stay as trained: refitted, they absorb drag (see
-/// [`DiagnoseConfig::refit_params`]).
-const CAR_REFIT: [&str; 1] = ["ellipse"];
+/// Car parameters the diagnosis holds even where training fits them: the tire stiffness factors
+/// `B` are weakly identified from poses, and refitted with the grip and the drivetrain they
+/// fit the fit half's particular slips and predict the held-out half worse than the model as
+/// given (measured on data with drag and a steering offset: 0 % held-out reduction for either
+/// effect with them refitted, 83 % for both without).
+const CAR_HELD: [&str; 2] = ["Bf", "Br"];
+
+/// The nominal parameters fitted wherever effect `e` is fitted (its candidate fit and every
+/// joint refit with it). A grip patch takes the car's friction-ellipse weight `ellipse`:
+/// nominal data rarely take the rear tire to its peak, so a nominal fit leaves the weight
+/// wherever it started (0 to 1 on five cars of one kind), while under throttle on low grip it
+/// decides how much lateral force is left. With the wrong weight the patch was found on 2 of 5
+/// such cars; refitted for the baseline too, the weight alone took up part of the patch. It does
+/// nothing where the tire stays inside its circle, so it explains no other effect's data.
+fn coupled_nominal(e: Effect) -> &'static [&'static str] {
+    match e {
+        Effect::GripPatch => &["ellipse"],
+        _ => &[],
+    }
+}
 
 /// Measured pushing parameters the diagnosis refits within a tolerance of the model's value
 /// (unless [`DiagnoseConfig::refit_tolerance`] sets one for all): the block's depth `a`, within
@@ -195,20 +207,19 @@ pub struct DiagnoseConfig {
     pub iterations: usize,
     /// Candidate effects (default: every effect of the world's library).
     pub effects: Option<Vec<Effect>>,
-    /// Refit nominal parameters ([`refit_params`](Self::refit_params)) on the fit half, for the
-    /// baseline and jointly with every candidate, so that an effect is credited only with what
-    /// the nominal model cannot absorb (default yes for physics models; network and hybrid
-    /// models are never refitted).
+    /// Refit the model's free nominal parameters (pushing: `c`, `κ`, and the measured depth `a`
+    /// for the baseline alone, within ±10 %; car: the tires and the drivetrain,
+    /// [`CAR_FITTED_PARAMS`](dynlab_learn::dynamics::physics::CAR_FITTED_PARAMS)) on
+    /// the fit half, for the baseline and jointly with every candidate, so that an effect is
+    /// credited only with what the nominal model cannot absorb (default: pushing physics models
+    /// yes; the car no — with 3 × 15 s of data the five refitted car parameters let the LM
+    /// screening of a grip patch's starts wander off to patches larger than the floor; set it,
+    /// or `dynlab diagnose --refit Df,Dr,Cm1,Cm2,Cr0`, on longer data; network and hybrid models
+    /// are never refitted).
     pub refit_nominal: Option<bool>,
-    /// Which nominal parameters are refitted (default: pushing, the model's free ones, `c` and
-    /// `κ`, and the measured depth `a` for the baseline alone, within ±10 %; the car, the
-    /// friction ellipse's weight `ellipse` alone — with 3 × 15 s of data the car's grip and
-    /// drivetrain refitted let the LM screening of a grip patch's starts wander off to patches
-    /// larger than the floor; `dynlab diagnose --refit ellipse,Df,Dr,Cm1,Cm2,Cr0` refits them
-    /// on longer data. The tire stiffness factors `B` are weakly identified from poses:
-    /// refitted with the grip and the drivetrain they fit the fit half's particular slips, and
-    /// on data with drag and a steering offset left 0 % held-out reduction for either effect,
-    /// against 83 % for both without).
+    /// Which nominal parameters are refitted (default: the model's default free ones and, for
+    /// pushing, the measured depth `a`; for the car without the tire stiffness `Bf`, `Br`: the
+    /// peak forces `Df`, `Dr` and the drivetrain `Cm1`, `Cm2`, `Cr0`).
     pub refit_params: Option<Vec<String>>,
     /// A refitted nominal parameter stays within this fraction of the model's value, e.g. 0.15
     /// for a model fitted on nominal data or a datasheet known to ±15 % (default: within the
@@ -274,6 +285,12 @@ impl DiagnoseConfig {
             World::Car => 50,
             World::Push => 3,
         })
+    }
+
+    /// Whether the nominal parameters are refitted for a world (see
+    /// [`refit_nominal`](Self::refit_nominal)).
+    pub fn refit_nominal_for(&self, world: World) -> bool {
+        self.refit_nominal.unwrap_or(world == World::Push)
     }
 
     /// The one-sided confidence of each candidate's interval when `candidates` are tested.
@@ -363,8 +380,8 @@ pub struct Candidate {
     pub on_bound: BTreeMap<String, String>,
     /// Units of the parameters.
     pub param_units: BTreeMap<String, String>,
-    /// Nominal parameters refitted jointly with the effect (pushing physics: `c`, `kappa`;
-    /// empty when the nominal parameters are held).
+    /// Nominal parameters refitted jointly with the effect (pushing physics: `c`, `kappa`; a
+    /// grip patch: the car's `ellipse`; empty when the nominal parameters are held).
     #[serde(default)]
     pub nominal_params: BTreeMap<String, f64>,
     /// The reduction before clipping (negative: the effect makes held-out predictions worse).
@@ -990,6 +1007,19 @@ impl<'a> Ctx<'a> {
         } else {
             Vec::new()
         };
+        // (network and hybrid models are never refitted)
+        for e in free_effects
+            .iter()
+            .copied()
+            .chain(cand)
+            .filter(|_| self.pure_physics)
+        {
+            for n in coupled_nominal(e) {
+                if let Some(i) = with.param_index(n).filter(|i| !idx.contains(i)) {
+                    idx.push(i);
+                }
+            }
+        }
         for e in free_effects.iter().copied().chain(cand) {
             idx.extend(
                 with.effect_param_range(e)
@@ -1728,7 +1758,7 @@ pub fn diagnose(
         World::Car => &[],
         World::Push => &PUSH_MEASURED,
     };
-    let refit: Vec<String> = if pure_physics && cfg.refit_nominal.unwrap_or(true) {
+    let refit: Vec<String> = if pure_physics && cfg.refit_nominal_for(world) {
         base.default_free()
             .iter()
             .zip(base.param_specs())
@@ -1737,10 +1767,14 @@ pub fn diagnose(
                 owner.is_none()
                     && match &cfg.refit_params {
                         Some(names) => names.iter().any(|n| n == spec.name),
-                        None => match world {
-                            World::Car => CAR_REFIT.contains(&spec.name),
-                            World::Push => **f || measured.iter().any(|(n, _)| *n == spec.name),
-                        },
+                        None => {
+                            let held: &[&str] = match world {
+                                World::Car => &CAR_HELD,
+                                World::Push => &[],
+                            };
+                            (**f && !held.contains(&spec.name))
+                                || measured.iter().any(|(n, _)| *n == spec.name)
+                        }
                     }
             })
             .map(|(i, _)| names[i].clone())
