@@ -589,18 +589,27 @@ fn a_square_block_model_file_loads_with_its_side_as_the_width() {
     }
     // the same model as the file with a = b = 0.09
     assert_eq!(p.params(), expected.physics().unwrap().params());
-    let (s, u) = ([0.4, 0.02, -0.3], [0.6, 0.2, 0.8]);
-    let (mut a, mut b) = ([0.0; 3], [0.0; 3]);
-    back.step(&s, &u, &mut a).unwrap();
-    expected.step(&s, &u, &mut b).unwrap();
-    assert_eq!(a, b);
-    // a file missing another parameter is still corrupt
-    let mut v: serde_json::Value = serde_json::from_str(&square).unwrap();
-    v["physics"]["params"].as_array_mut().unwrap().remove(3);
+    assert_same_step(&back, &expected, &[0.4, 0.02, -0.3], &[0.6, 0.2, 0.8]);
+    assert_corrupt_without_param(&dir, &square, 3, "kappa");
+}
+
+/// Both models take the same step from `s` under `u`.
+fn assert_same_step(a: &Model, b: &Model, s: &[f64], u: &[f64]) {
+    let (mut x, mut y) = (vec![0.0; s.len()], vec![0.0; s.len()]);
+    a.step(s, u, &mut x).unwrap();
+    b.step(s, u, &mut y).unwrap();
+    assert_eq!(x, y);
+}
+
+/// The model file `file` written to `dir` without its physics parameter `at` (`name`) is corrupt,
+/// and the error names the parameter: only the documented upgrades fill one in.
+fn assert_corrupt_without_param(dir: &Path, file: &str, at: usize, name: &str) {
+    let mut v: serde_json::Value = serde_json::from_str(file).unwrap();
+    v["physics"]["params"].as_array_mut().unwrap().remove(at);
     std::fs::write(dir.join(MODEL_JSON), serde_json::to_string(&v).unwrap()).unwrap();
-    let e = load_model(&dir, None, None).unwrap_err();
+    let e = load_model(dir, None, None).unwrap_err();
     assert!(
-        matches!(e, LearnError::CorruptModel { .. }) && e.to_string().contains("kappa"),
+        matches!(e, LearnError::CorruptModel { .. }) && e.to_string().contains(name),
         "{e}"
     );
 }
@@ -631,20 +640,8 @@ fn a_car_model_file_without_the_ellipse_weight_loads_with_the_full_ellipse() {
         back.physics().unwrap().params(),
         expected.physics().unwrap().params()
     );
-    let (s, u) = ([0.1, -0.2, 0.3, 1.2, -0.2, 0.5], [0.2, 0.9]);
-    let (mut a, mut b) = ([0.0; 6], [0.0; 6]);
-    back.step(&s, &u, &mut a).unwrap();
-    expected.step(&s, &u, &mut b).unwrap();
-    assert_eq!(a, b);
-    // a file missing another parameter is still corrupt
-    let mut v: serde_json::Value = serde_json::from_str(&before).unwrap();
-    v["physics"]["params"].as_array_mut().unwrap().remove(4);
-    std::fs::write(dir.join(MODEL_JSON), serde_json::to_string(&v).unwrap()).unwrap();
-    let e = load_model(&dir, None, None).unwrap_err();
-    assert!(
-        matches!(e, LearnError::CorruptModel { .. }) && e.to_string().contains("Bf"),
-        "{e}"
-    );
+    assert_same_step(&back, &expected, &[0.1, -0.2, 0.3, 1.2, -0.2, 0.5], &[0.2, 0.9]);
+    assert_corrupt_without_param(&dir, &before, 4, "Bf");
 }
 
 #[test]
