@@ -640,7 +640,12 @@ fn a_car_model_file_without_the_ellipse_weight_loads_with_the_full_ellipse() {
         back.physics().unwrap().params(),
         expected.physics().unwrap().params()
     );
-    assert_same_step(&back, &expected, &[0.1, -0.2, 0.3, 1.2, -0.2, 0.5], &[0.2, 0.9]);
+    assert_same_step(
+        &back,
+        &expected,
+        &[0.1, -0.2, 0.3, 1.2, -0.2, 0.5],
+        &[0.2, 0.9],
+    );
     assert_corrupt_without_param(&dir, &before, 4, "Bf");
 }
 
