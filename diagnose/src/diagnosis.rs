@@ -155,20 +155,6 @@ pub enum DiagnosisError {
 /// effect with them refitted, 83 % for both without).
 const CAR_HELD: [&str; 2] = ["Bf", "Br"];
 
-/// The nominal parameters fitted wherever effect `e` is fitted (its candidate fit and every
-/// joint refit with it). A grip patch takes the car's friction-ellipse weight `ellipse`:
-/// nominal data rarely take the rear tire to its peak, so a nominal fit leaves the weight
-/// wherever it started (0 to 1 on five cars of one kind), while under throttle on low grip it
-/// decides how much lateral force is left. With the wrong weight the patch was found on 2 of 5
-/// such cars; refitted for the baseline too, the weight alone took up part of the patch. It does
-/// nothing where the tire stays inside its circle, so it explains no other effect's data.
-fn coupled_nominal(e: Effect) -> &'static [&'static str] {
-    match e {
-        Effect::GripPatch => &["ellipse"],
-        _ => &[],
-    }
-}
-
 /// Measured pushing parameters the diagnosis refits within a tolerance of the model's value
 /// (unless [`DiagnoseConfig::refit_tolerance`] sets one for all): the block's depth `a`, within
 /// ±10 %, for the baseline alone. The depth is the contact's arm, which a `com_offset` along
@@ -1014,7 +1000,7 @@ impl<'a> Ctx<'a> {
             .chain(cand)
             .filter(|_| self.pure_physics)
         {
-            for n in coupled_nominal(e) {
+            for n in e.coupled_nominal() {
                 if let Some(i) = with.param_index(n).filter(|i| !idx.contains(i)) {
                     idx.push(i);
                 }

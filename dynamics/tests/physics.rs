@@ -296,9 +296,13 @@ fn car_fit_freed_non_identifiable_mass() {
     let m = PhysicsModel::car(&[]).unwrap();
     let free = m.default_free();
     for (name, f) in m.param_names().iter().zip(&free) {
-        let measured = ["m", "Iz", "lf", "lr", "Cr2", "v_reg", "Cf", "Cr"].contains(&name.as_str());
-        assert_eq!(*f, !measured, "{name}");
+        let held = ["m", "Iz", "lf", "lr", "Cr2", "v_reg", "Cf", "Cr", "ellipse"];
+        assert_eq!(*f, !held.contains(&name.as_str()), "{name}");
     }
+    // the friction ellipse's weight is fitted with a grip patch, which it shapes
+    let patch = PhysicsModel::car(&[Effect::GripPatch]).unwrap();
+    let i = patch.param_index("ellipse").unwrap();
+    assert!(patch.default_free()[i]);
     let p = PhysicsModel::pushing(&[]).unwrap();
     let pf = p.default_free();
     // a, c, L, kappa, b: the geometry and the push length are measured, c and κ fitted

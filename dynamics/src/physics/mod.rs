@@ -349,6 +349,18 @@ impl Effect {
         Effect::PusherFriction,
     ];
 
+    /// The nominal parameters fitted wherever the effect is fitted (training and diagnosis): a
+    /// grip patch takes the car's friction-ellipse weight `ellipse`. Nominal data rarely take the
+    /// rear tire to its peak, so a nominal fit cannot tell the weight; under throttle on low grip
+    /// it decides how much lateral force is left, and a patch fitted with the wrong weight is
+    /// the wrong patch (found on 2 of 5 cars without an ellipse, diagnosed with the full one).
+    pub fn coupled_nominal(self) -> &'static [&'static str] {
+        match self {
+            Effect::GripPatch => &["ellipse"],
+            _ => &[],
+        }
+    }
+
     /// Whether the effect acts on a region of the floor or table only (the patches): its
     /// parameters do not reach motion that never crosses the region.
     pub fn is_regional(self) -> bool {

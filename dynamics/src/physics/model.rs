@@ -429,12 +429,19 @@ impl PhysicsModel {
     /// Which parameters a fit frees by default, in vector order: the identifiable nominal
     /// parameters ([`CAR_FITTED_PARAMS`](super::CAR_FITTED_PARAMS),
     /// [`PUSH_FITTED_PARAMS`](super::PUSH_FITTED_PARAMS)) and every effect parameter except the
-    /// width `w` of a patch's smooth edge (a modelling choice, not a physical quantity). Measured
-    /// values (mass, inertia, geometry, published drag) stay fixed.
+    /// width `w` of a patch's smooth edge (a modelling choice, not a physical quantity), and the
+    /// nominal parameters an enabled effect is fitted with ([`Effect::coupled_nominal`]: the
+    /// car's `ellipse` with a grip patch). Measured values (mass, inertia, geometry, published
+    /// drag) stay fixed.
     pub fn default_free(&self) -> Vec<bool> {
         let fitted: &[&str] = match self.robot {
             Robot::Car => &super::CAR_FITTED_PARAMS,
             Robot::Pushing => &super::PUSH_FITTED_PARAMS,
+        };
+        let coupled = |name: &str| {
+            self.effects()
+                .iter()
+                .any(|e| e.coupled_nominal().contains(&name))
         };
         let start = self.custom_start();
         self.param_specs()
@@ -442,7 +449,7 @@ impl PhysicsModel {
             .enumerate()
             .map(|(i, (e, p))| match e {
                 _ if i >= start => true,
-                None => fitted.contains(&p.name),
+                None => fitted.contains(&p.name) || coupled(p.name),
                 Some(_) => p.name != "w",
             })
             .collect()
