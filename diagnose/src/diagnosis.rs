@@ -1077,8 +1077,27 @@ impl<'a> Ctx<'a> {
         if cand == Some(Effect::GripPatch) {
             effect_starts.extend(self.screened_discs(cur)?.into_iter().map(|st| (true, st)));
         }
+        // the candidate's coupled nominal parameters (the car's ellipse weight with a grip
+        // patch) also start at each end of their range: nominal data do not tell them, and
+        // from the model's weight the refinement stayed there (0.98 for a car without an
+        // ellipse, the patch not found)
+        let mut alternatives: Vec<Option<(usize, f64)>> = vec![None];
+        for n in cand.map_or(&[][..], |e| e.coupled_nominal()) {
+            if let Some(c) = idx.iter().position(|&i| with_names[i] == *n) {
+                let given = p0[idx[c]];
+                alternatives.extend(
+                    [lower[c], upper[c]]
+                        .into_iter()
+                        .filter(|b| *b != given)
+                        .map(|b| Some((c, b))),
+                );
+            }
+        }
         let mut scored: Vec<(f64, bool, Vec<f64>)> = Vec::new();
-        for (screened, st) in effect_starts {
+        for ((screened, st), alt) in effect_starts
+            .iter()
+            .flat_map(|s| alternatives.iter().map(move |a| (s, a)))
+        {
             let mut th: Vec<f64> = idx
                 .iter()
                 .zip(lower.iter().zip(&upper))
@@ -1086,13 +1105,16 @@ impl<'a> Ctx<'a> {
                 .collect();
             for (name, v) in st {
                 if let Some(i) =
-                    (0..idx.len()).find(|&i| owners[i] == cand && specs[i].name == name)
+                    (0..idx.len()).find(|&i| owners[i] == cand && specs[i].name == *name)
                 {
                     th[i] = v.clamp(lower[i], upper[i]);
                 }
             }
+            if let Some((c, v)) = alt {
+                th[*c] = *v;
+            }
             if let Some(errs) = cost_of(&th, &self.fit_w, None) {
-                scored.push((mean(&errs), screened, th));
+                scored.push((mean(&errs), *screened, th));
             }
         }
         scored.sort_by(|a, b| a.0.total_cmp(&b.0));
