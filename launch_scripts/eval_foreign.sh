@@ -5,7 +5,8 @@
 # with hidden effects and `dynlab diagnose`; prints what was named, the error removed, the fitted
 # strengths against the truth and the terms found beyond the library.
 # Usage: launch_scripts/eval_foreign.sh [--seeds N] [--first-seed N] [--only CASE,CASE] [--jobs N]
-#        [--out DIR]   (defaults: 3 seeds from 0, every case, 2 jobs, out/eval_foreign)
+#        [--out DIR] [--friction-ellipse]   (defaults: 3 seeds from 0, every case, 2 jobs,
+#        out/eval_foreign; --friction-ellipse: cars whose drive force takes lateral grip)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash tests/setup_python.sh
