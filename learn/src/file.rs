@@ -290,9 +290,9 @@ fn is_ellipsoid(s: &LimitSurface) -> bool {
 ///   at `v_reg`) gets `ellipse` = 1 right after `v_reg`: such a model had the full ellipse.
 fn upgraded_params(expected: &[String], params: &[ParamEntry]) -> Vec<ParamEntry> {
     let mut params = with_block_width(expected, params);
-    let at = expected.iter().position(|n| n == "ellipse");
-    if let Some(at) = at
-        && expected.get(at.wrapping_sub(1)).map(String::as_str) == Some("v_reg")
+    let after_v_reg = |at: usize| at > 0 && expected[at - 1] == "v_reg";
+    if let Some(at) = expected.iter().position(|n| n == "ellipse")
+        && after_v_reg(at)
         && params.len() + 1 == expected.len()
         && params.iter().all(|e| e.name != "ellipse")
         && params.get(at - 1).is_some_and(|e| e.name == "v_reg")
