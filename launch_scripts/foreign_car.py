@@ -11,8 +11,11 @@ AckermannDriveStamped at 50 Hz: steering angle, duty as `acceleration`).
 Hidden effects (comma-separated `--effects`): `aero_drag` (−c·vₓ|vₓ| on the drive force, c 0.01),
 `steering_offset` (+0.03 rad), `motor_lag` (first-order duty, τ 0.2 s), `grip_patch` (a disc at
 (0.5, 0) of radius 0.6 m where both tyres keep 45 % of their force), and outside dynlab's library
-`steering_gain_speed` (the steering angle divided by 1 + vₓ²/4) and `grip_band` (a 0.8 m wide
-band through (0, 0.3) at 0.5 rad where the tyres keep half their force).
+`steering_gain_speed` (the steering angle divided by 1 + vₓ²/4), `grip_band` (a 0.8 m wide
+band through (0, 0.3) at 0.5 rad where the tyres keep half their force), `cmd_delay` (both
+commands reach the car 60 ms after they are sent: radio and servo electronics, a transport delay,
+not a lag) and `yaw_damping` (a yaw moment −c·ω, c = 4 s⁻¹ times I_z: the tyres' relaxation and
+the chassis' scrub).
 
 The car's parameters are the datasheet's scaled by seeded factors in [1 − f, 1 + f]
 (`--perturb f`, default 0.1), the same for every bag of one `--car-seed`: a nominal bag and an
@@ -35,7 +38,9 @@ DATASHEET = dict(m=0.041, Iz=27.8e-6, lf=0.029, lr=0.033, Bf=2.579, Cf=1.2, Df=0
                  Br=3.3852, Cr=1.2691, Dr=0.1737, Cm1=0.287, Cm2=0.0545, Cr0=0.0518, Cr2=0.00035)
 STEER_MAX = 0.35
 FLOOR = 1.3  # the driver keeps the car within ±FLOOR m
-EFFECTS = ("aero_drag", "steering_offset", "motor_lag", "grip_patch", "steering_gain_speed", "grip_band")
+EFFECTS = ("aero_drag", "steering_offset", "motor_lag", "grip_patch", "steering_gain_speed", "grip_band",
+           "cmd_delay", "yaw_damping")
+DELAY = 0.06  # s, cmd_delay
 
 
 def car_params(car_seed, perturb):
@@ -85,7 +90,7 @@ def deriv(p, effects, s, steer, duty):
         om,
         (frx - ffy * math.sin(delta) + m * vy * om) / m,
         (fry + ffy * math.cos(delta) - m * vx * om) / m,
-        (ffy * p["lf"] * math.cos(delta) - fry * p["lr"]) / iz,
+        (ffy * p["lf"] * math.cos(delta) - fry * p["lr"]) / iz - (4.0 * om if "yaw_damping" in effects else 0.0),
         (duty - dstate) / 0.2,
     ])
 
@@ -107,6 +112,8 @@ def episode(p, effects, rng, duration):
     duty_level, next_duty, sweep_until = 0.3, 0.0, -1.0
     states, cmds = [], []
     steer, duty = 0.0, 0.0
+    sent = []  # commands on their way to the car (cmd_delay)
+    applied = (0.0, 0.0)
     n = int(duration / h)
     for i in range(n):
         t = i * h
@@ -129,8 +136,11 @@ def episode(p, effects, rng, duration):
                 steer = STEER_MAX * math.copysign(1.0, math.sin(9.0 * t))
             duty = float(np.clip(duty_level + rng.normal(0, 0.02), -0.1, 1.0))
             cmds.append((t, steer, duty))
+            sent.append((t + (DELAY if "cmd_delay" in effects else 0.0), steer, duty))
+        while sent and sent[0][0] <= t + 1e-9:
+            applied = sent.pop(0)[1:]
         states.append((t, s.copy()))
-        s = rk4(p, effects, s, steer, duty, h)
+        s = rk4(p, effects, s, *applied, h)
         if not np.all(np.isfinite(s)):
             break
     return states, cmds

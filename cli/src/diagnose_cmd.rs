@@ -170,7 +170,15 @@ pub fn run(args: DiagnoseArgs) -> anyhow::Result<()> {
     }
     // the fit starts from the diagnosis's values: from the defaults it may not find them (a
     // patch elsewhere, a servo's rate limit from its no-limit bound)
-    for (name, v) in d.joint.iter().flat_map(|j| &j.params) {
+    // and from the nominal parameters refitted with them but not for the baseline (a grip
+    // patch's friction-ellipse weight)
+    let coupled = d.joint.iter().flat_map(|j| &j.nominal_params);
+    for (name, v) in d
+        .joint
+        .iter()
+        .flat_map(|j| &j.params)
+        .chain(coupled.filter(|(k, _)| !d.nominal_refit.contains_key(*k)))
+    {
         train.extend(["--set".into(), format!("{name}={v}")]);
     }
     if let Some(f) = &custom {

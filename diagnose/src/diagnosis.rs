@@ -2598,7 +2598,7 @@ impl Diagnosis {
                 },
                 step.error_before
             );
-            o.push_str(&candidate_table(&step.candidates));
+            o.push_str(&candidate_table(&step.candidates, &self.nominal_refit));
             match &step.added {
                 Some(e) => {
                     let _ = writeln!(
@@ -2650,6 +2650,9 @@ impl Diagnosis {
                     param_text(name, *v, &j.param_std, &j.param_units, &j.on_bound)
                 );
             }
+            if let Some(t) = coupled_text(&j.nominal_params, &self.nominal_refit) {
+                let _ = writeln!(o, "  {t}");
+            }
         }
         if self.verdict.is_none() && !self.correlations.is_empty() {
             let _ = writeln!(o, "the one-step residual correlates most with:");
@@ -2697,8 +2700,23 @@ pub(crate) fn param_text(
     t.trim_end().to_string()
 }
 
-/// The rows of one step's candidates for the terminal.
-fn candidate_table(cands: &[Candidate]) -> String {
+/// The nominal parameters refitted with an effect but not for the baseline (a grip patch's
+/// friction-ellipse weight), for the terminal; `None` when there are none.
+pub(crate) fn coupled_text(
+    nominal: &BTreeMap<String, f64>,
+    baseline: &BTreeMap<String, f64>,
+) -> Option<String> {
+    let p: Vec<String> = nominal
+        .iter()
+        .filter(|(k, _)| !baseline.contains_key(*k))
+        .map(|(k, v)| format!("{k} = {}", g4(*v)))
+        .collect();
+    (!p.is_empty()).then(|| format!("nominal {}, refitted with it", p.join(", ")))
+}
+
+/// The rows of one step's candidates for the terminal; `baseline`: the nominal parameters
+/// refitted for the baseline (given in the header, not per candidate).
+fn candidate_table(cands: &[Candidate], baseline: &BTreeMap<String, f64>) -> String {
     use std::fmt::Write as _;
     let mut o = String::new();
     let _ = writeln!(
@@ -2722,6 +2740,9 @@ fn candidate_table(cands: &[Candidate]) -> String {
             c.chaotic_windows,
             params.join(", ")
         );
+        if let Some(t) = coupled_text(&c.nominal_params, baseline) {
+            let _ = writeln!(o, "  {:<16} {t}", "");
+        }
         if let Some(x) = &c.cross_fit {
             let _ = writeln!(o, "  {:<16} {}", "", cross_fit_text(x));
         }

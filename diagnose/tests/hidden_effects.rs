@@ -9,7 +9,7 @@
 use dynlab_diagnose::diagnosis::simdata::{
     car_dataset, car_scenario, low_grip_band, nominal_model, over_low_grip_band,
 };
-use dynlab_diagnose::diagnosis::{DiagnoseConfig, Diagnosis, diagnose};
+use dynlab_diagnose::diagnosis::{DiagnoseConfig, Diagnosis, diagnose, diagnosis_html};
 use dynlab_learn::World;
 use dynlab_learn::dynamics::physics::Effect;
 
@@ -144,6 +144,13 @@ fn a_grip_patch_is_found_with_the_ellipse_weight_the_car_has() {
     assert!(first.nominal_params["ellipse"] < 0.3, "{}", d.table());
     let joint = d.joint.as_ref().unwrap();
     assert!(joint.nominal_params["ellipse"] < 0.3, "{}", d.table());
+    // the weight is shown with the patch, in the candidate's row and in the joint fit
+    let table = d.table();
+    assert!(
+        table.matches("nominal ellipse = 0.").count() >= 2 && table.contains("refitted with it"),
+        "{table}"
+    );
+    assert!(diagnosis_html(&d).contains("ellipse (nominal, refitted with the effects)"));
 }
 
 #[test]

@@ -1,8 +1,9 @@
 //! The diagnosis as an HTML fragment (for `diagnosis.html` and for embedding in a report).
 
+use std::collections::BTreeMap;
 use std::fmt::Write as _;
 
-use super::{Candidate, Diagnosis, cross_fit_text, g4, param_text};
+use super::{Candidate, Diagnosis, coupled_text, cross_fit_text, g4, param_text};
 
 fn esc(s: &str) -> String {
     s.replace('&', "&amp;")
@@ -90,7 +91,11 @@ pub fn diagnosis_html(d: &Diagnosis) -> String {
             },
             g4(step.error_before)
         );
-        o.push_str(&candidate_table(&step.candidates, step.added.as_deref()));
+        o.push_str(&candidate_table(
+            &step.candidates,
+            step.added.as_deref(),
+            &d.nominal_refit,
+        ));
         let _ = match &step.added {
             Some(e) => writeln!(
                 o,
@@ -132,6 +137,18 @@ pub fn diagnosis_html(d: &Diagnosis) -> String {
                 esc(j.param_units.get(name).map_or("", |u| u.as_str()))
             );
         }
+        for (name, v) in j
+            .nominal_params
+            .iter()
+            .filter(|(k, _)| !d.nominal_refit.contains_key(*k))
+        {
+            let _ = writeln!(
+                o,
+                "<tr><td>{} (nominal, refitted with the effects)</td><td align=right>{}</td><td align=right>–</td><td></td></tr>",
+                esc(name),
+                g4(*v)
+            );
+        }
         let _ = writeln!(o, "</table>");
         if !j.spin_windows.is_empty() {
             let _ = writeln!(
@@ -168,7 +185,11 @@ pub fn diagnosis_html(d: &Diagnosis) -> String {
 }
 
 /// One step's candidates as a table with a bar per error reduction (`added` in bold).
-fn candidate_table(cands: &[Candidate], added: Option<&str>) -> String {
+fn candidate_table(
+    cands: &[Candidate],
+    added: Option<&str>,
+    baseline: &BTreeMap<String, f64>,
+) -> String {
     let mut o = String::new();
     let _ = writeln!(
         o,
@@ -176,7 +197,7 @@ fn candidate_table(cands: &[Candidate], added: Option<&str>) -> String {
     );
     for c in cands {
         let w = (c.error_reduction * 200.0).round();
-        let params: Vec<String> = c
+        let mut params: Vec<String> = c
             .params
             .iter()
             .map(|(k, v)| {
@@ -189,6 +210,7 @@ fn candidate_table(cands: &[Candidate], added: Option<&str>) -> String {
                 ))
             })
             .collect();
+        params.extend(coupled_text(&c.nominal_params, baseline).map(|t| esc(&t)));
         let bold = if added == Some(c.effect.as_str()) {
             "font-weight:bold;"
         } else {
