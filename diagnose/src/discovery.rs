@@ -619,6 +619,12 @@ impl RowSums {
         self.fit_column(self.pos.iter().map(|&p| phi(p)))
     }
 
+    /// The squared residual the car's region `atom` removes fitted alone.
+    fn gain(&self, atom: &Atom) -> Option<f64> {
+        self.fit(|p| atom.eval::<f64>(Robot::Car, &[], &p, &[]))
+            .map(|g| g.0)
+    }
+
     /// The same for any feature's values per transition.
     fn fit_column(&self, column: impl Iterator<Item = f64>) -> Option<(f64, f64)> {
         let (mut sy, mut sg) = (0.0, 0.0);
@@ -661,18 +667,8 @@ fn fitted_regions(reg: &Regression, one: &OneStep) -> Vec<Feature> {
     let Area { lo, hi } = sums.area();
     let side = (hi[0] - lo[0]).max(hi[1] - lo[1]).max(1e-3);
     let round = |v: f64| (v * 1000.0).round() / 1000.0;
-    let best_of = |atoms: &mut dyn Iterator<Item = Atom>| {
-        let mut best: Option<(f64, Atom)> = None;
-        for atom in atoms {
-            if let Some((gain, _)) = sums.fit(|p| atom.eval::<f64>(Robot::Car, &[], &p, &[]))
-                && best.is_none_or(|b| gain > b.0)
-            {
-                best = Some((gain, atom));
-            }
-        }
-        best.map(|b| b.1)
-    };
-    let mut strips = (0..STRIP_WIDTHS).flat_map(|k| {
+    let strip = |[a, d, w]: [f64; 3]| Atom::Strip { a, d, w };
+    let strips = (0..STRIP_WIDTHS).flat_map(|k| {
         let q = 0.06 * (0.45f64 / 0.06).powf(k as f64 / (STRIP_WIDTHS - 1) as f64);
         let w = round(q * side).max(1e-3);
         (0..ANGLES).flat_map(move |i| {
@@ -682,14 +678,16 @@ fn fitted_regions(reg: &Regression, one: &OneStep) -> Vec<Feature> {
             let corners = [lo, [lo[0], hi[1]], [hi[0], lo[1]], hi].map(proj);
             let pmin = corners.iter().copied().fold(f64::INFINITY, f64::min);
             let pmax = corners.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-            (0..OFFSETS).map(move |j| Atom::Strip {
-                a,
-                d: round(pmin + (j as f64 + 0.5) / OFFSETS as f64 * (pmax - pmin)),
-                w,
+            (0..OFFSETS).map(move |j| {
+                [
+                    a,
+                    round(pmin + (j as f64 + 0.5) / OFFSETS as f64 * (pmax - pmin)),
+                    w,
+                ]
             })
         })
     });
-    let mut bumps = BUMP_WIDTHS.into_iter().flat_map(|q| {
+    let bumps = BUMP_WIDTHS.into_iter().flat_map(|q| {
         let r = round(q * side).max(1e-3);
         lattice(lo, hi, CENTRES)
             .into_iter()
@@ -699,33 +697,38 @@ fn fitted_regions(reg: &Regression, one: &OneStep) -> Vec<Feature> {
                 r,
             })
     });
-    let strip = best_of(&mut strips).map(|atom| match atom {
-        Atom::Strip { a, d, w } => {
-            let gain = |[a, d, w]: [f64; 3]| {
-                let atom = Atom::Strip { a, d, w };
-                sums.fit(|p| atom.eval::<f64>(Robot::Car, &[], &p, &[]))
-                    .map_or(f64::NEG_INFINITY, |g| g.0)
-            };
-            // steps: half the lattice's direction and offset spacings, a tenth of the width
-            let steps = [
-                std::f64::consts::PI / 72.0,
-                0.5 * side / OFFSETS as f64,
-                0.1,
-            ];
-            let [a, d, w] = refine([a, d, w], steps, gain);
-            Atom::Strip {
-                a: round(a),
-                d: round(d),
-                w: round(w),
-            }
-        }
-        other => other,
+    let refined = best_shape(&sums, strips, strip).map(|shape| {
+        let gain = |shape| sums.gain(&strip(shape)).unwrap_or(f64::NEG_INFINITY);
+        // steps: half the lattice's direction and offset spacings, a tenth of the width
+        let steps = [
+            std::f64::consts::PI / 72.0,
+            0.5 * side / OFFSETS as f64,
+            0.1,
+        ];
+        strip(refine(shape, steps, gain).map(round))
     });
-    [strip, best_of(&mut bumps)]
+    [refined, best_shape(&sums, bumps, |atom| atom)]
         .into_iter()
         .flatten()
         .filter_map(|atom| Feature::new(vec![atom]).ok())
         .collect()
+}
+
+/// The shape among `shapes` whose region (`atom`) explains the most of `sums`' regression.
+fn best_shape<T: Copy>(
+    sums: &RowSums,
+    shapes: impl Iterator<Item = T>,
+    atom: impl Fn(T) -> Atom,
+) -> Option<T> {
+    let mut best: Option<(f64, T)> = None;
+    for shape in shapes {
+        if let Some(gain) = sums.gain(&atom(shape))
+            && best.is_none_or(|b| gain > b.0)
+        {
+            best = Some((gain, shape));
+        }
+    }
+    best.map(|b| b.1)
 }
 
 /// Coordinate ascent of `score` over a strip's `[a, d, w]` from `start` (the width on a log
