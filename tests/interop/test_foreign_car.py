@@ -40,6 +40,27 @@ def test_the_generator_rejects_an_unknown_effect(tmp_path):
     assert p.returncode != 0 and "wind" in p.stderr, p.stderr
 
 
+def test_the_generators_delay_and_yaw_damping_act_as_documented():
+    sys.path.insert(0, str(REPO / "launch_scripts"))
+    import numpy as np
+    import foreign_car as fc
+
+    p = dict(fc.car_params(1, 0.1), friction_ellipse=False)
+    s = np.array([0.1, 0.2, 0.3, 1.2, 0.1, 2.5, 0.2])
+    plain = fc.deriv(p, set(), s, 0.2, 0.3)
+    damped = fc.deriv(p, {"yaw_damping"}, s, 0.2, 0.3)
+    assert damped[5] - plain[5] == pytest.approx(-4.0 * 2.5)
+    assert np.array_equal(np.delete(damped, 5), np.delete(plain, 5))
+    # the delayed car's first 60 ms see no command: it coasts as a car sent zeros
+    delayed, _ = fc.episode(p, {"cmd_delay"}, np.random.default_rng(3), 0.2)
+    coast = delayed[0][1]
+    for _ in range(60):
+        coast = fc.rk4(p, set(), coast, 0.0, 0.0, 0.001)
+    assert np.allclose(delayed[60][1], coast)
+    undelayed, _ = fc.episode(p, set(), np.random.default_rng(3), 0.2)
+    assert not np.allclose(undelayed[60][1], coast)
+
+
 def test_diagnose_names_both_hidden_effects_and_applies_them(foreign):
     d, model, bag = foreign
     out = d / "diagnosis"
