@@ -172,12 +172,15 @@ pub fn run(args: DiagnoseArgs) -> anyhow::Result<()> {
     // patch elsewhere, a servo's rate limit from its no-limit bound)
     // and from the nominal parameters refitted with them but not for the baseline (a grip
     // patch's friction-ellipse weight)
-    let coupled = d.joint.iter().flat_map(|j| &j.nominal_params);
+    let coupled = d
+        .joint
+        .iter()
+        .flat_map(|j| d.coupled_nominal(&j.nominal_params));
     for (name, v) in d
         .joint
         .iter()
-        .flat_map(|j| &j.params)
-        .chain(coupled.filter(|(k, _)| !d.nominal_refit.contains_key(*k)))
+        .flat_map(|j| j.params.iter().map(|(k, v)| (k, *v)))
+        .chain(coupled)
     {
         train.extend(["--set".into(), format!("{name}={v}")]);
     }

@@ -2534,6 +2534,19 @@ fn residual_correlations(
 }
 
 impl Diagnosis {
+    /// The nominal parameters of `nominal` (a candidate's or the joint fit's) that were refitted
+    /// with the effects but not for the baseline (a grip patch's friction-ellipse weight): those
+    /// the baseline refits are given with it.
+    pub fn coupled_nominal<'a>(
+        &'a self,
+        nominal: &'a BTreeMap<String, f64>,
+    ) -> impl Iterator<Item = (&'a String, f64)> + 'a {
+        nominal
+            .iter()
+            .filter(|(k, _)| !self.nominal_refit.contains_key(*k))
+            .map(|(k, v)| (k, *v))
+    }
+
     /// The terminal summary: a table of candidates and the verdict line.
     pub fn table(&self) -> String {
         use std::fmt::Write as _;
@@ -2598,7 +2611,7 @@ impl Diagnosis {
                 },
                 step.error_before
             );
-            o.push_str(&candidate_table(&step.candidates, &self.nominal_refit));
+            o.push_str(&candidate_table(&step.candidates, self));
             match &step.added {
                 Some(e) => {
                     let _ = writeln!(
@@ -2650,7 +2663,7 @@ impl Diagnosis {
                     param_text(name, *v, &j.param_std, &j.param_units, &j.on_bound)
                 );
             }
-            if let Some(t) = coupled_text(&j.nominal_params, &self.nominal_refit) {
+            if let Some(t) = coupled_text(self, &j.nominal_params) {
                 let _ = writeln!(o, "  {t}");
             }
         }
@@ -2700,23 +2713,17 @@ pub(crate) fn param_text(
     t.trim_end().to_string()
 }
 
-/// The nominal parameters refitted with an effect but not for the baseline (a grip patch's
-/// friction-ellipse weight), for the terminal; `None` when there are none.
-pub(crate) fn coupled_text(
-    nominal: &BTreeMap<String, f64>,
-    baseline: &BTreeMap<String, f64>,
-) -> Option<String> {
-    let p: Vec<String> = nominal
-        .iter()
-        .filter(|(k, _)| !baseline.contains_key(*k))
-        .map(|(k, v)| format!("{k} = {}", g4(*v)))
+/// [`Diagnosis::coupled_nominal`] of `nominal` for the terminal; `None` when there are none.
+pub(crate) fn coupled_text(d: &Diagnosis, nominal: &BTreeMap<String, f64>) -> Option<String> {
+    let p: Vec<String> = d
+        .coupled_nominal(nominal)
+        .map(|(k, v)| format!("{k} = {}", g4(v)))
         .collect();
     (!p.is_empty()).then(|| format!("nominal {}, refitted with it", p.join(", ")))
 }
 
-/// The rows of one step's candidates for the terminal; `baseline`: the nominal parameters
-/// refitted for the baseline (given in the header, not per candidate).
-fn candidate_table(cands: &[Candidate], baseline: &BTreeMap<String, f64>) -> String {
+/// The rows of one step's candidates of `d` for the terminal.
+fn candidate_table(cands: &[Candidate], d: &Diagnosis) -> String {
     use std::fmt::Write as _;
     let mut o = String::new();
     let _ = writeln!(
@@ -2740,7 +2747,7 @@ fn candidate_table(cands: &[Candidate], baseline: &BTreeMap<String, f64>) -> Str
             c.chaotic_windows,
             params.join(", ")
         );
-        if let Some(t) = coupled_text(&c.nominal_params, baseline) {
+        if let Some(t) = coupled_text(d, &c.nominal_params) {
             let _ = writeln!(o, "  {:<16} {t}", "");
         }
         if let Some(x) = &c.cross_fit {

@@ -1,6 +1,5 @@
 //! The diagnosis as an HTML fragment (for `diagnosis.html` and for embedding in a report).
 
-use std::collections::BTreeMap;
 use std::fmt::Write as _;
 
 use super::{Candidate, Diagnosis, coupled_text, cross_fit_text, g4, param_text};
@@ -91,11 +90,7 @@ pub fn diagnosis_html(d: &Diagnosis) -> String {
             },
             g4(step.error_before)
         );
-        o.push_str(&candidate_table(
-            &step.candidates,
-            step.added.as_deref(),
-            &d.nominal_refit,
-        ));
+        o.push_str(&candidate_table(&step.candidates, step.added.as_deref(), d));
         let _ = match &step.added {
             Some(e) => writeln!(
                 o,
@@ -137,16 +132,12 @@ pub fn diagnosis_html(d: &Diagnosis) -> String {
                 esc(j.param_units.get(name).map_or("", |u| u.as_str()))
             );
         }
-        for (name, v) in j
-            .nominal_params
-            .iter()
-            .filter(|(k, _)| !d.nominal_refit.contains_key(*k))
-        {
+        for (name, v) in d.coupled_nominal(&j.nominal_params) {
             let _ = writeln!(
                 o,
                 "<tr><td>{} (nominal, refitted with the effects)</td><td align=right>{}</td><td align=right>–</td><td></td></tr>",
                 esc(name),
-                g4(*v)
+                g4(v)
             );
         }
         let _ = writeln!(o, "</table>");
@@ -185,11 +176,7 @@ pub fn diagnosis_html(d: &Diagnosis) -> String {
 }
 
 /// One step's candidates as a table with a bar per error reduction (`added` in bold).
-fn candidate_table(
-    cands: &[Candidate],
-    added: Option<&str>,
-    baseline: &BTreeMap<String, f64>,
-) -> String {
+fn candidate_table(cands: &[Candidate], added: Option<&str>, d: &Diagnosis) -> String {
     let mut o = String::new();
     let _ = writeln!(
         o,
@@ -210,7 +197,7 @@ fn candidate_table(
                 ))
             })
             .collect();
-        params.extend(coupled_text(&c.nominal_params, baseline).map(|t| esc(&t)));
+        params.extend(coupled_text(d, &c.nominal_params).map(|t| esc(&t)));
         let bold = if added == Some(c.effect.as_str()) {
             "font-weight:bold;"
         } else {
