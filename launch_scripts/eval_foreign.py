@@ -76,7 +76,7 @@ def true_model(root, car_seed):
     if not m.exists():
         b = bag(root / f"car{car_seed}" / "nominal", car_seed, 1000 * car_seed + 1, "")
         sets = [a for k, v in car_params(car_seed, 0.1).items() for a in ("--set", f"{k}={v}")]
-        sets += ["--set", f"ellipse={1 if GENERATOR else 0}", "--set", "v_reg=0.02"]
+        sets += ["--set", f"ellipse={int('--friction-ellipse' in GENERATOR)}", "--set", "v_reg=0.02"]
         run(DYNLAB, "train", "--world", "car", "--kind", "physics", "--bag", b, "--out", m, "--free", "Cr0",
             *sets, *TOPICS)
     return m

@@ -172,17 +172,11 @@ pub fn run(args: DiagnoseArgs) -> anyhow::Result<()> {
     // patch elsewhere, a servo's rate limit from its no-limit bound)
     // and from the nominal parameters refitted with them but not for the baseline (a grip
     // patch's friction-ellipse weight)
-    let coupled = d
-        .joint
-        .iter()
-        .flat_map(|j| d.coupled_nominal(&j.nominal_params));
-    for (name, v) in d
-        .joint
-        .iter()
-        .flat_map(|j| j.params.iter().map(|(k, v)| (k, *v)))
-        .chain(coupled)
-    {
-        train.extend(["--set".into(), format!("{name}={v}")]);
+    if let Some(j) = &d.joint {
+        let effects = j.params.iter().map(|(k, v)| (k, *v));
+        for (name, v) in effects.chain(d.coupled_nominal(&j.nominal_params)) {
+            train.extend(["--set".into(), format!("{name}={v}")]);
+        }
     }
     if let Some(f) = &custom {
         train.extend(["--effects-file".into(), f.display().to_string()]);
