@@ -80,6 +80,7 @@ use dynlab_learn::{Dataset, LearnError, Model, World};
 
 use crate::discovery::{
     Discovery, DiscoveryConfig, DiscoveryError, area_of, discover_terms_split, grip_discs,
+    strip_through,
 };
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
@@ -647,6 +648,13 @@ impl Fitted {
         }
     }
 
+    /// The fitted value of effect `e`'s parameter `name` (NaN when it has none).
+    fn effect_param(&self, e: Effect, name: &str) -> f64 {
+        (0..self.names.len())
+            .find(|&i| self.owners[i] == Some(e) && self.names[i] == name)
+            .map_or(f64::NAN, |i| self.theta[i])
+    }
+
     /// Standard error of parameter `i` as reported: −1 when it is not finite or the parameter
     /// is on a bound ([`Fitted::bound_side`]), where a σ from `JᵀJ` means nothing (a servo's
     /// rate at its bound 50 came out `± 333.5`, a lag at its bound 0.01 s `± 2.6·10⁻⁶`).
@@ -867,6 +875,9 @@ struct Ctx<'a> {
     /// segments it fits on; empty in the swapped context itself.
     swap: [Vec<Window>; 2],
     held_trajs: Vec<usize>,
+    /// Grip strips that removed more than a disc set against them ([`Ctx::rival_term_note`]),
+    /// tried again by the term search after the selection.
+    strips: Mutex<Vec<(Feature, f64)>>,
 }
 
 fn mean(v: &[f64]) -> f64 {
@@ -1345,12 +1356,7 @@ impl<'a> Ctx<'a> {
             }
         }
         if e.is_regional() && !self.positions.is_empty() {
-            let get = |n: &str| {
-                mine.iter()
-                    .find(|&&i| f.names[i] == n)
-                    .map(|&i| f.theta[i])
-                    .unwrap_or(f64::NAN)
-            };
+            let get = |n: &str| f.effect_param(e, n);
             let (cx, cy, r) = (get("cx"), get("cy"), get("r"));
             let inside = self
                 .positions
@@ -1389,10 +1395,13 @@ impl<'a> Ctx<'a> {
     /// falls with speed is lowered on most segments by a constant offset (22 % removed, named on
     /// one of five seeds before this check), and the term search finds the gain. (Without the
     /// margin a Gaussian bump of grip that removed 85.7 % refused a right-fitted disc's 85.1 %.)
+    /// A disc's rivals include the strip through it fitted on the k-step error
+    /// ([`strip_through`]): a band the data cross in two places, of which the disc covers one.
     fn rival_term_note(
         &self,
         cur: &Current,
         e: Effect,
+        f: &Fitted,
         reduction: f64,
     ) -> Result<Option<String>, DiagnosisError> {
         let Some(Rival {
@@ -1404,6 +1413,26 @@ impl<'a> Ctx<'a> {
         else {
             return Ok(None);
         };
+        let (solver, time) = (self.model.physics_solver(), self.model.physics_time());
+        let shapes: Vec<(Feature, f64)> = if e == Effect::GripPatch {
+            let p = |n: &str| f.effect_param(e, n);
+            strip_through(
+                &cur.physics,
+                &solver,
+                time,
+                self.d.trajs,
+                [&self.fit_w, &self.test_w],
+                self.d.k,
+                [p("cx"), p("cy")],
+                p("r"),
+                p("k") - 1.0,
+            )?
+            .map(|s| (s, p("k") - 1.0))
+            .into_iter()
+            .collect()
+        } else {
+            Vec::new()
+        };
         let dcfg = DiscoveryConfig {
             steps: Some(self.d.k),
             seed: self.cfg.seed,
@@ -1411,23 +1440,39 @@ impl<'a> Ctx<'a> {
             targets: Some(vec![target.name().to_string()]),
             ..self.cfg.discovery.clone()
         };
-        let d = discover_terms_split(
-            &cur.physics,
-            &self.model.physics_solver(),
-            self.model.physics_time(),
-            self.d.trajs,
-            &self.fit_trajs,
-            &self.fit_w,
-            &self.test_w,
-            self.d.k,
-            self.segments,
-            &dcfg,
-            &among,
-        )?;
-        Ok(d.terms
-            .first()
-            .filter(|t| t.error_reduction >= reduction + self.cfg.min_reduction)
-            .map(|t| {
+        // the best term of the library's `among` and, apart, of the fitted shapes
+        let search = |among: &dyn Fn(&Feature) -> bool, shapes: &[(Feature, f64)]| {
+            discover_terms_split(
+                &cur.physics,
+                &solver,
+                time,
+                self.d.trajs,
+                &self.fit_trajs,
+                &self.fit_w,
+                &self.test_w,
+                self.d.k,
+                self.segments,
+                &dcfg,
+                among,
+                shapes,
+            )
+            .map(|d| d.terms.into_iter().next())
+        };
+        let mut best = search(&among, &[])?;
+        if !shapes.is_empty()
+            && let Some(t) = search(&|f| shapes.iter().any(|s| &s.0 == f), &shapes)?
+            && best
+                .as_ref()
+                .is_none_or(|b| t.error_reduction > b.error_reduction)
+        {
+            if t.error_reduction >= reduction + self.cfg.min_reduction {
+                let mut strips = self.strips.lock().unwrap_or_else(|e| e.into_inner());
+                strips.extend(shapes.iter().filter(|s| s.0.name() == t.feature).cloned());
+            }
+            best = Some(t);
+        }
+        let best = best.filter(|t| t.error_reduction >= reduction + self.cfg.min_reduction);
+        Ok(best.map(|t| {
                 format!(
                     "{term} term, {}, removes more of the held-out error ({:.1} % against {:.1} %): {meaning} (see the term search)",
                     t.equation,
@@ -1491,7 +1536,7 @@ impl<'a> Ctx<'a> {
             None
         };
         if counts && note.is_none() && self.pure_physics {
-            note = self.rival_term_note(cur, e, raw)?;
+            note = self.rival_term_note(cur, e, &f, raw)?;
         }
         let significant = counts && note.is_none();
         let mine: Vec<usize> = (0..f.names.len())
@@ -1554,6 +1599,7 @@ impl<'a> Ctx<'a> {
             positions: self.positions.clone(),
             swap: [Vec::new(), Vec::new()],
             held_trajs: Vec::new(),
+            strips: Mutex::default(),
         }
     }
 
@@ -1842,6 +1888,7 @@ pub fn diagnose(
         positions,
         swap: swapped,
         held_trajs: split.validation.clone(),
+        strips: Mutex::default(),
     };
     // the baseline: the model as given, or with its nominal parameters refitted on the fit half
     let given = Current {
@@ -2030,6 +2077,7 @@ pub fn diagnose(
             [split.train.len(), split.validation.len()],
             &dcfg,
             &|_| true,
+            &ctx.strips.lock().unwrap_or_else(|e| e.into_inner()),
         )?)
     } else {
         None

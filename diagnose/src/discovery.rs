@@ -18,7 +18,9 @@
 //!    lattice, explains the most of its residual alone (a region's edges then fall where the
 //!    data put them), and `δ` the saturating steering term `δ·vₓ²/(vₓ² + v₀²)` whose speed
 //!    scale `v₀` does (an understeering car's steady-state gain `1/(1 + vₓ²/v₀²)`, which `δ·vₓ`
-//!    and `δ·vₓ²` follow only over part of the speeds).
+//!    and `δ·vₓ²` follow only over part of the speeds). A caller may add grip regions of its own,
+//!    chosen on the k-step error: the diagnosis adds the strip through a disc it found
+//!    ([`strip_through`]), which the screen then passes whatever its one-step `t`.
 //! 2. **Screen** per target: every feature regressed alone on the residual; a (target, feature)
 //!    pair passes when its coefficient's t-value (standard error clustered by trajectory,
 //!    [`cluster_std`]) clears the Bonferroni threshold for the `M` pairs tried; the strongest
@@ -385,7 +387,54 @@ struct Ctx<'a> {
     h: f64,
 }
 
-impl Ctx<'_> {
+/// The world of `robot`'s data.
+fn world_of(robot: Robot) -> World {
+    match robot {
+        Robot::Car => World::Car,
+        Robot::Pushing => World::Push,
+    }
+}
+
+impl<'a> Ctx<'a> {
+    /// The k-step error of `robot`'s models on `trajs`, each state dimension divided by its RMS
+    /// k-step change over the windows `ws` (fit and held-out).
+    fn new(
+        robot: Robot,
+        trajs: &'a [StateTrajectory],
+        ws: [&[Window]; 2],
+        k: usize,
+        solver: &Solver,
+        h: f64,
+    ) -> Self {
+        let world = world_of(robot);
+        let (ds, angle) = (world.state_dim(), world.angle_dim());
+        let mut scale = vec![0.0; ds];
+        for w in ws.into_iter().flatten() {
+            let t = &trajs[w.trajectory];
+            for (c, sc) in scale.iter_mut().enumerate() {
+                let mut e = t.s[(w.start + k) * ds + c] - t.s[w.start * ds + c];
+                if c == angle {
+                    e = wrap_angle(e);
+                }
+                *sc += e * e;
+            }
+        }
+        let nw = (ws[0].len() + ws[1].len()).max(1) as f64;
+        for v in &mut scale {
+            *v = (*v / nw).sqrt().max(1e-6);
+        }
+        Self {
+            trajs,
+            ds,
+            du: world.action_dim(),
+            k,
+            scale,
+            angle,
+            solver: *solver,
+            h,
+        }
+    }
+
     /// Per-window normalised k-step squared error of `p` (residuals step-major
     /// `(step, window, dimension)` into `resid` when given).
     fn errors(
@@ -705,7 +754,7 @@ fn fitted_regions(reg: &Regression, one: &OneStep) -> Vec<Feature> {
             0.5 * side / OFFSETS as f64,
             0.1,
         ];
-        strip(refine(shape, steps, gain).map(round))
+        strip(refine(shape, steps, 40, gain).map(round))
     });
     [refined, best_shape(&sums, bumps, |atom| atom)]
         .into_iter()
@@ -733,12 +782,17 @@ fn best_shape<T: Copy>(
 
 /// Coordinate ascent of `score` over a strip's `[a, d, w]` from `start` (the width on a log
 /// scale): each round tries one step up and down in each coordinate and keeps what raises the
-/// score, halving the steps when nothing does; 40 rounds. The lattice's 5° between directions
+/// score, halving the steps when nothing does, for `rounds` rounds. The lattice's 5° between directions
 /// turn a strip's far edge by 13 cm over a 3 m floor: a strip 5° off the truth removed 56 % of
 /// the held-out error with a bound of −52 %, refined 65 % with 3.4 % (open-world band, seed 3).
-fn refine(start: [f64; 3], mut steps: [f64; 3], score: impl Fn([f64; 3]) -> f64) -> [f64; 3] {
+fn refine(
+    start: [f64; 3],
+    mut steps: [f64; 3],
+    rounds: usize,
+    mut score: impl FnMut([f64; 3]) -> f64,
+) -> [f64; 3] {
     let (mut x, mut best) = (start, score(start));
-    for _ in 0..40 {
+    for _ in 0..rounds {
         let mut moved = false;
         for k in 0..3 {
             for sign in [-1.0, 1.0] {
@@ -759,6 +813,107 @@ fn refine(start: [f64; 3], mut steps: [f64; 3], score: impl Fn([f64; 3]) -> f64)
         }
     }
     x
+}
+
+/// The strip of other grip through `centre` (a disc's, `r` its radius) whose term
+/// `μ += coefficient·s(a, d; w)` explains the most of the k-step error of `physics` on the fit
+/// windows `ws[0]` (each state dimension scaled over both halves `ws`; the Gauss–Newton gain the
+/// term search's forward selection scores its picks by):
+/// 36 directions, full widths `r`, `1.4·r` and `2·r`; the best direction's offsets across the
+/// disc and widths; the best refined by coordinate ascent (12 rounds).
+/// The strip the term search screens is chosen on the one-step residual, which a band crossed
+/// in two places by noisy 120 Hz poses did not point to (a foreign car's low-grip band: the disc
+/// on one crossing removed 29 %, the band's own strip 46 %, and the term search's best grip
+/// term was a band of another direction, 25 %); the k-step error the disc was fitted on does.
+#[allow(clippy::too_many_arguments)]
+pub fn strip_through(
+    physics: &PhysicsModel,
+    solver: &Solver,
+    h: f64,
+    trajs: &[StateTrajectory],
+    ws: [&[Window]; 2],
+    k: usize,
+    centre: [f64; 2],
+    r: f64,
+    coefficient: f64,
+) -> Result<Option<Feature>, DiscoveryError> {
+    const ANGLES: usize = 36;
+    if physics.robot() != Robot::Car || !(r > 0.0 && coefficient != 0.0) {
+        return Ok(None);
+    }
+    let ctx = Ctx::new(physics.robot(), trajs, ws, k, solver, h);
+    let fit_w = ws[0];
+    let mut r0 = Vec::new();
+    ctx.errors(physics, fit_w, Some(&mut r0));
+    let mut name = "strip".to_string();
+    while physics.custom_effects().iter().any(|c| c.name() == name) {
+        name.push('_');
+    }
+    let round = |v: f64| (v * 1000.0).round() / 1000.0;
+    let strip = |[a, d, w]: [f64; 3]| Feature::new(vec![Atom::Strip { a, d, w }]).ok();
+    let mut failed = None;
+    let mut gain = |shape: [f64; 3]| -> f64 {
+        let Some(feature) = strip(shape.map(round)) else {
+            return f64::NEG_INFINITY;
+        };
+        let term = bounded_term(Target::Grip, feature, coefficient);
+        let h = term.coefficient;
+        let mut m = physics.clone();
+        if let Err(e) = CustomEffect::new(&name, vec![term])
+            .map_err(|e| DiscoveryError::Physics(ModelError::Custom(e)))
+            .and_then(|e| m.add_custom(e).map_err(DiscoveryError::from))
+        {
+            failed.get_or_insert(e);
+            return f64::NEG_INFINITY;
+        }
+        let mut r1 = Vec::new();
+        ctx.errors(&m, fit_w, Some(&mut r1));
+        if r1.len() != r0.len() || h == 0.0 {
+            return f64::NEG_INFINITY;
+        }
+        let (mut jr, mut jj) = (0.0, 0.0);
+        for (a, b) in r1.iter().zip(&r0) {
+            let j = (a - b) / h;
+            jr += j * b;
+            jj += j * j;
+        }
+        if jj > 0.0 && (jr * jr / jj).is_finite() {
+            jr * jr / jj
+        } else {
+            f64::NEG_INFINITY
+        }
+    };
+    let mut best: Option<(f64, [f64; 3])> = None;
+    let mut try_shape = |shape: [f64; 3], best: &mut Option<(f64, [f64; 3])>| {
+        let g = gain(shape);
+        if g > best.map_or(0.0, |b| b.0) {
+            *best = Some((g, shape));
+        }
+    };
+    for i in 0..ANGLES {
+        let a = i as f64 * std::f64::consts::PI / ANGLES as f64;
+        // the offset of the line through the centre
+        let d = centre[1] * a.cos() - centre[0] * a.sin();
+        for w in [r, 1.4 * r, 2.0 * r] {
+            try_shape([a, d, w], &mut best);
+        }
+    }
+    // the disc lies anywhere across the band: the best direction's offsets and widths
+    if let Some((_, [a, d, _])) = best {
+        for j in -4..=4 {
+            for q in [0.5, 0.75, 1.0, 1.4, 2.0] {
+                try_shape([a, d + 0.25 * j as f64 * r, q * r], &mut best);
+            }
+        }
+    }
+    let refined = best.map(|(_, shape)| {
+        let steps = [std::f64::consts::PI / (2 * ANGLES) as f64, 0.25 * r, 0.1];
+        refine(shape, steps, 12, &mut gain)
+    });
+    if let Some(e) = failed {
+        return Err(e);
+    }
+    Ok(refined.and_then(|shape| strip(shape.map(round))))
 }
 
 /// The steering term `δ·vₓ²/(vₓ² + v₀²)` whose speed scale `v₀`, screened on a fine lattice
@@ -965,6 +1120,7 @@ pub fn discover_terms(
         segments,
         cfg,
         &|_| true,
+        &[],
     )
 }
 
@@ -972,7 +1128,8 @@ pub fn discover_terms(
 /// `physics` integrated by `solver` over `h` (car: the step in seconds, pushing: 1), trajectories
 /// `trajs`, the fit half's trajectories `fit_trajs` (one-step regression), k-step windows of the
 /// fit half `fit_w` and of the held-out half `test_w`; the library's features for which `among`
-/// holds are tried.
+/// holds are tried, and the regions `shapes` (a grip strip the caller fitted, [`strip_through`],
+/// with the coefficient to start from) on the grip.
 #[allow(clippy::too_many_arguments)]
 pub fn discover_terms_split(
     physics: &PhysicsModel,
@@ -986,43 +1143,14 @@ pub fn discover_terms_split(
     segments: [usize; 2],
     cfg: &DiscoveryConfig,
     among: &dyn Fn(&Feature) -> bool,
+    shapes: &[(Feature, f64)],
 ) -> Result<Discovery, DiscoveryError> {
     cfg.validate()?;
     let held_out = test_w.len();
     let robot = physics.robot();
-    let world = match robot {
-        Robot::Car => World::Car,
-        Robot::Pushing => World::Push,
-    };
-    let ds = world.state_dim();
-    let du = world.action_dim();
-    let angle = world.angle_dim();
-    // scale: RMS k-step change of each dimension over the windows given
-    let mut scale = vec![0.0; ds];
-    for w in fit_w.iter().chain(test_w) {
-        let t = &trajs[w.trajectory];
-        for (c, sc) in scale.iter_mut().enumerate() {
-            let mut e = t.s[(w.start + k) * ds + c] - t.s[w.start * ds + c];
-            if c == angle {
-                e = wrap_angle(e);
-            }
-            *sc += e * e;
-        }
-    }
-    let nw = (fit_w.len() + test_w.len()).max(1) as f64;
-    for v in &mut scale {
-        *v = (*v / nw).sqrt().max(1e-6);
-    }
-    let ctx = Ctx {
-        trajs,
-        ds,
-        du,
-        k,
-        scale,
-        angle,
-        solver: *solver,
-        h,
-    };
+    let world = world_of(robot);
+    let ctx = Ctx::new(robot, trajs, [fit_w, test_w], k, solver, h);
+    let du = ctx.du;
 
     // 1. one-step residuals of the targets on the fit half
     let one = OneStep::new(physics, &ctx, fit_trajs, cfg.max_transitions, cfg.seed);
@@ -1064,7 +1192,10 @@ pub fn discover_terms_split(
     if cfg.grid > 0
         && let Some(reg) = regs.iter().find(|r| r.target == Target::Grip)
     {
-        for f in fitted_regions(reg, &one) {
+        for f in fitted_regions(reg, &one)
+            .into_iter()
+            .chain(shapes.iter().map(|s| s.0.clone()))
+        {
             if !feats.contains(&f) {
                 feats.push(f);
                 fitted_for.push(Target::Grip);
@@ -1112,43 +1243,72 @@ pub fn discover_terms_split(
         t: f64,
         slope: f64,
     }
-    let mut picks: Vec<Pick> = Vec::new();
-    for reg in &regs {
+    // the one-step regression of feature `f` alone on `reg`: (share, t, slope)
+    let regress = |reg: &Regression, f: usize| -> Option<(f64, f64, f64)> {
         let yy: f64 = reg.y.iter().map(|v| v * v).sum();
         if yy <= 0.0 {
-            continue;
+            return None;
         }
         let clusters: Vec<usize> = cluster
             .iter()
             .flat_map(|&c| std::iter::repeat_n(c, reg.rows))
             .collect();
+        // the term's column, fitted alone
+        let jac: Vec<f64> = (0..n * reg.rows)
+            .map(|j| reg.gain[j] * x[(j / reg.rows) * nf + f])
+            .collect();
+        let jj: f64 = jac.iter().map(|v| v * v).sum();
+        if jj.is_nan() || jj <= 0.0 {
+            return None;
+        }
+        let b = jac.iter().zip(&reg.y).map(|(a, y)| a * y).sum::<f64>() / jj;
+        let r: Vec<f64> = jac.iter().zip(&reg.y).map(|(a, y)| b * a - y).collect();
+        let rss: f64 = r.iter().map(|v| v * v).sum();
+        let sd = cluster_std(&jac, &r, 1, &[true], &clusters);
+        let t = (b / sd[0]).abs();
+        t.is_finite().then_some(((yy - rss) / yy, t, b))
+    };
+    let mut picks: Vec<Pick> = Vec::new();
+    for reg in &regs {
         for f in (0..nf).filter(|&f| tried(reg.target, f)) {
-            // the term's column, fitted alone
-            let jac: Vec<f64> = (0..n * reg.rows)
-                .map(|j| reg.gain[j] * x[(j / reg.rows) * nf + f])
-                .collect();
-            let jj: f64 = jac.iter().map(|v| v * v).sum();
-            if jj.is_nan() || jj <= 0.0 {
-                continue;
-            }
-            let b = jac.iter().zip(&reg.y).map(|(a, y)| a * y).sum::<f64>() / jj;
-            let r: Vec<f64> = jac.iter().zip(&reg.y).map(|(a, y)| b * a - y).collect();
-            let rss: f64 = r.iter().map(|v| v * v).sum();
-            let sd = cluster_std(&jac, &r, 1, &[true], &clusters);
-            let t = (b / sd[0]).abs();
-            if t.is_finite() && t > z {
+            if let Some((share, t, slope)) = regress(reg, f)
+                && t > z
+            {
                 picks.push(Pick {
                     target: reg.target,
                     feature: f,
-                    share: (yy - rss) / yy,
+                    share,
                     t,
-                    slope: b,
+                    slope,
                 });
             }
         }
     }
     picks.sort_by(|a, b| b.t.total_cmp(&a.t));
     picks.truncate(cfg.max_candidates);
+    // the caller's shapes were chosen on the k-step error: tried whatever their one-step t,
+    // from the caller's coefficient
+    if let Some(reg) = regs.iter().find(|r| r.target == Target::Grip) {
+        for (shape, coefficient) in shapes {
+            let Some(f) = feats.iter().position(|g| g == shape) else {
+                continue;
+            };
+            if tried(Target::Grip, f)
+                && !picks
+                    .iter()
+                    .any(|p| p.target == Target::Grip && p.feature == f)
+                && let Some((share, t, _)) = regress(reg, f)
+            {
+                picks.push(Pick {
+                    target: Target::Grip,
+                    feature: f,
+                    share,
+                    t,
+                    slope: *coefficient,
+                });
+            }
+        }
+    }
 
     // 3. forward selection on the fit half's k-step error (Gauss–Newton score of each
     //    screened term), each chosen term refitted and tested on the held-out half
@@ -1886,19 +2046,70 @@ mod tests {
                 + ((x[2] / truth[2]).ln() / 0.2).powi(2))
         };
         let steps = [std::f64::consts::PI / 72.0, 0.05, 0.1];
-        let x = refine([0.436, 0.324, 0.848], steps, score);
+        let x = refine([0.436, 0.324, 0.848], steps, 40, score);
         for k in 0..3 {
             assert!((x[k] - truth[k]).abs() < 2e-3, "{x:?}");
         }
-        assert_eq!(refine(truth, steps, score), truth);
+        assert_eq!(refine(truth, steps, 40, score), truth);
     }
 }
 
 #[cfg(test)]
 mod grip_disc_tests {
     use super::*;
-    use crate::diagnosis::simdata::{car_dataset, car_scenario, nominal_model};
+    use crate::diagnosis::simdata::{car_dataset, car_scenario, low_grip_band, nominal_model};
     use dynlab_learn::dynamics::physics::Effect;
+
+    /// The strip through a disc on the simulator's low-grip band (half the grip within 0.4 m of
+    /// a line at 0.5 rad through (0, 0.3)), a third of the way off its centre line, follows the
+    /// band: its direction within 0.1 rad, its offset (0.263 m) within 0.1 m, its width (0.8 m)
+    /// within a third.
+    #[test]
+    fn the_strip_through_a_disc_on_a_band_follows_the_band() {
+        let mut scenario = car_scenario(None, 1.0);
+        scenario.effects.grip_patch = Some(low_grip_band());
+        let data = car_dataset(&scenario, 4, 15.0, 1, 2).expect("simulated data");
+        let model = nominal_model(World::Car, data.pose_dt_s).expect("the nominal model");
+        let physics = model.physics().expect("a physics model");
+        let k = 50;
+        let ws: Vec<Window> = data
+            .trajectories
+            .iter()
+            .enumerate()
+            .flat_map(|(i, t)| {
+                (0..t.len().saturating_sub(k))
+                    .step_by(25)
+                    .map(move |start| Window {
+                        trajectory: i,
+                        start,
+                    })
+            })
+            .collect();
+        // (0.5, 0.573) is on the centre line; the disc's centre 0.13 m across it
+        let (s, c) = 0.5f64.sin_cos();
+        let centre = [0.5 - 0.13 * s, 0.573 + 0.13 * c];
+        let strip = strip_through(
+            physics,
+            &model.physics_solver(),
+            model.physics_time(),
+            &data.trajectories,
+            [&ws, &[]],
+            k,
+            centre,
+            0.5,
+            -0.5,
+        )
+        .expect("the search runs")
+        .expect("a strip");
+        let name = strip.name();
+        let Some(&Atom::Strip { a, d, w }) = strip.factors().first() else {
+            panic!("not a strip: {name}");
+        };
+        println!("{name}");
+        assert!((a - 0.5).abs() < 0.1, "{name}");
+        assert!((d - 0.263).abs() < 0.1, "{name}");
+        assert!((w - 0.8).abs() < 0.27, "{name}");
+    }
 
     /// The screen's best disc on data with the simulator's `grip_patch` (half the grip within
     /// 0.6 m of (0.5, 0)) lies on the patch, with less grip inside.
