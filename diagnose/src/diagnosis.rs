@@ -1416,6 +1416,7 @@ impl<'a> Ctx<'a> {
         let (solver, time) = (self.model.physics_solver(), self.model.physics_time());
         let shapes: Vec<(Feature, f64)> = if e == Effect::GripPatch {
             let p = |n: &str| f.effect_param(e, n);
+            let coefficient = p("k") - 1.0;
             strip_through(
                 &cur.physics,
                 &solver,
@@ -1425,11 +1426,10 @@ impl<'a> Ctx<'a> {
                 self.d.k,
                 [p("cx"), p("cy")],
                 p("r"),
-                p("k") - 1.0,
+                coefficient,
             )?
-            .map(|s| (s, p("k") - 1.0))
-            .into_iter()
-            .collect()
+            .map(|s| vec![(s, coefficient)])
+            .unwrap_or_default()
         } else {
             Vec::new()
         };
@@ -1460,7 +1460,7 @@ impl<'a> Ctx<'a> {
         };
         let mut best = search(&among, &[])?;
         if !shapes.is_empty()
-            && let Some(t) = search(&|f| shapes.iter().any(|s| &s.0 == f), &shapes)?
+            && let Some(t) = search(&|g| shapes.iter().any(|s| &s.0 == g), &shapes)?
             && best
                 .as_ref()
                 .is_none_or(|b| t.error_reduction > b.error_reduction)

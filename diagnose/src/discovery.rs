@@ -815,6 +815,24 @@ fn refine(
     x
 }
 
+/// The Gauss–Newton gain `(Jᵀr₀)²/(JᵀJ)` of one parameter stepped by `h` from residuals `r0`
+/// to `r1` (the secant column `J = (r1 − r0)/h`): the squared residual it removes to first
+/// order. `None` when the residuals differ in length, `h` is 0 or the gain is not finite;
+/// 0 when the column is.
+fn secant_gain(r0: &[f64], r1: &[f64], h: f64) -> Option<f64> {
+    if r1.len() != r0.len() || h == 0.0 {
+        return None;
+    }
+    let (mut jr, mut jj) = (0.0, 0.0);
+    for (a, b) in r1.iter().zip(r0) {
+        let j = (a - b) / h;
+        jr += j * b;
+        jj += j * j;
+    }
+    let gain = if jj > 0.0 { jr * jr / jj } else { 0.0 };
+    gain.is_finite().then_some(gain)
+}
+
 /// The strip of other grip through `centre` (a disc's, `r` its radius) whose term
 /// `μ += coefficient·s(a, d; w)` explains the most of the k-step error of `physics` on the fit
 /// windows `ws[0]` (each state dimension scaled over both halves `ws`; the Gauss–Newton gain the
@@ -868,20 +886,7 @@ pub fn strip_through(
         }
         let mut r1 = Vec::new();
         ctx.errors(&m, fit_w, Some(&mut r1));
-        if r1.len() != r0.len() || h == 0.0 {
-            return f64::NEG_INFINITY;
-        }
-        let (mut jr, mut jj) = (0.0, 0.0);
-        for (a, b) in r1.iter().zip(&r0) {
-            let j = (a - b) / h;
-            jr += j * b;
-            jj += j * j;
-        }
-        if jj > 0.0 && (jr * jr / jj).is_finite() {
-            jr * jr / jj
-        } else {
-            f64::NEG_INFINITY
-        }
+        secant_gain(&r0, &r1, h).unwrap_or(f64::NEG_INFINITY)
     };
     let mut best: Option<(f64, [f64; 3])> = None;
     let mut try_shape = |shape: [f64; 3], best: &mut Option<(f64, [f64; 3])>| {
@@ -1383,17 +1388,10 @@ pub fn discover_terms_split(
                 let m = with_terms(trial)?;
                 let mut r1 = Vec::new();
                 ctx.errors(&m, fit_w, Some(&mut r1));
-                if r1.len() != r0.len() {
+                let Some(gain) = secant_gain(&r0, &r1, h) else {
                     continue;
-                }
-                let (mut jr, mut jj) = (0.0, 0.0);
-                for (a, b) in r1.iter().zip(&r0) {
-                    let jcol = (a - b) / h;
-                    jr += jcol * b;
-                    jj += jcol * jcol;
-                }
-                let gain = if jj > 0.0 { jr * jr / jj } else { 0.0 };
-                if gain.is_finite() && gain > best.map_or(0.0, |b| b.0) {
+                };
+                if gain > best.map_or(0.0, |b| b.0) {
                     best = Some((gain, pi));
                 }
             }
