@@ -178,6 +178,9 @@ pub fn run(args: DiagnoseArgs) -> anyhow::Result<()> {
             train.extend(["--set".into(), format!("{name}={v}")]);
         }
     }
+    if let Some(free) = model.physics().and_then(|p| d.train_free(p)) {
+        train.extend(["--free".into(), free.join(",")]);
+    }
     if let Some(f) = &custom {
         train.extend(["--effects-file".into(), f.display().to_string()]);
     }

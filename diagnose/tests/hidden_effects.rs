@@ -120,6 +120,21 @@ fn car_grip_patch_is_found() {
         // the centre within a third of the radius
         let off = (p["cx"] - 0.5).hypot(p["cy"]);
         assert!(off < 0.2 && (p["r"] - 0.6).abs() < 0.1, "{}", d.table());
+        // the car has the full friction ellipse: its weight is held at the model's 1 or
+        // refitted near it, never wandered off where the data hardly tell it
+        let ellipse = d.candidates[0].nominal_params.get("ellipse");
+        assert!(ellipse.is_none_or(|w| *w > 0.8), "{}", d.table());
+        // held in the joint fit, training is told to hold it too
+        let model = nominal_model(World::Car, 0.01).unwrap();
+        let free = d.train_free(model.physics().unwrap());
+        let joint = d.joint.as_ref().unwrap();
+        match joint.nominal_params.contains_key("ellipse") {
+            true => assert!(free.is_none(), "{free:?}"),
+            false => {
+                let free = free.unwrap();
+                assert!(free.iter().any(|n| n == "Df") && !free.iter().any(|n| n == "ellipse"));
+            }
+        }
     }
 }
 
