@@ -1300,8 +1300,8 @@ impl<'a> Ctx<'a> {
                 .map(|e| mean(&e))
         };
         let hold = match (all_fit(&freed), all_fit(&held)) {
-            (Some(f), Some(h)) => !(f < (1.0 - COUPLED_MIN_GAIN) * h),
-            (None, Some(_)) => true,
+            (Some(f), Some(h)) if f < (1.0 - COUPLED_MIN_GAIN) * h => false,
+            (_, Some(_)) => true,
             _ => false,
         };
         let free = if hold { held_free } else { free };
