@@ -65,15 +65,14 @@ fn the_jackknife_of_a_linear_fit_is_that_of_its_refits_without_each_cluster() {
     let (jac, r) = jac_res(&x, &y, theta);
     let std = cluster_jackknife_std(&jac, &r, 2, &[true, true], &c);
     let g = 8.0;
-    for k in 0..2 {
+    for (k, got) in std.iter().enumerate() {
         let est: Vec<f64> = (0..8).map(|h| fit(&x, &y, |i| c[i] != h)[k]).collect();
         let mean = est.iter().sum::<f64>() / g;
         let var = est.iter().map(|e| (e - mean).powi(2)).sum::<f64>() * (g - 1.0) / g;
         let want = var.sqrt();
         assert!(
-            (std[k] - want).abs() <= 1e-6 * want,
-            "parameter {k}: {} against {want}",
-            std[k]
+            (got - want).abs() <= 1e-6 * want,
+            "parameter {k}: {got} against {want}"
         );
     }
 }
