@@ -278,16 +278,7 @@ pub fn cluster_jackknife_std(
         let (a, s) = parts
             .entry(g)
             .or_insert_with(|| (vec![0.0; nf * nf], vec![0.0; nf]));
-        for (p, &ip) in idx.iter().enumerate() {
-            let vp = row[ip];
-            if vp == 0.0 {
-                continue;
-            }
-            s[p] += vp * ri;
-            for (q, &iq) in idx.iter().enumerate() {
-                a[p * nf + q] += vp * row[iq];
-            }
-        }
+        add_row(row, *ri, idx.as_slice(), a, s);
     }
     let g = parts.len();
     if g < 2 {
@@ -318,6 +309,22 @@ pub fn cluster_jackknife_std(
     std
 }
 
+/// Adds one residual's Jacobian row `row` and value `ri` to `JᵀJ` (`jtj`) and `Jᵀr` (`jtr`)
+/// over the columns `idx`.
+fn add_row(row: &[f64], ri: f64, idx: &[usize], jtj: &mut [f64], jtr: &mut [f64]) {
+    let nf = idx.len();
+    for (a, &ia) in idx.iter().enumerate() {
+        let va = row[ia];
+        if va == 0.0 {
+            continue;
+        }
+        jtr[a] += va * ri;
+        for (b, &ib) in idx.iter().enumerate() {
+            jtj[a * nf + b] += va * row[ib];
+        }
+    }
+}
+
 /// `JᵀJ` and `Jᵀr` over the columns `idx`.
 fn reduced_normal_equations(
     jac: &[f64],
@@ -329,16 +336,7 @@ fn reduced_normal_equations(
     let mut jtj = vec![0.0; nf * nf];
     let mut jtr = vec![0.0; nf];
     for (row, ri) in jac.chunks_exact(n).zip(r) {
-        for (a, &ia) in idx.iter().enumerate() {
-            let va = row[ia];
-            if va == 0.0 {
-                continue;
-            }
-            jtr[a] += va * ri;
-            for (b, &ib) in idx.iter().enumerate() {
-                jtj[a * nf + b] += va * row[ib];
-            }
-        }
+        add_row(row, *ri, idx, &mut jtj, &mut jtr);
     }
     (jtj, jtr)
 }

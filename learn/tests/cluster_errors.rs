@@ -58,11 +58,25 @@ fn jac_res(x: &[f64], y: &[f64], theta: [f64; 2]) -> (Vec<f64>, Vec<f64>) {
     (jac, r)
 }
 
+/// A line fitted to [`line`]'s points: the points, their clusters, and the Jacobian and
+/// residuals at the fit.
+struct Fitted {
+    x: Vec<f64>,
+    y: Vec<f64>,
+    c: Vec<usize>,
+    jac: Vec<f64>,
+    r: Vec<f64>,
+}
+
+fn fitted(clusters: usize, lever: Option<usize>, seed: u64) -> Fitted {
+    let (x, y, c) = line(clusters, lever, seed);
+    let (jac, r) = jac_res(&x, &y, fit(&x, &y, |_| true));
+    Fitted { x, y, c, jac, r }
+}
+
 #[test]
 fn the_jackknife_of_a_linear_fit_is_that_of_its_refits_without_each_cluster() {
-    let (x, y, c) = line(8, Some(3), 7);
-    let theta = fit(&x, &y, |_| true);
-    let (jac, r) = jac_res(&x, &y, theta);
+    let Fitted { x, y, c, jac, r } = fitted(8, Some(3), 7);
     let std = cluster_jackknife_std(&jac, &r, 2, &[true, true], &c);
     let g = 8.0;
     for (k, got) in std.iter().enumerate() {
@@ -79,9 +93,7 @@ fn the_jackknife_of_a_linear_fit_is_that_of_its_refits_without_each_cluster() {
 
 #[test]
 fn one_cluster_that_carries_the_slope_widens_the_jackknife_not_the_sandwich() {
-    let (x, y, c) = line(8, Some(3), 7);
-    let theta = fit(&x, &y, |_| true);
-    let (jac, r) = jac_res(&x, &y, theta);
+    let Fitted { c, jac, r, .. } = fitted(8, Some(3), 7);
     let jack = cluster_jackknife_std(&jac, &r, 2, &[true, true], &c);
     let sandwich = cluster_std(&jac, &r, 2, &[true, true], &c);
     assert!(
@@ -91,9 +103,7 @@ fn one_cluster_that_carries_the_slope_widens_the_jackknife_not_the_sandwich() {
         sandwich[1]
     );
     // balanced clusters: the two agree
-    let (x, y, c) = line(30, None, 8);
-    let theta = fit(&x, &y, |_| true);
-    let (jac, r) = jac_res(&x, &y, theta);
+    let Fitted { c, jac, r, .. } = fitted(30, None, 8);
     let jack = cluster_jackknife_std(&jac, &r, 2, &[true, true], &c);
     let sandwich = cluster_std(&jac, &r, 2, &[true, true], &c);
     for k in 0..2 {
@@ -104,9 +114,7 @@ fn one_cluster_that_carries_the_slope_widens_the_jackknife_not_the_sandwich() {
 
 #[test]
 fn fixed_parameters_get_zero_and_a_single_cluster_nothing() {
-    let (x, y, c) = line(4, None, 9);
-    let theta = fit(&x, &y, |_| true);
-    let (jac, r) = jac_res(&x, &y, theta);
+    let Fitted { c, jac, r, .. } = fitted(4, None, 9);
     let std = cluster_jackknife_std(&jac, &r, 2, &[false, true], &c);
     assert_eq!(std[0], 0.0);
     assert!(std[1] > 0.0 && std[1].is_finite());
