@@ -2676,10 +2676,15 @@ impl Diagnosis {
 
     /// The nominal parameters `dynlab train` should free to add the selected effects to
     /// `model` (its physics): `None` when they are the defaults, which free the effects'
-    /// coupled nominal parameters ([`Effect::coupled_nominal`]); the list without those the
-    /// joint fit held at the model's values (data that hardly tell them, see
+    /// coupled nominal parameters ([`Effect::coupled_nominal`]), and for a model other than a
+    /// physics model (whose nominal parameters the diagnosis never refits); else the list
+    /// without those the joint fit held at the model's values (data that hardly tell them, see
     /// `COUPLED_MIN_GAIN`), which training on the same data would let wander.
     pub fn train_free(&self, model: &PhysicsModel) -> Option<Vec<String>> {
+        // (only a physics model's nominal parameters are refitted in the diagnosis)
+        if self.model_kind != "physics" {
+            return None;
+        }
         let joint = self.joint.as_ref()?;
         let effects: Vec<Effect> = self
             .effects
