@@ -178,17 +178,12 @@ pub fn calm_windows(sensitivity: &[f64], limit: f64) -> Vec<bool> {
 /// trajectories keeps that correlation. Fixed parameters get 0, and every free one NaN when
 /// there are fewer than 2 clusters or `JᵀJ` is singular.
 pub fn cluster_std(jac: &[f64], r: &[f64], n: usize, free: &[bool], cluster: &[usize]) -> Vec<f64> {
-    let idx: Vec<usize> = (0..n).filter(|&i| free[i]).collect();
+    let idx = match free_columns(jac, r, n, free, cluster) {
+        Ok(idx) => idx,
+        Err(std) => return std,
+    };
     let nf = idx.len();
     let mut std = vec![0.0; n];
-    if nf == 0 {
-        return std;
-    }
-    let m = r.len();
-    if jac.len() != m * n || cluster.len() != m {
-        idx.iter().for_each(|&i| std[i] = f64::NAN);
-        return std;
-    }
     let (jtj, _) = reduced_normal_equations(jac, r, n, &idx);
     let mut scores: std::collections::BTreeMap<usize, Vec<f64>> = Default::default();
     for ((row, ri), &g) in jac.chunks_exact(n).zip(r).zip(cluster) {
@@ -242,6 +237,29 @@ pub fn cluster_std(jac: &[f64], r: &[f64], n: usize, free: &[bool], cluster: &[u
     std
 }
 
+/// The free columns of a cluster-robust σ's arguments ([`cluster_std`]), or the σ to return
+/// at once: all 0 without a free parameter, NaN for the free ones when the Jacobian or the
+/// cluster ids do not match the residuals.
+fn free_columns(
+    jac: &[f64],
+    r: &[f64],
+    n: usize,
+    free: &[bool],
+    cluster: &[usize],
+) -> Result<Vec<usize>, Vec<f64>> {
+    let idx: Vec<usize> = (0..n).filter(|&i| free[i]).collect();
+    let mut std = vec![0.0; n];
+    if idx.is_empty() {
+        return Err(std);
+    }
+    let m = r.len();
+    if jac.len() != m * n || cluster.len() != m {
+        idx.iter().for_each(|&i| std[i] = f64::NAN);
+        return Err(std);
+    }
+    Ok(idx)
+}
+
 /// Standard errors of a least-squares fit by the delete-one-cluster jackknife (the "CR3"
 /// cluster-robust form), each cluster's removal taken as one Gauss–Newton step from the
 /// solution: `Δθ_g = (JᵀJ − J_gᵀJ_g)⁻¹ J_gᵀ r_g`, `Var = (G − 1)/G · Σ_g (Δθ_g − Δ̄)²`. Arguments
@@ -258,20 +276,16 @@ pub fn cluster_jackknife_std(
     free: &[bool],
     cluster: &[usize],
 ) -> Vec<f64> {
-    let idx: Vec<usize> = (0..n).filter(|&i| free[i]).collect();
+    let idx = match free_columns(jac, r, n, free, cluster) {
+        Ok(idx) => idx,
+        Err(std) => return std,
+    };
     let nf = idx.len();
     let mut std = vec![0.0; n];
-    if nf == 0 {
-        return std;
-    }
-    let m = r.len();
     let undetermined = |mut std: Vec<f64>| {
         idx.iter().for_each(|&i| std[i] = f64::NAN);
         std
     };
-    if jac.len() != m * n || cluster.len() != m {
-        return undetermined(std);
-    }
     // per cluster: J_gᵀJ_g and J_gᵀr_g
     let mut parts: std::collections::BTreeMap<usize, (Vec<f64>, Vec<f64>)> = Default::default();
     for ((row, ri), &g) in jac.chunks_exact(n).zip(r).zip(cluster) {
