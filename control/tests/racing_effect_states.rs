@@ -8,11 +8,15 @@ use dynlab_control::racing::{
     RacerSettings, Regulariser, SqpSettings, State, Target, gradient, solve_sqp,
 };
 use dynlab_learn::dynamics::ode::Solver;
-use dynlab_learn::dynamics::physics::{Effect, PhysicsModel};
+use dynlab_learn::dynamics::physics::{CustomEffect, Effect, PhysicsModel};
 use dynlab_learn::{Model, ModelKind, World};
 use dynlab_sim::Track;
 
 fn lagged_car(effects: &[Effect]) -> Model {
+    car_model(lagged_physics(effects))
+}
+
+fn lagged_physics(effects: &[Effect]) -> PhysicsModel {
     let mut p = PhysicsModel::car(effects).unwrap();
     if effects.contains(&Effect::MotorLag) {
         p.set_param("motor_lag.tau", 0.1).unwrap();
@@ -21,6 +25,10 @@ fn lagged_car(effects: &[Effect]) -> Model {
         p.set_param("steering_lag.tau", 0.06).unwrap();
         p.set_param("steering_lag.rate", 3.0).unwrap();
     }
+    p
+}
+
+fn car_model(p: PhysicsModel) -> Model {
     Model::new(
         ModelKind::Physics,
         World::Car,
@@ -76,12 +84,25 @@ fn target_problem(plant: Plant<'_>) -> Problem<'_> {
 
 #[test]
 fn the_augmented_linearization_matches_finite_differences() {
-    for effects in [
-        vec![Effect::MotorLag],
-        vec![Effect::MotorLag, Effect::SteeringLag],
+    // a steering delay as a custom term on the lagged steering rate: six lagged commands more
+    let mut delayed = lagged_physics(&[Effect::MotorLag]);
+    delayed
+        .add_custom(
+            CustomEffect::from_toml(
+                "name = \"delay\"\n[[term]]\nstate = \"delta\"\nfeature = \"delta_rate(0.1)\"\ncoefficient = -0.06\n",
+            )
+            .unwrap(),
+        )
+        .unwrap();
+    for (effects, model) in [
+        ("motor_lag", lagged_car(&[Effect::MotorLag])),
+        (
+            "motor_lag, steering_lag",
+            lagged_car(&[Effect::MotorLag, Effect::SteeringLag]),
+        ),
+        ("motor_lag, steering delay", car_model(delayed)),
     ] {
-        let model = lagged_car(&effects);
-        let ne = effects.len();
+        let ne = model.dim_extra();
         let e0 = vec![0.2; ne];
         let plant = Plant::new(&model, 3).unwrap().with_extra(&e0).unwrap();
         assert_eq!(plant.nx(), 6 + ne);
@@ -122,7 +143,7 @@ fn the_augmented_linearization_matches_finite_differences() {
         }
         assert!(
             worst < 1e-6,
-            "{effects:?}: worst relative Jacobian error {worst:e}"
+            "{effects}: worst relative Jacobian error {worst:e}"
         );
         // the throttle acts on the filtered throttle, not directly on the car
         let ie = 6; // first effect state: d_f

@@ -19,6 +19,37 @@ fn servo(tau: f64, rate: f64, delta0: f64) -> PhysicsModel {
     m
 }
 
+/// The field's Jacobians wrt state, input and every parameter against central differences.
+fn assert_exact_jacobians(m: &PhysicsModel, s: &[f64], u: &[f64]) {
+    let (ds, du, np) = (m.dim_s(), m.dim_u(), m.n_params());
+    let nz = ds + du + np;
+    let (mut f, mut j) = (vec![0.0; ds], vec![0.0; ds * nz]);
+    m.jacobian_full(s, u, &vec![true; m.effects().len()], true, &mut f, &mut j);
+    let z: Vec<f64> = s.iter().chain(u).chain(m.params()).copied().collect();
+    let eval = |z: &[f64]| -> Vec<f64> {
+        let mut mm = m.clone();
+        mm.set_params(&z[ds + du..]).unwrap();
+        let mut out = vec![0.0; ds];
+        mm.eval_one(&z[..ds], &z[ds..ds + du], &mut out);
+        out
+    };
+    for c in 0..nz {
+        let h = 1e-6 * z[c].abs().max(1e-2);
+        let (mut p, mut q) = (z.clone(), z.clone());
+        p[c] += h;
+        q[c] -= h;
+        let (fp, fq) = (eval(&p), eval(&q));
+        for r in 0..ds {
+            let fd = (fp[r] - fq[r]) / (2.0 * h);
+            let ex = j[r * nz + c];
+            assert!(
+                (fd - ex).abs() < 1e-5 * fd.abs().max(1.0),
+                "∂f{r}/∂z{c}: exact {ex} vs FD {fd}"
+            );
+        }
+    }
+}
+
 #[test]
 fn steering_lag_is_a_rate_limited_first_order_servo_with_exact_jacobians() {
     let m = servo(0.05, 2.0, 0.03);
@@ -60,33 +91,8 @@ fn steering_lag_is_a_rate_limited_first_order_servo_with_exact_jacobians() {
     // weight inside its range [0, 1])
     let mut m = m;
     m.set_param("ellipse", 0.8).unwrap();
-    let (ds, du, np) = (m.dim_s(), m.dim_u(), m.n_params());
-    let nz = ds + du + np;
-    let mut j = vec![0.0; ds * nz];
-    m.jacobian_full(&s, &u, &[true; 3], true, &mut f, &mut j);
-    let z: Vec<f64> = s.iter().chain(&u).chain(m.params()).copied().collect();
-    let eval = |z: &[f64]| -> Vec<f64> {
-        let mut mm = m.clone();
-        mm.set_params(&z[ds + du..]).unwrap();
-        let mut out = vec![0.0; ds];
-        mm.eval_one(&z[..ds], &z[ds..ds + du], &mut out);
-        out
-    };
-    for c in 0..nz {
-        let h = 1e-6 * z[c].abs().max(1e-2);
-        let (mut p, mut q) = (z.clone(), z.clone());
-        p[c] += h;
-        q[c] -= h;
-        let (fp, fq) = (eval(&p), eval(&q));
-        for r in 0..ds {
-            let fd = (fp[r] - fq[r]) / (2.0 * h);
-            let ex = j[r * nz + c];
-            assert!(
-                (fd - ex).abs() < 1e-5 * fd.abs().max(1.0),
-                "∂f{r}/∂z{c}: exact {ex} vs FD {fd}"
-            );
-        }
-    }
+    assert_exact_jacobians(&m, &s, &u);
+    let ds = m.dim_s();
     // its contribution: what the servo changes, with exact Jacobians
     let t = m.effect_term(Effect::SteeringLag, &s, &u).unwrap();
     assert_eq!(t.d_params.len(), ds * 2);
@@ -181,4 +187,81 @@ fn a_state_without_its_effect_states_is_a_shape_error_not_a_slice_panic() {
         0.01,
         &mut out,
     );
+}
+
+#[test]
+fn a_term_on_a_lagged_command_carries_the_lagged_commands_as_effect_states() {
+    // δ += −τ·δ̇_τ is the lag itself: the wheels see δ_τ = δ − τ·(δ − δ_τ)/τ
+    let lag = CustomEffect::from_toml(
+        "name = \"steering_delay\"\n[[term]]\nstate = \"delta\"\nfeature = \"delta_rate(0.1)\"\ncoefficient = -0.1\n",
+    )
+    .unwrap();
+    assert!(lag.uses_input_lags());
+    let mut plain = PhysicsModel::car(&[Effect::MotorLag]).unwrap();
+    plain.set_param("motor_lag.tau", 0.07).unwrap();
+    // the ellipse's weight inside its range [0, 1], for the central differences
+    plain.set_param("ellipse", 0.8).unwrap();
+    let mut m = plain.clone();
+    m.add_custom(lag.clone()).unwrap();
+    let mut names = vec!["d_f"];
+    names.extend_from_slice(&features::INPUT_LAG_STATES);
+    assert_eq!(m.effect_state_names(), names);
+    assert_eq!(m.dim_state(), 7 + 6);
+    // the lagged copies, each unlike its command
+    let s = [
+        0.9, 0.1, 0.4, 1.2, 0.15, 2.0, 0.3, 0.05, 0.2, -0.1, 0.4, 0.12, 0.25,
+    ];
+    let u = [0.2, 0.5];
+    let (delta_01, d_01) = (s[7 + 2], s[7 + 3]);
+    assert_eq!(features::input_lag_index(0, 1), 4);
+    let mut f = vec![0.0; 13];
+    m.eval_one(&s, &u, &mut f);
+    let mut g = vec![0.0; 7];
+    plain.eval_one(&s[..7], &[delta_01, u[1]], &mut g);
+    for r in 0..7 {
+        assert!((f[r] - g[r]).abs() < 1e-12, "row {r}: {} vs {}", f[r], g[r]);
+    }
+    // each copy follows its command with its time constant
+    for (k, tau) in features::INPUT_LAGS_S.iter().enumerate() {
+        for i in 0..2 {
+            let j = 7 + 2 * k + i;
+            assert!(
+                (f[j] - (u[i] - s[j]) / tau).abs() < 1e-12,
+                "{}",
+                names[j - 6]
+            );
+        }
+    }
+    assert!((f[7 + 3] - (u[1] - d_01) / 0.1).abs() < 1e-12);
+    assert_exact_jacobians(&m, &s, &u);
+    // the copies are the exact lag of the commands, rebuilt from the command history
+    let dt = 0.01;
+    let cmd: Vec<f64> = (0..80)
+        .flat_map(|i| [0.25 * ((i / 20) as f64 - 1.5), 0.1 * (i / 10) as f64])
+        .collect();
+    let e = m.effect_states_along(&cmd, dt);
+    assert_eq!(e.len(), 80 * 7);
+    for (k, &tau) in features::INPUT_LAGS_S.iter().enumerate() {
+        for i in 0..2 {
+            let seq: Vec<f64> = (0..80).map(|a| cmd[a * 2 + i]).collect();
+            let exact = PhysicsModel::motor_lag_filter(&seq, dt, tau, seq[0]);
+            for a in 0..80 {
+                let got = e[a * 7 + 1 + 2 * k + i];
+                assert!((got - exact[a]).abs() < 1e-6, "τ {tau} input {i} step {a}");
+            }
+        }
+    }
+    // a library effect added later keeps the copies last; the equations name them
+    let more = m.with_effects(&[Effect::SteeringLag]).unwrap();
+    assert_eq!(more.state_names()[6..8], ["d_f", "delta_w"]);
+    assert_eq!(more.state_names()[8..], features::INPUT_LAG_STATES);
+    let text = m.equations();
+    assert!(text.contains("δ += −0.1000 · δ̇_{0.1 s}   [θ: s]"), "{text}");
+    assert!(text.contains("lagged commands"), "{text}");
+    // the pusher has no lagged commands
+    let e = CustomEffect::from_toml(
+        "name = \"p\"\n[[term]]\nstate = \"x\"\nfeature = \"d_rate(0.1)\"\ncoefficient = 0\n",
+    )
+    .unwrap_err();
+    assert!(e.to_string().contains("d_rate(0.1)"), "{e}");
 }

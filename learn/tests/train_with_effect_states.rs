@@ -10,7 +10,8 @@ mod common;
 use std::path::Path;
 
 use dynlab_dynamics::data::{SavGol, windows};
-use dynlab_dynamics::physics::{Effect, PhysicsModel};
+use dynlab_dynamics::physics::features::INPUT_LAG_STATES;
+use dynlab_dynamics::physics::{CustomEffect, Effect, PhysicsModel};
 use dynlab_learn::eval::{rollout_windows, window_extra_states};
 use dynlab_learn::train::{default_physics_solver, physics_model};
 use dynlab_learn::{
@@ -44,8 +45,13 @@ fn cfg(kind: ModelKind, steps: usize, effects: &[&str]) -> TrainConfig {
 }
 
 fn k_step_vx_rmse(model: &Model, data: &Dataset, k: usize) -> f64 {
+    k_step_rmse(model, data, k, 3)
+}
+
+/// The `k`-step RMSE of state dimension `dim` (3: `vx`, 5: `ω`).
+fn k_step_rmse(model: &Model, data: &Dataset, k: usize, dim: usize) -> f64 {
     let rep = evaluate(model, data, k, 1.0).unwrap();
-    rep.k_step[3].rmse
+    rep.k_step[dim].rmse
 }
 
 #[test]
@@ -404,4 +410,54 @@ fn a_hybrid_with_effect_states_has_exact_augmented_jacobians() {
         1e-3,
         2e-2,
     );
+}
+
+#[test]
+fn a_steering_delay_is_learnt_as_a_term_on_the_lagged_steering_rate() {
+    // the steering command reaches the car 60 ms after it is logged; the models have no delay
+    let tmp = tempfile::tempdir().unwrap();
+    let car = PhysicsModel::car(&[]).unwrap();
+    let data = |seed| {
+        let bag = common::car_bag_delayed(tmp.path(), &car, 2, 12.0, 100.0, seed, 6);
+        load_bags(&[bag], None, &Topics::default(), &SavGol::default()).unwrap()
+    };
+    let (fit_data, held_out) = (data(3), data(11));
+    // δ += θ·δ̇_{0.1 s}: the wheels see δ − t_d·δ̇ for a delay t_d = −θ
+    let delay = CustomEffect::from_toml(
+        "name = \"steering_delay\"\n[[term]]\nstate = \"delta\"\nfeature = \"delta_rate(0.1)\"\ncoefficient = 0\n",
+    )
+    .unwrap();
+    let with_cfg = TrainConfig {
+        custom_effects: vec![delay],
+        ..cfg(ModelKind::Physics, 8, &[])
+    };
+    let with = train(&fit_data, &with_cfg, &mut |_| {}).unwrap().model;
+    let without = train(&fit_data, &cfg(ModelKind::Physics, 8, &[]), &mut |_| {})
+        .unwrap()
+        .model;
+    assert_eq!(with.extra_state_names(), INPUT_LAG_STATES);
+    let p = with.physics().unwrap();
+    let theta = p.params()[p.param_index("custom.steering_delay.0").unwrap()];
+    let (a, b) = (
+        k_step_rmse(&with, &held_out, 20, 5),
+        k_step_rmse(&without, &held_out, 20, 5),
+    );
+    eprintln!(
+        "steering delay 0.06 s: θ = {theta:.4} s; 20-step ω RMSE with {a:.3e}, without {b:.3e}"
+    );
+    assert!(
+        (-0.09..-0.035).contains(&theta),
+        "fitted delay {:.4} s, true 0.06 s",
+        -theta
+    );
+    assert!(
+        a < 0.6 * b,
+        "20-step ω RMSE with the term {a:.3e}, without {b:.3e}"
+    );
+    // the model file keeps the term and its lagged commands
+    let dir = tmp.path().join("m");
+    save_model(&with, &dir, None, Default::default()).unwrap();
+    let (back, _) = load_model(&dir, None, None).unwrap();
+    assert_eq!(back.extra_state_names(), INPUT_LAG_STATES);
+    assert_eq!(k_step_rmse(&back, &held_out, 20, 5), a);
 }

@@ -468,6 +468,12 @@ impl CustomEffect {
         self.robot
     }
 
+    /// Whether a term uses a lagged command (`delta_rate(0.1)`, …): a model with the effect then
+    /// carries the lagged commands as effect states.
+    pub fn uses_input_lags(&self) -> bool {
+        self.terms.iter().any(|t| t.feature.uses_input_lags())
+    }
+
     /// The same effect with new coefficients (one per term; fitted values).
     pub fn with_coefficients(&self, c: &[f64]) -> Self {
         let mut o = self.clone();

@@ -42,9 +42,16 @@
 //! and tries them on the car's grip). Angles count as dimensionless in units (rad = 1), so
 //! `ω̇ += θ·δ·vₓ` has `θ` in `1/(m·s)`.
 //!
-//! Features are memoryless: lagged inputs and input rates are not in the library (they need
-//! the command history inside the vector field); a delay shows up in `diagnose`'s lagged
-//! cross-correlations and in the `motor_lag` effect instead.
+//! **Lagged inputs** (car): `delta_lag(τ)`, `d_lag(τ)` (`δ_{τ s}`, `d_{τ s}`) are the commands
+//! seen through a first-order lag of time constant `τ`, and `delta_rate(τ)`, `d_rate(τ)`
+//! (`δ̇_{τ s}`, `ḋ_{τ s}`, 1/s) the commands' rates seen through it, `(δ − δ_τ)/τ`. A command
+//! that acts `t_d` late is `δ(t − t_d) ≈ δ − t_d·δ̇`, so `δ += θ·δ̇_{τ s}` is a steering delay of
+//! `−θ` seconds (for delays up to about `τ`; `θ = −τ` is the lag `δ_τ` itself). `τ` is one of
+//! [`INPUT_LAGS_S`]. They need the command history: a model with a custom term on them carries
+//! the lagged commands as effect states ([`INPUT_LAG_STATES`], last in the state), rebuilt from
+//! the command history at the start of each window like the library's lags. Their values reach
+//! [`Atom::eval`] as the input's entries past the commands: `u = (δ, d, δ_{τ₁}, d_{τ₁}, …)` in
+//! the order of [`INPUT_LAGS_S`] ([`input_lag_index`]); without them the atoms are `NaN`.
 
 use std::fmt::Write as _;
 
@@ -57,6 +64,52 @@ pub const SLIP_SCALE_RAD: f64 = 0.1;
 
 /// Most factors in one feature.
 pub const MAX_FACTORS: usize = 4;
+
+/// Time constants \[s\] of the car's lagged-input atoms (`delta_lag(τ)`, `d_rate(τ)`, …): a
+/// fixed set, so that a model carries one lagged copy of each command per time constant
+/// whichever terms use them.
+pub const INPUT_LAGS_S: [f64; 3] = [0.03, 0.1, 0.3];
+
+/// Names of the effect states holding the lagged commands, in state order: for each of
+/// [`INPUT_LAGS_S`] the lagged steering angle, then the lagged throttle.
+pub const INPUT_LAG_STATES: [&str; 6] = [
+    "delta_0.03",
+    "d_0.03",
+    "delta_0.1",
+    "d_0.1",
+    "delta_0.3",
+    "d_0.3",
+];
+
+/// The car's commands (`δ`, `d`): the number of entries of an input before its lagged copies.
+const CAR_COMMANDS: usize = 2;
+
+/// Where the command `input` (0: `δ`, 1: `d`) lagged by `INPUT_LAGS_S[lag]` sits in an input
+/// extended by the lagged commands (`(δ, d, δ_{τ₁}, d_{τ₁}, …)`), and in the block of
+/// [`INPUT_LAG_STATES`] after subtracting the commands.
+pub fn input_lag_index(input: usize, lag: usize) -> usize {
+    CAR_COMMANDS + CAR_COMMANDS * lag + input
+}
+
+/// The rates of the lagged commands `lagged` ([`INPUT_LAG_STATES`] order) under the commands
+/// `u`: `(u_i − u_{i,τ})/τ` for each time constant.
+pub fn input_lag_rates<R: Real>(lagged: &[R], u: &[R], out: &mut [R]) {
+    for (lag, &tau) in INPUT_LAGS_S.iter().enumerate() {
+        for i in 0..CAR_COMMANDS {
+            let j = input_lag_index(i, lag) - CAR_COMMANDS;
+            out[j] = (u[i] - lagged[j]) / tau;
+        }
+    }
+}
+
+/// The lagged commands settled under the held commands `u` (each copy equal to its command).
+pub fn input_lags_settled<R: Real>(u: &[R], out: &mut [R]) {
+    for lag in 0..INPUT_LAGS_S.len() {
+        for i in 0..CAR_COMMANDS {
+            out[input_lag_index(i, lag) - CAR_COMMANDS] = u[i];
+        }
+    }
+}
 
 /// A physical unit as powers of metre and of the robot's time unit (seconds for the car, one
 /// push for the pusher). Angles are dimensionless.
@@ -225,6 +278,21 @@ pub enum Atom {
         /// Width \[m\].
         w: f64,
     },
+    /// Car: the command `input` (0: `δ`, 1: `d`) through a first-order lag of time constant
+    /// `tau` (one of [`INPUT_LAGS_S`]).
+    LaggedInput {
+        /// 0: the steering angle `δ`; 1: the throttle `d`.
+        input: usize,
+        /// Time constant \[s\].
+        tau: f64,
+    },
+    /// Car: the rate of the command `input` through that lag, `(u − u_τ)/τ` \[1/s\].
+    InputRate {
+        /// 0: the steering angle `δ`; 1: the throttle `d`.
+        input: usize,
+        /// Time constant \[s\].
+        tau: f64,
+    },
     /// Flat-topped strip `½·(tanh((e + w/2)/ε) − tanh((e − w/2)/ε))`, `e = n·(x, y) − d` as for
     /// [`Atom::Band`], `ε = w/20`: a straight strip `w` wide with sharp edges (a wet stripe, a
     /// rug, a painted line), 1 inside and 0 outside, which a Gaussian band follows only near
@@ -368,6 +436,12 @@ impl Atom {
                 format!("strip({},{},{})", short(*a), short(*d), short(*w))
             }
             Atom::SatVx2 { v0 } => format!("sat_vx2({})", short(*v0)),
+            Atom::LaggedInput { input, tau } => {
+                format!("{}_lag({})", COMMAND_NAMES[*input], short(*tau))
+            }
+            Atom::InputRate { input, tau } => {
+                format!("{}_rate({})", COMMAND_NAMES[*input], short(*tau))
+            }
             a => entry(a).map(|e| e.1).unwrap_or("?").to_string(),
         }
     }
@@ -394,6 +468,12 @@ impl Atom {
                 short(*w)
             ),
             Atom::SatVx2 { v0 } => format!("vₓ²/(vₓ² + {}²)", short(*v0)),
+            Atom::LaggedInput { input, tau } => {
+                format!("{}_{{{} s}}", COMMAND_SYMBOLS[*input], short(*tau))
+            }
+            Atom::InputRate { input, tau } => {
+                format!("{}_{{{} s}}", COMMAND_RATE_SYMBOLS[*input], short(*tau))
+            }
             a => entry(a).map(|e| e.2).unwrap_or("?").to_string(),
         }
     }
@@ -401,9 +481,12 @@ impl Atom {
     /// Unit.
     pub fn unit(&self) -> Unit {
         match self {
-            Atom::Gauss { .. } | Atom::Band { .. } | Atom::Strip { .. } | Atom::SatVx2 { .. } => {
-                Unit::default()
-            }
+            Atom::Gauss { .. }
+            | Atom::Band { .. }
+            | Atom::Strip { .. }
+            | Atom::SatVx2 { .. }
+            | Atom::LaggedInput { .. } => Unit::default(),
+            Atom::InputRate { .. } => Unit::new(0, -1),
             a => entry(a).map(|e| e.3).unwrap_or_default(),
         }
     }
@@ -412,7 +495,7 @@ impl Atom {
     pub fn belongs_to(&self, robot: Robot) -> bool {
         let owner = match self {
             Atom::Gauss { .. } | Atom::Band { .. } | Atom::Strip { .. } => Owner::Both,
-            Atom::SatVx2 { .. } => Owner::Car,
+            Atom::SatVx2 { .. } | Atom::LaggedInput { .. } | Atom::InputRate { .. } => Owner::Car,
             a => entry(a).map(|e| e.4).unwrap_or(Owner::Both),
         };
         match owner {
@@ -428,6 +511,12 @@ impl Atom {
         matches!(self, Atom::X | Atom::Y) || self.is_region()
     }
 
+    /// Whether the atom needs the command history (a lagged command or its rate): a model with
+    /// such a term carries the lagged commands as effect states.
+    pub fn uses_input_lags(&self) -> bool {
+        matches!(self, Atom::LaggedInput { .. } | Atom::InputRate { .. })
+    }
+
     /// Whether the atom is a region of the floor or table (a bump, a band, a strip).
     pub fn is_region(&self) -> bool {
         matches!(
@@ -436,15 +525,24 @@ impl Atom {
         )
     }
 
-    /// Names of the atoms of `robot` (those with parameters last: `sat_vx2(v0)` of the car,
-    /// `gauss(cx,cy,r)`, `band(a,d,w)`, `strip(a,d,w)`).
+    /// Names of the atoms of `robot` (those with parameters last: `sat_vx2(v0)` and the lagged
+    /// commands of the car, `gauss(cx,cy,r)`, `band(a,d,w)`, `strip(a,d,w)`).
     pub fn names(robot: Robot) -> Vec<String> {
-        let car_only = (robot == Robot::Car).then(|| "sat_vx2(v0)".to_string());
+        let car_only: &[&str] = match robot {
+            Robot::Car => &[
+                "sat_vx2(v0)",
+                "delta_lag(tau)",
+                "d_lag(tau)",
+                "delta_rate(tau)",
+                "d_rate(tau)",
+            ],
+            Robot::Pushing => &[],
+        };
         TABLE
             .iter()
             .filter(|e| e.0.belongs_to(robot))
             .map(|e| e.1.to_string())
-            .chain(car_only)
+            .chain(car_only.iter().map(|n| n.to_string()))
             .chain(["gauss(cx,cy,r)", "band(a,d,w)", "strip(a,d,w)"].map(String::from))
             .collect()
     }
@@ -482,6 +580,28 @@ impl Atom {
             let [a, d, w] = v?;
             return Ok(Atom::Strip { a, d, w });
         }
+        for (input, command) in COMMAND_NAMES.iter().enumerate() {
+            for (kind, rate) in [("_lag(", false), ("_rate(", true)] {
+                let Some(inner) = n
+                    .strip_prefix(command)
+                    .and_then(|r| r.strip_prefix(kind))
+                    .and_then(|r| r.strip_suffix(')'))
+                else {
+                    continue;
+                };
+                let tau = inner.trim().parse::<f64>().ok().and_then(|t| {
+                    INPUT_LAGS_S
+                        .iter()
+                        .copied()
+                        .find(|&l| (l - t).abs() <= 1e-9 * l)
+                });
+                return match tau {
+                    Some(tau) if rate => Ok(Atom::InputRate { input, tau }),
+                    Some(tau) => Ok(Atom::LaggedInput { input, tau }),
+                    None => Err(FeatureError::BadInputLag(n.to_string())),
+                };
+            }
+        }
         if let Some(inner) = n.strip_prefix("sat_vx2(").and_then(|r| r.strip_suffix(')')) {
             return match inner.trim().parse::<f64>() {
                 Ok(v0) if v0.is_finite() && v0 > 0.0 => Ok(Atom::SatVx2 { v0 }),
@@ -496,9 +616,21 @@ impl Atom {
     }
 
     /// The atom's value at state `s`, input `u`, with the nominal parameters `p` of the robot's
-    /// model (the car's slip angles use `l_f`, `l_r`, `v_reg`).
+    /// model (the car's slip angles use `l_f`, `l_r`, `v_reg`). The lagged commands read the
+    /// input's entries past the commands ([`input_lag_index`]), and are `NaN` without them.
     pub fn eval<R: Real>(&self, robot: Robot, p: &[R], s: &[R], u: &[R]) -> R {
+        let lagged = |input: usize, tau: f64| {
+            let lag = INPUT_LAGS_S.iter().position(|&l| l == tau);
+            lag.and_then(|lag| u.get(input_lag_index(input, lag)).copied())
+        };
         match (robot, self) {
+            (Robot::Car, Atom::LaggedInput { input, tau }) => {
+                lagged(*input, *tau).unwrap_or(R::cst(f64::NAN))
+            }
+            (Robot::Car, Atom::InputRate { input, tau }) => match lagged(*input, *tau) {
+                Some(l) => (u[*input] - l) / *tau,
+                None => R::cst(f64::NAN),
+            },
             (_, Atom::X) => s[0],
             (_, Atom::Y) => s[1],
             (_, Atom::One) => R::cst(1.0),
@@ -574,6 +706,12 @@ fn push_atom<R: Real>(a: &Atom, s: &[R], u: &[R]) -> R {
     }
 }
 
+/// File names of the car's commands (`δ`, `d`), as the lagged atoms spell them.
+const COMMAND_NAMES: [&str; 2] = ["delta", "d"];
+/// Symbols of the car's commands and of their rates.
+const COMMAND_SYMBOLS: [&str; 2] = ["δ", "d"];
+const COMMAND_RATE_SYMBOLS: [&str; 2] = ["δ̇", "ḋ"];
+
 /// Errors parsing a feature.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum FeatureError {
@@ -598,6 +736,11 @@ pub enum FeatureError {
     /// A malformed saturating speed.
     #[error("bad saturating speed '{0}'; write sat_vx2(v0) with a finite speed scale v0 > 0 (m/s)")]
     BadSpeedScale(String),
+    /// A lagged command with a time constant outside [`INPUT_LAGS_S`].
+    #[error(
+        "bad lagged command '{0}'; write delta_lag(tau), d_lag(tau), delta_rate(tau) or d_rate(tau) with tau one of 0.03, 0.1, 0.3 (seconds)"
+    )]
+    BadInputLag(String),
     /// No factors or too many.
     #[error("feature '{name}' has {got} factors; use 1 to {max} atoms joined by '*'")]
     FactorCount {
@@ -680,6 +823,11 @@ impl Feature {
     /// The factors.
     pub fn factors(&self) -> &[Atom] {
         &self.factors
+    }
+
+    /// Whether the feature needs the command history ([`Atom::uses_input_lags`]).
+    pub fn uses_input_lags(&self) -> bool {
+        self.factors.iter().any(Atom::uses_input_lags)
     }
 
     /// Whether the feature depends on where the robot is (`x`, `y`, a Gaussian bump or band):
@@ -900,6 +1048,48 @@ mod tests {
         for bad in ["strip(0.5,0.3,0)", "strip(0.5,0.3)", "strip(0.5,nan,0.8)"] {
             assert!(Feature::parse(bad).is_err(), "{bad}");
         }
+    }
+
+    #[test]
+    fn lagged_commands_name_their_time_constant_and_need_the_command_history() {
+        let f = Feature::parse("delta_rate(0.1)*vx").unwrap();
+        assert_eq!(f.factors()[0], Atom::InputRate { input: 0, tau: 0.1 });
+        assert_eq!(Feature::parse(&f.name()).unwrap(), f);
+        assert_eq!(f.symbol(), "δ̇_{0.1 s}·vₓ");
+        assert_eq!(f.unit(), Unit::new(1, -2));
+        assert!(f.uses_input_lags() && !f.depends_on_position());
+        let g = Feature::parse("d_lag(0.03)").unwrap();
+        assert_eq!(
+            (g.name().as_str(), g.symbol().as_str()),
+            ("d_lag(0.03)", "d_{0.03 s}")
+        );
+        assert_eq!(g.unit(), Unit::default());
+        assert!(f.check_robot(Robot::Pushing).is_err() && g.check_robot(Robot::Car).is_ok());
+        // the state names follow the time constants and the index
+        for (lag, tau) in INPUT_LAGS_S.iter().enumerate() {
+            for (i, cmd) in COMMAND_NAMES.iter().enumerate() {
+                let j = input_lag_index(i, lag) - CAR_COMMANDS;
+                assert_eq!(INPUT_LAG_STATES[j], format!("{cmd}_{tau}"));
+            }
+        }
+        // values from the input's entries past the commands; NaN without them
+        let u = [0.2, 0.5, 0.1, 0.4, 0.15, 0.3, 0.0, 0.0];
+        let s = [0.0, 0.0, 0.0, 2.0, 0.0, 0.0];
+        let p = crate::physics::PhysicsModel::car(&[])
+            .unwrap()
+            .params()
+            .to_vec();
+        let v = f.eval::<f64>(Robot::Car, &p, &s, &u);
+        assert!((v - (0.2 - 0.15) / 0.1 * 2.0).abs() < 1e-12, "{v}");
+        assert_eq!(g.eval::<f64>(Robot::Car, &p, &s, &u), 0.4);
+        assert!(f.eval::<f64>(Robot::Car, &p, &s, &u[..2]).is_nan());
+        // a time constant outside the set says which exist
+        let e = Feature::parse("delta_rate(0.05)").unwrap_err().to_string();
+        for tau in INPUT_LAGS_S {
+            assert!(e.contains(&tau.to_string()), "{e}");
+        }
+        assert!(Feature::parse("delta_lag()").is_err() && Feature::parse("d_rate(x)").is_err());
+        assert!(Atom::names(Robot::Car).contains(&"delta_rate(tau)".to_string()));
     }
 
     #[test]

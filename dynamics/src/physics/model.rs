@@ -2,6 +2,7 @@
 
 use super::car::{self, CAR_NOMINAL_PARAMS, Slot};
 use super::custom::{CustomEffect, CustomError, Target};
+use super::features::{INPUT_LAG_STATES, INPUT_LAGS_S, input_lag_rates, input_lags_settled};
 use super::push::{self, LimitSurface, PUSH_NOMINAL_PARAMS};
 use super::{Effect, ParamSpec, Robot};
 use crate::ode::{InputTape, VectorField};
@@ -118,6 +119,9 @@ pub struct PhysicsModel {
     dim_s: usize,
     /// Custom effects (their coefficients follow the library effects' parameters).
     custom: Vec<CustomEffect>,
+    /// Whether the state ends with the lagged commands ([`INPUT_LAG_STATES`]), which a custom
+    /// term on a lagged command needs.
+    input_lags: bool,
     /// Pushing: how the pusher's force moves the block.
     limit_surface: LimitSurface,
 }
@@ -167,6 +171,7 @@ impl PhysicsModel {
             std_errors: None,
             dim_s,
             custom: Vec::new(),
+            input_lags: false,
             limit_surface: LimitSurface::default(),
         })
     }
@@ -266,6 +271,9 @@ impl PhysicsModel {
         for s in &self.slots {
             v.extend_from_slice(s.effect.extra_states());
         }
+        if self.input_lags {
+            v.extend_from_slice(&INPUT_LAG_STATES);
+        }
         v
     }
 
@@ -345,7 +353,8 @@ impl PhysicsModel {
 
     /// Adds a custom effect (see [`CustomEffect`]): its coefficients (start values from the
     /// effect) are appended to the parameter vector as `custom.<name>.<j>`; standard errors, if
-    /// set, get `NaN` for them.
+    /// set, get `NaN` for them. The first effect with a term on a lagged command appends the
+    /// lagged commands ([`INPUT_LAG_STATES`]) to the state.
     pub fn add_custom(&mut self, c: CustomEffect) -> Result<(), ModelError> {
         if c.robot() != self.robot {
             return Err(CustomError::WrongRobot {
@@ -357,6 +366,10 @@ impl PhysicsModel {
         }
         if self.custom.iter().any(|o| o.name() == c.name()) {
             return Err(CustomError::Duplicate(c.name().to_string()).into());
+        }
+        if c.uses_input_lags() && !self.input_lags {
+            self.input_lags = true;
+            self.dim_s += INPUT_LAG_STATES.len();
         }
         self.params.extend(c.terms().iter().map(|t| t.coefficient));
         if let Some(s) = &mut self.std_errors {
@@ -516,16 +529,33 @@ impl PhysicsModel {
     /// whose `active` flag is set.
     pub fn eval_generic<R: Real>(&self, p: &[R], active: &[bool], s: &[R], u: &[R], out: &mut [R]) {
         match self.robot {
+            Robot::Car if self.input_lags => {
+                // the custom terms read the lagged commands after the commands
+                let off = self.dim_s - INPUT_LAG_STATES.len();
+                let mut ext = [R::cst(0.0); 2 + INPUT_LAG_STATES.len()];
+                ext[..2].copy_from_slice(&u[..2]);
+                ext[2..].copy_from_slice(&s[off..self.dim_s]);
+                let inputs = car::Inputs {
+                    steer: self.custom_input(Target::Delta, p, s, &ext),
+                    grip: self.custom_input(Target::Grip, p, s, &ext),
+                };
+                car::rhs(p, &self.slots, active, s, u, inputs, out);
+                self.add_custom_terms(p, s, &ext, out);
+                input_lag_rates(&s[off..self.dim_s], u, &mut out[off..self.dim_s]);
+            }
             Robot::Car => {
                 let inputs = car::Inputs {
                     steer: self.custom_input(Target::Delta, p, s, u),
                     grip: self.custom_input(Target::Grip, p, s, u),
                 };
-                car::rhs(p, &self.slots, active, s, u, inputs, out)
+                car::rhs(p, &self.slots, active, s, u, inputs, out);
+                self.add_custom_terms(p, s, u, out);
             }
-            Robot::Pushing => push::rhs(p, self, active, s, u, out),
+            Robot::Pushing => {
+                push::rhs(p, self, active, s, u, out);
+                self.add_custom_terms(p, s, u, out);
+            }
         }
-        self.add_custom_terms(p, s, u, out);
     }
 
     /// Adds the custom effects' terms (always on) to `out`.
@@ -729,6 +759,9 @@ impl PhysicsModel {
         if self.robot == Robot::Car && self.dim_s > off {
             car::settled_effect_states(p, &self.slots, u, &mut full);
         }
+        if self.input_lags {
+            input_lags_settled(u, &mut full[self.dim_s - INPUT_LAG_STATES.len()..]);
+        }
         full[off..].to_vec()
     }
 
@@ -748,11 +781,17 @@ impl PhysicsModel {
         }
         // the substeps follow from the time constants' lower bounds, not their values: the
         // effect states then vary smoothly with the parameters (a fit differentiates them)
+        let lags = if self.input_lags {
+            &INPUT_LAGS_S[..]
+        } else {
+            &[]
+        };
         let tau_min = self
             .slots
             .iter()
             .filter(|sl| !sl.effect.extra_states().is_empty())
             .map(|sl| sl.effect.params()[0].lower)
+            .chain(lags.iter().copied())
             .fold(f64::INFINITY, f64::min)
             .max(1e-6);
         let substeps = (4.0 * dt / tau_min).ceil().clamp(1.0, 1000.0) as usize;
@@ -766,8 +805,17 @@ impl PhysicsModel {
             vec![R::cst(0.0); self.dim_s],
             vec![R::cst(0.0); self.dim_s],
         ];
+        let lagged = self.dim_s
+            - if self.input_lags {
+                INPUT_LAG_STATES.len()
+            } else {
+                0
+            };
         let rates = |s: &[R], out: &mut [R]| {
             car::effect_state_rates(p, &self.slots, &active, s, &ur, out);
+            if self.input_lags {
+                input_lag_rates(&s[lagged..], &ur, &mut out[lagged..]);
+            }
         };
         for _ in 0..substeps {
             let e0: Vec<R> = e.to_vec();
@@ -1031,6 +1079,14 @@ impl PhysicsModel {
                     c.name()
                 );
             }
+        }
+        if self.input_lags {
+            let taus: Vec<String> = INPUT_LAGS_S.iter().map(|t| t.to_string()).collect();
+            let _ = writeln!(
+                o,
+                "  lagged commands (effect states): u̇_τ = (u − u_τ)/τ for δ and d, τ = {} s",
+                taus.join(", ")
+            );
         }
         let _ = writeln!(o, "nominal parameters:");
         for i in 0..Self::nominal_specs(self.robot).len() {

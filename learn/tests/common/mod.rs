@@ -98,8 +98,22 @@ pub fn car_bag_from(
     rate_hz: f64,
     seed: u64,
 ) -> PathBuf {
+    car_bag_delayed(dir, model, runs, seconds, rate_hz, seed, 0)
+}
+
+/// As [`car_bag_from`], with the steering command reaching the car `delay` samples after it is
+/// logged (a transport delay; before a run's first command, that command).
+pub fn car_bag_delayed(
+    dir: &Path,
+    model: &PhysicsModel,
+    runs: usize,
+    seconds: f64,
+    rate_hz: f64,
+    seed: u64,
+    delay: usize,
+) -> PathBuf {
     let names: Vec<&str> = model.effects().iter().map(|e| e.name()).collect();
-    let path = dir.join(format!("car_{runs}_{seed}_{}", names.join("_")));
+    let path = dir.join(format!("car_{runs}_{seed}_{delay}_{}", names.join("_")));
     let mut w = BagWriter::create(&path, WriterOptions::default()).unwrap();
     let tp = w
         .add_typed_topic::<PoseStamped>("/car/pose", &[QosProfile::default_profile()])
@@ -115,6 +129,7 @@ pub fn car_bag_from(
         let t0 = 1_000_000_000i64 + (run as f64 * (seconds + 10.0) * 1e9) as i64;
         let mut s = vec![0.0, 0.0, uniform(&mut rng, -3.0, 3.0), 1.0, 0.0, 0.0];
         let mut u = [0.0, 0.3];
+        let mut steering = Vec::with_capacity(steps + 1);
         for i in 0..=steps {
             let t = t0 + (i as f64 * dt * 1e9) as i64;
             if i % ((0.4 * rate_hz) as usize).max(1) == 0 {
@@ -136,7 +151,9 @@ pub fn car_bag_from(
             };
             w.write(tc, t as u64, &cmd).unwrap();
             // commands go through f32 on the wire: integrate with the same values
-            let uf = [f64::from(u[0] as f32), f64::from(u[1] as f32)];
+            let mut uf = [f64::from(u[0] as f32), f64::from(u[1] as f32)];
+            steering.push(uf[0]);
+            uf[0] = steering[i.saturating_sub(delay)];
             let mut next = vec![0.0; s.len()];
             integrate(model, &solver, 1, &s, &uf, dt, &mut next);
             s = next;
