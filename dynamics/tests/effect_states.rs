@@ -223,10 +223,10 @@ fn a_term_on_a_lagged_command_carries_the_lagged_commands_as_effect_states() {
     }
     // each copy follows its command with its time constant
     for (k, tau) in features::INPUT_LAGS_S.iter().enumerate() {
-        for i in 0..2 {
+        for (i, ui) in u.iter().enumerate() {
             let j = 7 + 2 * k + i;
             assert!(
-                (f[j] - (u[i] - s[j]) / tau).abs() < 1e-12,
+                (f[j] - (ui - s[j]) / tau).abs() < 1e-12,
                 "{}",
                 names[j - 6]
             );
