@@ -68,7 +68,9 @@ use dynlab_learn::dynamics::conventions::wrap_angle;
 use dynlab_learn::dynamics::data::{DataError, SplitMix64, StateTrajectory, Window};
 use dynlab_learn::dynamics::ode::Solver;
 use dynlab_learn::dynamics::physics::custom::fmt_num;
-use dynlab_learn::dynamics::physics::features::{Area, Atom, Feature, library, time_unit};
+use dynlab_learn::dynamics::physics::features::{
+    Area, Atom, Feature, INPUT_LAG_STATES, input_lags_along, library, time_unit,
+};
 use dynlab_learn::dynamics::physics::{
     CustomEffect, CustomTerm, ModelError, PhysicsModel, Robot, Target, lattice,
 };
@@ -1223,12 +1225,26 @@ pub fn discover_terms_split(
     };
     let nf = feats.len();
     let params = physics.params();
+    // the lagged commands at every sample, after the commands (what a model with such a term
+    // carries as effect states)
+    let lags: Vec<Vec<f64>> = if robot == Robot::Car && feats.iter().any(Feature::uses_input_lags)
+    {
+        trajs.iter().map(|t| input_lags_along(&t.u, t.dt)).collect()
+    } else {
+        Vec::new()
+    };
+    let nl = INPUT_LAG_STATES.len();
     let mut x = vec![0.0; n * nf];
-    for i in 0..n {
+    let mut u = Vec::with_capacity(du + nl);
+    for (i, &(ti, a)) in trans.iter().enumerate() {
         let s = &s0[i * dp..(i + 1) * dp];
-        let u = &u0[i * du..(i + 1) * du];
+        u.clear();
+        u.extend_from_slice(&u0[i * du..(i + 1) * du]);
+        if let Some(l) = lags.get(ti) {
+            u.extend_from_slice(&l[a * nl..(a + 1) * nl]);
+        }
         for (f, feat) in feats.iter().enumerate() {
-            let v = feat.eval(robot, params, s, u);
+            let v = feat.eval(robot, params, s, &u);
             x[i * nf + f] = if v.is_finite() { v } else { 0.0 };
         }
     }

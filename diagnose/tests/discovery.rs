@@ -48,6 +48,19 @@ fn car_data_steered(
     duration: f64,
     steer: fn(f64) -> f64,
 ) -> Dataset {
+    car_data_delayed(truth, seed, episodes, duration, steer, 0)
+}
+
+/// [`car_data_steered`] with the steering reaching the car `delay` samples after it is logged
+/// (a transport delay; before an episode's first command, that command).
+fn car_data_delayed(
+    truth: &PhysicsModel,
+    seed: u64,
+    episodes: u64,
+    duration: f64,
+    steer: fn(f64) -> f64,
+    delay: usize,
+) -> Dataset {
     let sim = car_dataset(&car_scenario(None, 0.0), episodes, duration, 700 + seed, 1).unwrap();
     let dt = sim.pose_dt_s;
     let dt_ns = (dt * 1e9).round() as i64;
@@ -70,8 +83,9 @@ fn car_data_steered(
                 t_ns,
                 u: u.to_vec(),
             });
+            let late = [steer(t.u[i.saturating_sub(delay) * 2]), u[1]];
             let mut next = vec![0.0; 6];
-            truth.integrate_step(&Solver::rk4(), 1, &s, &u, dt, &mut next);
+            truth.integrate_step(&Solver::rk4(), 1, &s, &late, dt, &mut next);
             s = next;
         }
         t0 += n as i64 * dt_ns + 1_000_000_000;
@@ -552,4 +566,35 @@ fn a_low_grip_band_is_a_grip_term_on_a_band() {
         significant >= 2,
         "the grip term passed the test in {significant} of 3 seeds"
     );
+}
+
+#[test]
+fn a_steering_delay_is_discovered_as_a_term_on_the_lagged_steering_rate() {
+    // the steering reaches the car 60 ms after it is logged; the model has no delay, and no
+    // memoryless term can stand for one
+    let car = PhysicsModel::car(&[]).unwrap();
+    for seed in 0..3 {
+        let dt = car_data(&car, seed, 1, 1.0).pose_dt_s;
+        let delay = (0.06 / dt).round() as usize;
+        let data = car_data_delayed(&car, seed, 2, 12.0, |d| d, delay);
+        let model = physics_model(PhysicsModel::car(&[]).unwrap(), data.pose_dt_s);
+        let d = search(&model, &data, seed);
+        let table = d.table();
+        println!("seed {seed}, delay {delay} samples\n{table}");
+        let found = d.terms.iter().find(|t| t.significant).expect(&table);
+        assert_eq!(found.state, "delta", "{table}");
+        assert!(found.feature.starts_with("delta_rate("), "{table}");
+        // δ − t_d·δ̇: the coefficient is minus the delay in seconds
+        assert!(
+            (-0.075..-0.045).contains(&found.coefficient),
+            "delay {} s, truth 0.06 s\n{table}",
+            -found.coefficient
+        );
+        assert!(d.error_reduction >= 0.4, "{table}");
+        // the custom effect file carries the term, and a model with it has the lagged commands
+        let eff = d.effect.clone().expect(&table);
+        let mut with = PhysicsModel::car(&[]).unwrap();
+        with.add_custom(eff).unwrap();
+        assert_eq!(with.dim_effect_states(), 6);
+    }
 }

@@ -161,7 +161,9 @@ impl Target {
 
     /// Whether the term search tries `feature` on this target: every feature on a derivative;
     /// on the steering angle `δ` only features of the commands and the speed (`δ`, `d`, `vₓ`,
-    /// `|vₓ|`, `|v|`, `vₓ²/(vₓ² + v₀²)`), the shapes of an input's nonlinearity. With a slip
+    /// `|vₓ|`, `|v|`, `vₓ²/(vₓ² + v₀²)`, the lagged steering command), the shapes of an input's
+    /// nonlinearity. A lagged command is tried only through the input it lags: the steering's
+    /// on `δ`, the throttle's on `v̇ₓ` (the drive). With a slip
     /// angle, `ω`, `v_y` or a position in it a `δ` term is a change of the tire model (on a car
     /// whose tires were 10 % off the model's, `δ += 0.48·α_r·vₓ` passed the search's test). A
     /// custom effect file may still put any feature on `δ`. On the grip `μ` only features of the position (`x`,
@@ -170,20 +172,34 @@ impl Target {
     /// tried on `μ` only (a strip of other grip across a floor).
     pub fn searched_with(self, feature: &Feature) -> bool {
         let all = |ok: fn(&Atom) -> bool| feature.factors().iter().all(ok);
+        let lagged = |input: usize| {
+            feature.factors().iter().all(|a| match a {
+                Atom::LaggedInput { input: i, .. } | Atom::InputRate { input: i, .. } => {
+                    *i == input
+                }
+                _ => !a.uses_input_lags(),
+            })
+        };
         match self {
-            Target::Delta => all(|a| {
-                matches!(
-                    a,
-                    Atom::Delta
-                        | Atom::Throttle
-                        | Atom::Vx
-                        | Atom::AbsVx
-                        | Atom::Speed
-                        | Atom::SatVx2 { .. }
-                )
-            }),
+            Target::Delta => {
+                lagged(0)
+                    && all(|a| {
+                        matches!(
+                            a,
+                            Atom::Delta
+                                | Atom::Throttle
+                                | Atom::Vx
+                                | Atom::AbsVx
+                                | Atom::Speed
+                                | Atom::SatVx2 { .. }
+                                | Atom::LaggedInput { .. }
+                                | Atom::InputRate { .. }
+                        )
+                    })
+            }
             Target::Grip => all(Atom::is_position),
-            _ => all(|a| !matches!(a, Atom::Band { .. } | Atom::Strip { .. })),
+            Target::Vx => lagged(1) && all(|a| !matches!(a, Atom::Band { .. } | Atom::Strip { .. })),
+            _ => all(|a| !a.uses_input_lags() && !matches!(a, Atom::Band { .. } | Atom::Strip { .. })),
         }
     }
 

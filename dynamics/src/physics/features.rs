@@ -102,6 +102,34 @@ pub fn input_lag_rates<R: Real>(lagged: &[R], u: &[R], out: &mut [R]) {
     }
 }
 
+/// The lagged commands along a car's command sequence `u` (`len × 2`, each held for `dt` until
+/// the next): `len × 6` in [`INPUT_LAG_STATES`] order, started settled at the first command,
+/// the exact solution of each first-order lag under zero-order hold. Entry `a` is what a
+/// model's lagged commands hold at sample `a` (the model rebuilds them with its own integrator,
+/// within 10⁻⁶ of these).
+pub fn input_lags_along(u: &[f64], dt: f64) -> Vec<f64> {
+    let n = INPUT_LAG_STATES.len();
+    let len = u.len() / CAR_COMMANDS;
+    let mut out = Vec::with_capacity(len * n);
+    if len == 0 {
+        return out;
+    }
+    let decay: Vec<f64> = INPUT_LAGS_S.iter().map(|tau| (-dt / tau).exp()).collect();
+    let mut l = vec![0.0; n];
+    input_lags_settled(&u[..CAR_COMMANDS], &mut l);
+    for a in 0..len {
+        out.extend_from_slice(&l);
+        let cmd = &u[a * CAR_COMMANDS..(a + 1) * CAR_COMMANDS];
+        for (lag, e) in decay.iter().enumerate() {
+            for (i, c) in cmd.iter().enumerate() {
+                let j = input_lag_index(i, lag) - CAR_COMMANDS;
+                l[j] = c + (l[j] - c) * e;
+            }
+        }
+    }
+    out
+}
+
 /// The lagged commands settled under the held commands `u` (each copy equal to its command).
 pub fn input_lags_settled<R: Real>(u: &[R], out: &mut [R]) {
     for lag in 0..INPUT_LAGS_S.len() {
@@ -899,7 +927,8 @@ pub struct Area {
 }
 
 /// The candidate features of the term search for `robot`: the physics-informed products of
-/// states and inputs, slip angles and their saturating functions, `x`, `y`, and, when `area`
+/// states and inputs, slip angles and their saturating functions, the car's lagged command
+/// rates (a command that acts late), `x`, `y`, and, when `area`
 /// is given, Gaussian bumps on a `grid × grid` lattice over it (width: the lattice spacing) and
 /// for the car bands at 4 directions and `grid` offsets across it (width: half the spacing).
 pub fn library(robot: Robot, area: Option<Area>, grid: usize) -> Vec<Feature> {
@@ -928,6 +957,12 @@ pub fn library(robot: Robot, area: Option<Area>, grid: usize) -> Vec<Feature> {
             "alpha_r*vx",
             "beta",
             "beta*vx",
+            "delta_rate(0.03)",
+            "delta_rate(0.1)",
+            "delta_rate(0.3)",
+            "d_rate(0.03)",
+            "d_rate(0.1)",
+            "d_rate(0.3)",
             "1",
             "x",
             "y",
