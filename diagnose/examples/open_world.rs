@@ -40,7 +40,8 @@ use dynlab_learn::dynamics::physics::{CustomEffect, Effect, PhysicsModel, Target
 use dynlab_learn::train::{KindDefaults, TrainConfig, train};
 use dynlab_learn::{Model, ModelKind, World};
 use dynlab_sim::car::{
-    AeroDrag, GripPatch, MotorLag, SteeringGainSpeed, SteeringOffset, SteeringRateLimit,
+    AeroDrag, CommandDelay, GripPatch, MotorLag, SteeringGainSpeed, SteeringOffset,
+    SteeringRateLimit,
 };
 use dynlab_sim::{CarScenario, Region, RegionShape};
 
@@ -67,6 +68,7 @@ enum Hidden {
     GainSpeed,
     RateLimit,
     Band,
+    Delay,
 }
 
 impl Hidden {
@@ -86,6 +88,7 @@ impl Hidden {
         match self {
             Hidden::GainSpeed => "steering_gain_speed*",
             Hidden::Band => "grip_band*",
+            Hidden::Delay => "command_delay*",
             h => h.library().map_or("", |l| l.0),
         }
     }
@@ -127,6 +130,7 @@ impl Hidden {
                     tau: 0.05,
                 })
             }
+            Hidden::Delay => e.command_delay = Some(CommandDelay::default()),
         }
     }
 }
@@ -179,7 +183,7 @@ fn true_model(car: &CarScenario, case: &[Hidden], like: &Model) -> Option<Model>
                 ("grip_patch.r", 0.6),
                 ("grip_patch.k", 0.5),
             ],
-            Hidden::GainSpeed | Hidden::Band => &[],
+            Hidden::GainSpeed | Hidden::Band | Hidden::Delay => &[],
         };
         for &(name, v) in values {
             p.set_param(name, v).ok()?;
@@ -248,6 +252,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         vec![GainSpeed],
         vec![RateLimit],
         vec![Band],
+        vec![Delay],
     ];
     println!(
         "open-world recovery: car {episodes} × {duration} s, noise ×{noise}, parameters perturbed ±{:.0} % from the datasheet; * = outside the library",

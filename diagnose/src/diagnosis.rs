@@ -42,7 +42,8 @@
 //! the term search's best grip term on the position ([`crate::discovery`], `μ` on a bump or band)
 //! removes at least `min_reduction` more: the region is not a disc; nor a `steering_offset` when
 //! the term search's best steering term with `δ` as a factor (`δ·vₓ`, `δ`, …) does: the steering
-//! error is not a constant.
+//! error is not a constant; nor a `steering_lag` when its best term on the lagged steering's rate
+//! (`δ̇_τ`) does: the command reaches the wheels late, a delay rather than a servo's lag.
 //! The verdict is the best significant candidate, or none:
 //! then the report says so and lists what the residual correlates with (state and input features,
 //! and inputs at lags).
@@ -1455,7 +1456,8 @@ impl<'a> Ctx<'a> {
     /// across the floor fits a disc on part of it, and the term search finds the band. A
     /// `steering_offset` against a steering term with `δ` as a factor: a steering gain that
     /// falls with speed is lowered on most segments by a constant offset (22 % removed, named on
-    /// one of five seeds before this check), and the term search finds the gain. (Without the
+    /// one of five seeds before this check), and the term search finds the gain. A
+    /// `steering_lag` against a term on the lagged steering's rate: a transport delay. (Without the
     /// margin a Gaussian bump of grip that removed 85.7 % refused a right-fitted disc's 85.1 %.)
     /// A disc's rivals include the strip through it fitted on the k-step error
     /// ([`strip_through`]): a band the data cross in two places, of which the disc covers one.
@@ -2420,7 +2422,9 @@ const MAX_LOG_RATIO: f64 = 6.907_755_278_982_137; // ln 1000
 /// steering offset's rivals have the commanded angle as a factor (`δ·vₓ`, `δ`, …): a steering term without it
 /// (`d`, `vₓ`, `|v|`) is positive wherever the car drives forward, so it is a constant offset
 /// in another guise (on a car with a true 0.03 rad offset, `δ += 0.12·d` removed 36 % against
-/// the offset's 31 %).
+/// the offset's 31 %). A steering servo's lag against the lagged steering's rate (`δ̇_τ`): a
+/// command that reaches the wheels a fixed time late is `δ − t_d·δ̇`, which a first-order lag
+/// with a rate limit follows only in part.
 fn rival(e: Effect) -> Option<Rival> {
     match e {
         Effect::GripPatch => Some(Rival {
@@ -2434,6 +2438,12 @@ fn rival(e: Effect) -> Option<Rival> {
             among: |f| f.factors().contains(&Atom::Delta),
             term: "a steering",
             meaning: "the steering error is not a constant offset",
+        }),
+        Effect::SteeringLag => Some(Rival {
+            target: Target::Delta,
+            among: Feature::uses_input_lags,
+            term: "a lagged-steering",
+            meaning: "the wheels follow the command late (a delay), not through a servo's lag",
         }),
         _ => None,
     }

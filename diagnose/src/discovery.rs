@@ -1227,8 +1227,7 @@ pub fn discover_terms_split(
     let params = physics.params();
     // the lagged commands at every sample, after the commands (what a model with such a term
     // carries as effect states)
-    let lags: Vec<Vec<f64>> = if robot == Robot::Car && feats.iter().any(Feature::uses_input_lags)
-    {
+    let lags: Vec<Vec<f64>> = if robot == Robot::Car && feats.iter().any(Feature::uses_input_lags) {
         trajs.iter().map(|t| input_lags_along(&t.u, t.dt)).collect()
     } else {
         Vec::new()

@@ -345,9 +345,21 @@ fn a_nominal_parameter_change_is_not_reported_as_a_term() {
         4 + grid * grid + 4 * grid,
         "x, y, bumps, bands and the two fitted regions are tried on μ"
     );
+    // a lagged command is tried only through the input it lags: the throttle's rates on v̇ₓ
+    // (and the steering's on δ, counted above), none on v̇_y, ω̇
+    let lagged_elsewhere: usize = [Target::Vx, Target::Vy, Target::Omega]
+        .iter()
+        .map(|t| {
+            library(Robot::Car, None, 0)
+                .iter()
+                .filter(|f| f.uses_input_lags() && !t.searched_with(f))
+                .count()
+        })
+        .sum();
+    assert_eq!(lagged_elsewhere, 3 + 6 + 6);
     assert_eq!(
         d.pairs_tried,
-        3 * features - shaped.len() + steering + grip,
+        3 * features - shaped.len() - lagged_elsewhere + steering + grip,
         "{}",
         d.table()
     );

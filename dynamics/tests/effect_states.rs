@@ -225,11 +225,7 @@ fn a_term_on_a_lagged_command_carries_the_lagged_commands_as_effect_states() {
     for (k, tau) in features::INPUT_LAGS_S.iter().enumerate() {
         for (i, ui) in u.iter().enumerate() {
             let j = 7 + 2 * k + i;
-            assert!(
-                (f[j] - (ui - s[j]) / tau).abs() < 1e-12,
-                "{}",
-                names[j - 6]
-            );
+            assert!((f[j] - (ui - s[j]) / tau).abs() < 1e-12, "{}", names[j - 6]);
         }
     }
     assert!((f[7 + 3] - (u[1] - d_01) / 0.1).abs() < 1e-12);

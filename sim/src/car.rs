@@ -36,6 +36,8 @@
 //!   at rest stays at rest (creep below 1 mm/s). Forward driving above the floor speed is the
 //!   published model to first order in the slip angles, and exactly in them.
 
+use std::collections::VecDeque;
+
 use serde::{Deserialize, Serialize};
 
 use crate::error::SimError;
@@ -379,6 +381,30 @@ impl Default for SteeringRateLimit {
     }
 }
 
+/// Hidden effect: a transport delay: the car applies each command `delay` seconds after it is
+/// given (both steering and throttle), as a radio link, a bus or a message queue between the
+/// controller and the motor drivers does. Before its first command reaches it after a reset
+/// the car holds the neutral command (straight, no throttle). Why: a model that applies the
+/// command at once sees every response early by the delay; no memoryless term can stand for
+/// that (the term search's lagged command rates can: `δ − t_d·δ̇`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct CommandDelay {
+    /// Switch. Default true.
+    pub enabled: bool,
+    /// The delay \[s\] (0 … 1). Default 0.06.
+    pub delay: f64,
+}
+
+impl Default for CommandDelay {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            delay: 0.06,
+        }
+    }
+}
+
 /// The hidden effects of the car world; each is off unless its table is present.
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -395,6 +421,8 @@ pub struct CarEffects {
     pub steering_gain_speed: Option<SteeringGainSpeed>,
     /// Rate-limited, lagging steering servo (not in the diagnosis library).
     pub steering_rate_limit: Option<SteeringRateLimit>,
+    /// Transport delay of the commands (not in the diagnosis library).
+    pub command_delay: Option<CommandDelay>,
 }
 
 fn on<T>(e: &Option<T>, enabled: impl Fn(&T) -> bool) -> Option<&T> {
@@ -422,6 +450,9 @@ impl CarEffects {
         }
         if on(&self.steering_rate_limit, |e| e.enabled).is_some() {
             v.push("steering_rate_limit");
+        }
+        if on(&self.command_delay, |e| e.enabled).is_some() {
+            v.push("command_delay");
         }
         v
     }
@@ -607,6 +638,9 @@ impl CarScenario {
             positive("effects.steering_rate_limit.rate", r.rate)?;
             crate::geometry::non_negative("effects.steering_rate_limit.tau", r.tau)?;
         }
+        if let Some(d) = &e.command_delay {
+            in_range("effects.command_delay.delay", d.delay, 0.0, 1.0)?;
+        }
         self.noise.validate("noise")
     }
 }
@@ -683,6 +717,10 @@ pub struct CarWorld {
     /// `steering_rate_limit`, else the last clamped command.
     servo: f64,
     time: f64,
+    /// Under `command_delay`: the commands given (clamped) with the times they were given,
+    /// oldest first; the first is the one the car applies now (the neutral command at time −∞
+    /// after a reset).
+    given: VecDeque<(f64, CarInput)>,
 }
 
 impl CarWorld {
@@ -694,6 +732,7 @@ impl CarWorld {
             x: [0.0; 7],
             servo: 0.0,
             time: 0.0,
+            given: VecDeque::new(),
         };
         w.reset(scenario.start_state())?;
         Ok(w)
@@ -723,6 +762,9 @@ impl CarWorld {
             0.0,
         ];
         self.servo = 0.0;
+        self.given.clear();
+        self.given
+            .push_back((f64::NEG_INFINITY, CarInput::default()));
         Ok(())
     }
 
@@ -800,9 +842,17 @@ impl CarWorld {
             });
         }
         let u = self.clamp_input(u);
+        let delay = on(&self.scenario.effects.command_delay, |d| d.enabled).map(|d| d.delay);
+        if delay.is_some() {
+            self.given.push_back((self.time, u));
+        }
         let n = (dt / self.scenario.car.substep - 1e-9).ceil().max(1.0) as usize;
         let h = dt / n as f64;
-        for _ in 0..n {
+        for i in 0..n {
+            let u = match delay {
+                Some(d) => self.delayed(self.time + i as f64 * h - d),
+                None => u,
+            };
             self.servo_substep(u.steering, h);
             let held = CarInput {
                 steering: self.servo,
@@ -812,6 +862,15 @@ impl CarWorld {
         }
         self.time += dt;
         Ok(self.state())
+    }
+
+    /// Under `command_delay`: the last command given at or before `t` (drops the older ones).
+    fn delayed(&mut self, t: f64) -> CarInput {
+        // commands given within a nanosecond of `t` count as given at `t`
+        while self.given.len() > 1 && self.given[1].0 <= t + 1e-9 {
+            self.given.pop_front();
+        }
+        self.given.front().map_or_else(CarInput::default, |g| g.1)
     }
 
     /// Moves the servo angle towards the clamped command over one substep (see

@@ -4,7 +4,8 @@
 //! values are rejected naming the key.
 
 use dynlab_sim::car::{
-    AeroDrag, CarParams, GripPatch, SteeringGainSpeed, SteeringOffset, SteeringRateLimit,
+    AeroDrag, CarParams, CommandDelay, GripPatch, SteeringGainSpeed, SteeringOffset,
+    SteeringRateLimit,
 };
 use dynlab_sim::push::{AnisotropicFriction, FrictionPatch, TableTilt};
 use dynlab_sim::{
@@ -383,7 +384,57 @@ fn car_all_new() -> CarScenario {
             ..Region::default()
         },
     });
+    s.effects.command_delay = Some(CommandDelay::default());
     s
+}
+
+#[test]
+fn command_delay_applies_every_command_the_delay_later() {
+    let mut s = CarScenario::floor();
+    s.effects.command_delay = Some(CommandDelay {
+        enabled: true,
+        delay: 0.06,
+    });
+    let cmd = |k: usize| {
+        CarInput::new(
+            0.3 * (k as f64 * 0.13).sin(),
+            0.2 + 0.3 * ((k / 17) % 2) as f64,
+        )
+    };
+    let start = rolling(1.0);
+    let (mut late, mut now) = (
+        CarWorld::new(&s).unwrap(),
+        CarWorld::new(&CarScenario::floor()).unwrap(),
+    );
+    for round in 0..2 {
+        // after a reset the car holds the neutral command until the first one arrives
+        late.reset(start).unwrap();
+        now.reset(start).unwrap();
+        for k in 0..200 {
+            let a = late.step(cmd(k), 0.01).unwrap();
+            let given = if k < 6 {
+                CarInput::default()
+            } else {
+                cmd(k - 6)
+            };
+            let b = now.step(given, 0.01).unwrap();
+            assert!(
+                (a.x - b.x).abs() + (a.y - b.y).abs() + (a.omega - b.omega).abs() < 1e-12,
+                "round {round} step {k}: {a:?} vs {b:?}"
+            );
+        }
+    }
+    // it changes the run: the commands act late
+    let plain = drive(&CarScenario::floor(), start, CarInput::new(0.3, 0.5), 0.3);
+    let delayed = drive(&s, start, CarInput::new(0.3, 0.5), 0.3);
+    assert!(
+        delayed[5].omega.abs() < 1e-12 && plain[5].omega > 0.1,
+        "{:?} {:?}",
+        delayed[5],
+        plain[5]
+    );
+    assert!((delayed.last().unwrap().psi - plain.last().unwrap().psi).abs() > 0.01);
+    assert_eq!(s.effects.active(), ["command_delay"]);
 }
 
 #[test]
@@ -428,6 +479,7 @@ fn switched_off_new_effects_change_no_bit() {
             .as_mut()
             .map(|e| &mut e.enabled),
         off.effects.grip_patch.as_mut().map(|e| &mut e.enabled),
+        off.effects.command_delay.as_mut().map(|e| &mut e.enabled),
     ]
     .into_iter()
     .flatten()
@@ -554,6 +606,10 @@ fn bad_values_of_the_new_keys_are_named() {
         e.to_string()
             .contains("must be < effects.grip_patch.region.radius (0.5)"),
         "{e}"
+    );
+    assert_eq!(
+        err_key(car("[effects.command_delay]\ndelay = 1.5\n")),
+        "effects.command_delay.delay"
     );
     let e = car("[effects.steering_rate_limit]\nrat = 3.0\n")
         .unwrap_err()

@@ -198,8 +198,12 @@ impl Target {
                     })
             }
             Target::Grip => all(Atom::is_position),
-            Target::Vx => lagged(1) && all(|a| !matches!(a, Atom::Band { .. } | Atom::Strip { .. })),
-            _ => all(|a| !a.uses_input_lags() && !matches!(a, Atom::Band { .. } | Atom::Strip { .. })),
+            Target::Vx => {
+                lagged(1) && all(|a| !matches!(a, Atom::Band { .. } | Atom::Strip { .. }))
+            }
+            _ => all(|a| {
+                !a.uses_input_lags() && !matches!(a, Atom::Band { .. } | Atom::Strip { .. })
+            }),
         }
     }
 
