@@ -529,33 +529,38 @@ impl PhysicsModel {
     /// whose `active` flag is set.
     pub fn eval_generic<R: Real>(&self, p: &[R], active: &[bool], s: &[R], u: &[R], out: &mut [R]) {
         match self.robot {
-            Robot::Car if self.input_lags => {
-                // the custom terms read the lagged commands after the commands
-                let off = self.dim_s - INPUT_LAG_STATES.len();
-                let mut ext = [R::cst(0.0); 2 + INPUT_LAG_STATES.len()];
-                ext[..2].copy_from_slice(&u[..2]);
-                ext[2..].copy_from_slice(&s[off..self.dim_s]);
-                let inputs = car::Inputs {
-                    steer: self.custom_input(Target::Delta, p, s, &ext),
-                    grip: self.custom_input(Target::Grip, p, s, &ext),
-                };
-                car::rhs(p, &self.slots, active, s, u, inputs, out);
-                self.add_custom_terms(p, s, &ext, out);
-                input_lag_rates(&s[off..self.dim_s], u, &mut out[off..self.dim_s]);
-            }
             Robot::Car => {
+                // the custom terms read the lagged commands, if any, after the commands
+                let mut ext = [R::cst(0.0); 2 + INPUT_LAG_STATES.len()];
+                let terms_u = match self.input_lags_at() {
+                    Some(off) => {
+                        ext[..2].copy_from_slice(&u[..2]);
+                        ext[2..].copy_from_slice(&s[off..self.dim_s]);
+                        &ext[..]
+                    }
+                    None => u,
+                };
                 let inputs = car::Inputs {
-                    steer: self.custom_input(Target::Delta, p, s, u),
-                    grip: self.custom_input(Target::Grip, p, s, u),
+                    steer: self.custom_input(Target::Delta, p, s, terms_u),
+                    grip: self.custom_input(Target::Grip, p, s, terms_u),
                 };
                 car::rhs(p, &self.slots, active, s, u, inputs, out);
-                self.add_custom_terms(p, s, u, out);
+                self.add_custom_terms(p, s, terms_u, out);
+                if let Some(off) = self.input_lags_at() {
+                    input_lag_rates(&s[off..self.dim_s], u, &mut out[off..self.dim_s]);
+                }
             }
             Robot::Pushing => {
                 push::rhs(p, self, active, s, u, out);
                 self.add_custom_terms(p, s, u, out);
             }
         }
+    }
+
+    /// Where the lagged commands ([`INPUT_LAG_STATES`]) start in the state, when the model
+    /// carries them (last in the state).
+    fn input_lags_at(&self) -> Option<usize> {
+        self.input_lags.then(|| self.dim_s - INPUT_LAG_STATES.len())
     }
 
     /// Adds the custom effects' terms (always on) to `out`.
@@ -759,8 +764,8 @@ impl PhysicsModel {
         if self.robot == Robot::Car && self.dim_s > off {
             car::settled_effect_states(p, &self.slots, u, &mut full);
         }
-        if self.input_lags {
-            input_lags_settled(u, &mut full[self.dim_s - INPUT_LAG_STATES.len()..]);
+        if let Some(at) = self.input_lags_at() {
+            input_lags_settled(u, &mut full[at..]);
         }
         full[off..].to_vec()
     }
@@ -781,11 +786,7 @@ impl PhysicsModel {
         }
         // the substeps follow from the time constants' lower bounds, not their values: the
         // effect states then vary smoothly with the parameters (a fit differentiates them)
-        let lags = if self.input_lags {
-            &INPUT_LAGS_S[..]
-        } else {
-            &[]
-        };
+        let lags = self.input_lags_at().map_or(&[][..], |_| &INPUT_LAGS_S[..]);
         let tau_min = self
             .slots
             .iter()
@@ -805,16 +806,11 @@ impl PhysicsModel {
             vec![R::cst(0.0); self.dim_s],
             vec![R::cst(0.0); self.dim_s],
         ];
-        let lagged = self.dim_s
-            - if self.input_lags {
-                INPUT_LAG_STATES.len()
-            } else {
-                0
-            };
+        let lagged = self.input_lags_at();
         let rates = |s: &[R], out: &mut [R]| {
             car::effect_state_rates(p, &self.slots, &active, s, &ur, out);
-            if self.input_lags {
-                input_lag_rates(&s[lagged..], &ur, &mut out[lagged..]);
+            if let Some(at) = lagged {
+                input_lag_rates(&s[at..], &ur, &mut out[at..]);
             }
         };
         for _ in 0..substeps {
