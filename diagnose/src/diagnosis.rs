@@ -75,7 +75,7 @@ use dynlab_learn::dynamics::physics::features::{Atom, Feature};
 use dynlab_learn::dynamics::physics::{Effect, ModelError, PhysicsModel, Target};
 use dynlab_learn::fit::{
     SENSITIVITY_LIMIT, bounded_least_squares, calm_windows, cluster_jackknife_std,
-    initial_state_after,
+    initial_states_after,
 };
 use dynlab_learn::train::{segment, segment_origins};
 use dynlab_learn::{Dataset, LearnError, Model, World};
@@ -749,13 +749,13 @@ impl Augmented<'_> {
         for (i, w) in ws.iter().enumerate() {
             let t = &d.trajs[w.trajectory];
             s[i * ds..(i + 1) * ds].copy_from_slice(&t.s[w.start * ds..(w.start + 1) * ds]);
-            let h = &d.history[w.trajectory];
-            if !self.pure_physics {
-                sb.extend(initial_state_after(&self.base, h, t, w.start));
-            }
-            if let Some(p) = with {
-                sw.extend(initial_state_after(p, h, t, w.start));
-            }
+        }
+        let at = || ws.iter().map(|w| (w.trajectory, w.start));
+        if !self.pure_physics {
+            sb = initial_states_after(&self.base, &d.history, d.trajs, at());
+        }
+        if let Some(p) = with {
+            sw = initial_states_after(p, &d.history, d.trajs, at());
         }
         let mut err = vec![0.0; n];
         let mut next = vec![0.0; n * ds];

@@ -74,7 +74,7 @@ use dynlab_learn::dynamics::physics::features::{
 use dynlab_learn::dynamics::physics::{
     CustomEffect, CustomTerm, ModelError, PhysicsModel, Robot, Target, lattice,
 };
-use dynlab_learn::fit::{SENSITIVITY_LIMIT, bounded_least_squares, cluster_std, initial_state};
+use dynlab_learn::fit::{SENSITIVITY_LIMIT, bounded_least_squares, cluster_std, initial_states};
 use dynlab_learn::train::segment;
 use dynlab_learn::{Dataset, LearnError, Model, World};
 use serde::{Deserialize, Serialize};
@@ -448,10 +448,7 @@ impl<'a> Ctx<'a> {
         let (ds, du, k) = (self.ds, self.du, self.k);
         let n = ws.len();
         let dp = p.dim_state();
-        let mut s = Vec::with_capacity(n * dp);
-        for w in ws {
-            s.extend(initial_state(p, &self.trajs[w.trajectory], w.start));
-        }
+        let mut s = initial_states(p, self.trajs, ws.iter().map(|w| (w.trajectory, w.start)));
         let mut u = vec![0.0; n * du];
         let mut next = vec![0.0; n * dp];
         let mut err = vec![0.0; n];
@@ -575,10 +572,9 @@ impl OneStep {
         }
         let n = trans.len();
         let (dp, du) = (physics.dim_state(), ctx.du);
-        let mut s0 = Vec::with_capacity(n * dp);
+        let s0 = initial_states(physics, trajs, trans.iter().copied());
         let mut u0 = Vec::with_capacity(n * du);
         for &(ti, a) in &trans {
-            s0.extend(initial_state(physics, &trajs[ti], a));
             u0.extend_from_slice(&trajs[ti].u[a * du..(a + 1) * du]);
         }
         let mut pred = vec![0.0; n * dp];

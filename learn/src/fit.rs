@@ -454,6 +454,49 @@ pub fn initial_state(p: &PhysicsModel, t: &StateTrajectory, a: usize) -> Vec<f64
     initial_state_after(p, &[], t, a)
 }
 
+/// [`initial_state`] at every `(trajectory, index)` of `at`, concatenated: the effect states are
+/// rebuilt once per trajectory over all its commands (entry `a` of
+/// [`PhysicsModel::effect_states_along`] depends only on the commands before `a`), not once per
+/// window over its prefix.
+pub fn initial_states(
+    p: &PhysicsModel,
+    trajs: &[StateTrajectory],
+    at: impl IntoIterator<Item = (usize, usize)>,
+) -> Vec<f64> {
+    initial_states_after(p, &[], trajs, at)
+}
+
+/// [`initial_states`] of trajectories that continue recordings ([`initial_state_after`]):
+/// `history[i]` holds the recording's commands before trajectory `i` (none past its end).
+pub fn initial_states_after(
+    p: &PhysicsModel,
+    history: &[Vec<f64>],
+    trajs: &[StateTrajectory],
+    at: impl IntoIterator<Item = (usize, usize)>,
+) -> Vec<f64> {
+    let ne = p.dim_effect_states();
+    // per trajectory: the effect states along its history and its commands, and the index of
+    // its first sample among them
+    let mut along: std::collections::BTreeMap<usize, (Vec<f64>, usize)> = Default::default();
+    let mut out = Vec::new();
+    for (ti, a) in at {
+        let t = &trajs[ti];
+        out.extend_from_slice(&t.s[a * t.dim_s..(a + 1) * t.dim_s]);
+        if ne > 0 {
+            let (e, first) = along.entry(ti).or_insert_with(|| {
+                let before = history.get(ti).map_or(&[][..], Vec::as_slice);
+                let mut u = before.to_vec();
+                u.extend_from_slice(&t.u);
+                let first = before.len() / t.dim_u.max(1);
+                (p.effect_states_along(&u, t.dt), first)
+            });
+            let i = *first + a;
+            out.extend_from_slice(&e[i * ne..(i + 1) * ne]);
+        }
+    }
+    out
+}
+
 /// [`initial_state`] of a trajectory that continues a recording: the effect states are rebuilt
 /// over `before` (the recording's commands before `t`, `n × dim_u`, settled at its first) and
 /// `t`'s own commands up to `a`, so that cutting a recording into segments does not restart them.
