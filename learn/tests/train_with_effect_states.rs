@@ -13,6 +13,7 @@ use dynlab_dynamics::data::{SavGol, windows};
 use dynlab_dynamics::physics::features::INPUT_LAG_STATES;
 use dynlab_dynamics::physics::{CustomEffect, Effect, PhysicsModel};
 use dynlab_learn::eval::{rollout_windows, window_extra_states};
+use dynlab_learn::fit::{initial_state, initial_state_after, initial_states, initial_states_after};
 use dynlab_learn::train::{default_physics_solver, physics_model};
 use dynlab_learn::{
     Dataset, Model, ModelKind, Topics, TrainConfig, World, evaluate, load_bags, load_model,
@@ -191,6 +192,26 @@ fn windows_start_from_the_effect_states_of_their_command_history() {
         .copied()
         .collect();
     let e0 = window_extra_states(&model, &data.trajectories, &some);
+    // the physics model's window starts, the effect states rebuilt once per trajectory (and
+    // after a recording's earlier commands), are those rebuilt over each window's prefix
+    let p = model.physics().unwrap();
+    let at = || some.iter().map(|w| (w.trajectory, w.start));
+    let per_window: Vec<f64> = some
+        .iter()
+        .flat_map(|w| initial_state(p, &data.trajectories[w.trajectory], w.start))
+        .collect();
+    assert_eq!(initial_states(p, &data.trajectories, at()), per_window);
+    // 40 samples of coasting before the recording's first window
+    let before = vec![vec![0.0; 40 * t.dim_u]];
+    let after: Vec<f64> = some
+        .iter()
+        .flat_map(|w| initial_state_after(p, &before[0], t, w.start))
+        .collect();
+    assert_eq!(
+        initial_states_after(p, &before, &data.trajectories, at()),
+        after
+    );
+    assert_ne!(after, per_window);
     for (w, e) in some.iter().zip(&e0) {
         // the same recursion from the history before the window
         let hist = &t.u[..w.start * t.dim_u];
