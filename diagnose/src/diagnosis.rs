@@ -752,10 +752,10 @@ impl Augmented<'_> {
         }
         let at = || ws.iter().map(|w| (w.trajectory, w.start));
         if !self.pure_physics {
-            sb = initial_states_after(&self.base, &d.history, d.trajs, at());
+            sb = initial_states_after(&self.base, d.history, d.trajs, at());
         }
         if let Some(p) = with {
-            sw = initial_states_after(p, &d.history, d.trajs, at());
+            sw = initial_states_after(p, d.history, d.trajs, at());
         }
         let mut err = vec![0.0; n];
         let mut next = vec![0.0; n * ds];
