@@ -225,33 +225,6 @@ fn a_steering_gain_falling_with_speed_gets_no_library_name_and_a_steering_term()
     }
 }
 
-/// Outside the library: both commands reach the car 60 ms late (a transport delay). The
-/// library's servo lag follows part of it; the term search's lagged steering rate follows it
-/// all (`δ − t_d·δ̇`), so the servo is not counted and the term names the delay.
-#[test]
-fn a_command_delay_gets_no_library_name_and_a_lagged_steering_term() {
-    let mut scenario = car_scenario(None, 1.0);
-    scenario.effects.command_delay = Some(dynlab_sim::car::CommandDelay::default());
-    let d = run_scenario(&scenario, 361, 1, None);
-    let table = d.table();
-    assert!(d.effects.is_empty(), "no library effect: {table}");
-    let disc = d.discovery.as_ref().expect("the term search ran");
-    let t = disc
-        .terms
-        .iter()
-        .find(|t| t.significant)
-        .unwrap_or_else(|| panic!("no significant term: {table}"));
-    assert_eq!(t.state, "delta", "{table}");
-    assert!(t.feature.starts_with("delta_rate("), "{table}");
-    // δ += −t_d·δ̇: the delay in seconds
-    assert!(
-        (0.04..0.08).contains(&-t.coefficient),
-        "delay {} s, truth 0.06 s: {table}",
-        -t.coefficient
-    );
-    assert!(disc.error_reduction >= 0.4, "{table}");
-}
-
 /// Outside the library: half the grip within 0.4 m of a line at 0.5 rad through (0, 0.3)
 /// (launch_scripts/scenarios/car_grip_band.toml), 4 × 30 s. The library's disc fits only the
 /// part of the band the data cross most; the term search's grip term on the band fitted to the
