@@ -1281,6 +1281,10 @@ mod tests {
         assert!(e.to_string().contains("'vx'"));
     }
 
+    fn v_is_finite(f: &Feature, p: &[f64], s: &[f64], u: &[f64]) -> bool {
+        f.eval(Robot::Car, p, s, u).is_finite()
+    }
+
     #[test]
     fn derivatives_match_finite_differences() {
         let p: Vec<f64> = super::super::CAR_NOMINAL_PARAMS
@@ -1288,14 +1292,24 @@ mod tests {
             .map(|s| s.default)
             .collect();
         let s = [0.3, -0.2, 0.4, 1.2, 0.1, 0.8];
-        let u = [0.15, 0.4];
+        // the commands, then their lagged copies (constants here: a model's effect states)
+        let u = [0.15, 0.4, 0.1, 0.3, 0.05, 0.35, 0.0, 0.2];
         // the fitted shapes, a strip's edge passing near the state's position
         let fitted =
             ["delta*sat_vx2(0.9)", "strip(0.5,0.07,0.8)"].map(|n| Feature::parse(n).unwrap());
         for f in library(Robot::Car, None, 0).into_iter().chain(fitted) {
             let pd: Vec<Dual<8>> = p.iter().map(|&v| Dual::cst(v)).collect();
             let sd: Vec<Dual<8>> = (0..6).map(|i| Dual::var(s[i], i)).collect();
-            let ud: Vec<Dual<8>> = (0..2).map(|i| Dual::var(u[i], 6 + i)).collect();
+            let ud: Vec<Dual<8>> = (0..8)
+                .map(|i| {
+                    if i < 2 {
+                        Dual::var(u[i], 6 + i)
+                    } else {
+                        Dual::cst(u[i])
+                    }
+                })
+                .collect();
+            assert!(v_is_finite(&f, &p, &s, &u), "{}", f.name());
             let v = f.eval(Robot::Car, &pd, &sd, &ud);
             for k in 0..8 {
                 let (mut s2, mut u2) = (s, u);
