@@ -110,20 +110,17 @@ pub fn input_lag_rates<R: Real>(lagged: &[R], u: &[R], out: &mut [R]) {
 pub fn input_lags_along(u: &[f64], dt: f64) -> Vec<f64> {
     let n = INPUT_LAG_STATES.len();
     let len = u.len() / CAR_COMMANDS;
-    let mut out = Vec::with_capacity(len * n);
-    if len == 0 {
-        return out;
-    }
-    let decay: Vec<f64> = INPUT_LAGS_S.iter().map(|tau| (-dt / tau).exp()).collect();
-    let mut l = vec![0.0; n];
-    input_lags_settled(&u[..CAR_COMMANDS], &mut l);
-    for a in 0..len {
-        out.extend_from_slice(&l);
-        let cmd = &u[a * CAR_COMMANDS..(a + 1) * CAR_COMMANDS];
-        for (lag, e) in decay.iter().enumerate() {
-            for (i, c) in cmd.iter().enumerate() {
-                let j = input_lag_index(i, lag) - CAR_COMMANDS;
-                l[j] = c + (l[j] - c) * e;
+    let mut out = vec![0.0; len * n];
+    for (lag, &tau) in INPUT_LAGS_S.iter().enumerate() {
+        for i in 0..CAR_COMMANDS {
+            let cmd: Vec<f64> = (0..len).map(|a| u[a * CAR_COMMANDS + i]).collect();
+            let j = input_lag_index(i, lag) - CAR_COMMANDS;
+            let first = cmd.first().copied().unwrap_or(0.0);
+            for (a, v) in super::PhysicsModel::motor_lag_filter(&cmd, dt, tau, first)
+                .into_iter()
+                .enumerate()
+            {
+                out[a * n + j] = v;
             }
         }
     }
@@ -1281,10 +1278,6 @@ mod tests {
         assert!(e.to_string().contains("'vx'"));
     }
 
-    fn v_is_finite(f: &Feature, p: &[f64], s: &[f64], u: &[f64]) -> bool {
-        f.eval(Robot::Car, p, s, u).is_finite()
-    }
-
     #[test]
     fn derivatives_match_finite_differences() {
         let p: Vec<f64> = super::super::CAR_NOMINAL_PARAMS
@@ -1309,7 +1302,7 @@ mod tests {
                     }
                 })
                 .collect();
-            assert!(v_is_finite(&f, &p, &s, &u), "{}", f.name());
+            assert!(f.eval(Robot::Car, &p, &s, &u).is_finite(), "{}", f.name());
             let v = f.eval(Robot::Car, &pd, &sd, &ud);
             for k in 0..8 {
                 let (mut s2, mut u2) = (s, u);
