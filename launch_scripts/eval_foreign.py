@@ -34,15 +34,18 @@ CASES = {
     "aero_drag": ("aero_drag", ("aero_drag",)),
     "steering_offset": ("steering_offset", ("steering_offset",)),
     "motor_lag": ("motor_lag", ("motor_lag",)),
+    "servo_rate": ("servo_rate", ("steering_lag",)),
     "grip_patch": ("grip_patch", ("grip_patch",)),
     "aero_drag + steering_offset": ("aero_drag,steering_offset", ("aero_drag", "steering_offset")),
     "steering_offset + grip_patch": ("steering_offset,grip_patch", ("steering_offset", "grip_patch")),
     "steering_gain_speed*": ("steering_gain_speed", None),
     "grip_band*": ("grip_band", None),
-    "cmd_delay*": ("cmd_delay", None),
+    "cmd_delay": ("cmd_delay", ("command_delay",)),
     "yaw_damping*": ("yaw_damping", None),
 }
 TRUTH = {"aero_drag.c": 0.01, "steering_offset.delta0": 0.03, "motor_lag.tau": 0.2,
+         "steering_lag.tau": 0.025, "steering_lag.rate": 2.5,
+         "command_delay.delay": 0.06,
          "grip_patch.k": 0.45, "grip_patch.cx": 0.5, "grip_patch.cy": 0.0, "grip_patch.r": 0.6}
 
 

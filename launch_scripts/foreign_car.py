@@ -15,7 +15,9 @@ Hidden effects (comma-separated `--effects`): `aero_drag` (−c·vₓ|vₓ| on t
 band through (0, 0.3) at 0.5 rad where the tyres keep half their force), `cmd_delay` (both
 commands reach the car 60 ms after they are sent: radio and servo electronics, a transport delay,
 not a lag) and `yaw_damping` (a yaw moment −c·ω, c = 4 s⁻¹ times I_z: the tyres' relaxation and
-the chassis' scrub).
+the chassis' scrub); `servo_rate` (a steering servo that follows the command with a 25 ms
+proportional loop and turns the wheels at most 2.5 rad/s) is in dynlab's library as
+`steering_lag`.
 
 The car's parameters are the datasheet's scaled by seeded factors in [1 − f, 1 + f]
 (`--perturb f`, default 0.1), the same for every bag of one `--car-seed`: a nominal bag and an
@@ -39,8 +41,9 @@ DATASHEET = dict(m=0.041, Iz=27.8e-6, lf=0.029, lr=0.033, Bf=2.579, Cf=1.2, Df=0
 STEER_MAX = 0.35
 FLOOR = 1.3  # the driver keeps the car within ±FLOOR m
 EFFECTS = ("aero_drag", "steering_offset", "motor_lag", "grip_patch", "steering_gain_speed", "grip_band",
-           "cmd_delay", "yaw_damping")
+           "cmd_delay", "yaw_damping", "servo_rate")
 DELAY = 0.06  # s, cmd_delay
+SERVO_TAU, SERVO_RATE = 0.025, 2.5  # s, rad/s: servo_rate
 
 
 def car_params(car_seed, perturb):
@@ -60,10 +63,10 @@ def grip(effects, x, y):
 
 
 def deriv(p, effects, s, steer, duty):
-    """State (x, y, ψ, vₓ, v_y, ω, duty_state) → its derivative."""
-    x, y, psi, vx, vy, om, dstate = s
+    """State (x, y, ψ, vₓ, v_y, ω, duty_state, wheel angle) → its derivative."""
+    x, y, psi, vx, vy, om, dstate, wheels = s
     d = dstate if "motor_lag" in effects else duty
-    delta = steer
+    delta = wheels if "servo_rate" in effects else steer
     if "steering_offset" in effects:
         delta += 0.03
     if "steering_gain_speed" in effects:
@@ -92,6 +95,7 @@ def deriv(p, effects, s, steer, duty):
         (fry + ffy * math.cos(delta) - m * vx * om) / m,
         (ffy * p["lf"] * math.cos(delta) - fry * p["lr"]) / iz - (4.0 * om if "yaw_damping" in effects else 0.0),
         (duty - dstate) / 0.2,
+        min(max((steer - wheels) / SERVO_TAU, -SERVO_RATE), SERVO_RATE),
     ])
 
 
@@ -107,7 +111,7 @@ def episode(p, effects, rng, duration):
     """One drive: returns (t, state) at 1 kHz and the 50 Hz commands (t, steer, duty)."""
     h, cmd_every = 0.001, 20
     s = np.array([rng.uniform(-0.8, 0.8), rng.uniform(-0.8, 0.8), rng.uniform(-math.pi, math.pi),
-                  0.3, 0.0, 0.0, 0.0])
+                  0.3, 0.0, 0.0, 0.0, 0.0])
     goal = rng.uniform(-FLOOR + 0.2, FLOOR - 0.2, 2)
     duty_level, next_duty, sweep_until = 0.3, 0.0, -1.0
     states, cmds = [], []

@@ -80,6 +80,7 @@ impl Hidden {
             Hidden::Disc => Some(("grip_patch", "grip_patch.k", 0.5)),
             // the library's servo model: a lag with a (smooth) rate limit
             Hidden::RateLimit => Some(("steering_lag", "steering_lag.rate", 3.0)),
+            Hidden::Delay => Some(("command_delay", "command_delay.delay", 0.06)),
             _ => None,
         }
     }
@@ -88,7 +89,6 @@ impl Hidden {
         match self {
             Hidden::GainSpeed => "steering_gain_speed*",
             Hidden::Band => "grip_band*",
-            Hidden::Delay => "command_delay*",
             h => h.library().map_or("", |l| l.0),
         }
     }
@@ -183,7 +183,9 @@ fn true_model(car: &CarScenario, case: &[Hidden], like: &Model) -> Option<Model>
                 ("grip_patch.r", 0.6),
                 ("grip_patch.k", 0.5),
             ],
-            Hidden::GainSpeed | Hidden::Band | Hidden::Delay => &[],
+            // the simulator's delay is exact, the model's two lags of t_d/2
+            Hidden::Delay => &[("command_delay.delay", 0.06)],
+            Hidden::GainSpeed | Hidden::Band => &[],
         };
         for &(name, v) in values {
             p.set_param(name, v).ok()?;

@@ -162,6 +162,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     Effect::MotorLag => "tau",
                     Effect::SteeringOffset => "delta0",
                     Effect::SteeringLag => "rate",
+                    Effect::CommandDelay => "delay",
                     Effect::GripPatch => "k",
                     Effect::ComOffset => "ox",
                     Effect::TableTilt => "gx",

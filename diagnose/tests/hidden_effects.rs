@@ -106,6 +106,13 @@ fn car_steering_servo_rate_limit_is_found() {
     assert_found(&d, Effect::SteeringLag, "rate", 3.0, 1.0);
 }
 
+#[test]
+fn car_command_delay_is_found_and_its_delay_recovered() {
+    // both commands applied 60 ms late (exact); the library's delay is two lags of 30 ms
+    let d = run_car(Some(Effect::CommandDelay), 9);
+    assert_found(&d, Effect::CommandDelay, "delay", 0.06, 0.015);
+}
+
 /// A disc of radius 0.6 m at (0.5, 0) with half the tire peak force, 4 × 30 s, two seeds. On
 /// 3 × 15 s (8 held-out segments) the fitted disc was right (k 0.455 and 0.486, r 0.61) and
 /// removed 86 and 95 % of the held-out error, but only the one or two segments that cross the

@@ -261,3 +261,91 @@ fn a_term_on_a_lagged_command_carries_the_lagged_commands_as_effect_states() {
     .unwrap_err();
     assert!(e.to_string().contains("d_rate(0.1)"), "{e}");
 }
+
+#[test]
+fn a_command_delay_is_two_lags_of_half_the_delay_per_command_ahead_of_the_servo_and_the_motor() {
+    let mut m = PhysicsModel::car(&[
+        Effect::SteeringOffset,
+        Effect::MotorLag,
+        Effect::SteeringLag,
+        Effect::CommandDelay,
+    ])
+    .unwrap();
+    m.set_param("steering_offset.delta0", 0.02).unwrap();
+    m.set_param("motor_lag.tau", 0.07).unwrap();
+    m.set_param("steering_lag.tau", 0.04).unwrap();
+    m.set_param("steering_lag.rate", 3.0).unwrap();
+    m.set_param("command_delay.delay", 0.08).unwrap();
+    // the ellipse's weight inside its range [0, 1], for the central differences
+    m.set_param("ellipse", 0.8).unwrap();
+    assert_eq!(
+        m.effect_state_names(),
+        vec!["d_f", "delta_w", "delta_c1", "delta_c2", "d_c1", "d_c2"]
+    );
+    let s = [
+        0.9, 0.1, 0.4, 1.2, 0.15, 2.0, 0.3, 0.1, 0.25, 0.18, 0.45, 0.35,
+    ];
+    let u = [0.2, 0.5];
+    let mut f = vec![0.0; 12];
+    m.eval_one(&s, &u, &mut f);
+    let tau = 0.04; // t_d/2
+    let want = [
+        (0.35 - 0.3) / 0.07, // the motor lags the delayed throttle
+        3.0 * ((0.18 - 0.1) / (3.0 * 0.04f64)).tanh(), // the servo the delayed steering
+        (0.2 + 0.02 - 0.25) / tau, // the chain takes the trimmed command
+        (0.25 - 0.18) / tau,
+        (0.5 - 0.45) / tau,
+        (0.45 - 0.35) / tau,
+    ];
+    for (i, w) in want.iter().enumerate() {
+        assert!(
+            (f[6 + i] - w).abs() < 1e-12,
+            "state {}: {} vs {w}",
+            6 + i,
+            f[6 + i]
+        );
+    }
+    assert_exact_jacobians(&m, &s, &u);
+
+    // the chains along commands: the exact solution of two lags under zero-order hold
+    let mut delay = PhysicsModel::car(&[Effect::CommandDelay]).unwrap();
+    delay.set_param("command_delay.delay", 0.06).unwrap();
+    let dt = 0.01;
+    let n = 120;
+    let u: Vec<f64> = (0..n)
+        .flat_map(|i| if i < 10 { [0.0, 0.1] } else { [0.3, 0.4] })
+        .collect();
+    let e = delay.effect_states_along(&u, dt);
+    assert_eq!(
+        &e[..4],
+        &[0.0, 0.0, 0.1, 0.1],
+        "settled at the first command"
+    );
+    let (mut x1, mut x2) = ([0.0, 0.1], [0.0, 0.1]);
+    let a = (-dt / 0.03f64).exp();
+    for i in 0..n {
+        for c in 0..2 {
+            assert!(
+                (e[i * 4 + 2 * c] - x1[c]).abs() < 1e-6,
+                "sample {i}: {} vs {}",
+                e[i * 4 + 2 * c],
+                x1[c]
+            );
+            assert!(
+                (e[i * 4 + 2 * c + 1] - x2[c]).abs() < 1e-6,
+                "sample {i}: {} vs {}",
+                e[i * 4 + 2 * c + 1],
+                x2[c]
+            );
+            let v = u[i * 2 + c];
+            let (y1, y2) = (x1[c] - v, x2[c] - v);
+            x1[c] = v + y1 * a;
+            x2[c] = v + y2 * a + y1 * (dt / 0.03) * a;
+        }
+    }
+    // the commands arrive 60 ms late on average: ∫(1 − response) of the step at sample 10
+    let lag: f64 = (10..n).map(|i| (1.0 - e[i * 4 + 1] / 0.3) * dt).sum();
+    assert!((lag - 0.06).abs() < 0.006, "mean delay {lag}");
+    // nothing reaches the car at once
+    assert!(e[11 * 4 + 1] < 0.3 * 0.1);
+}

@@ -122,10 +122,11 @@ impl CarDynamics for Model {
     }
 }
 
-/// Most effect states a [`Plant`] carries: the library's car effects add at most 2, a custom
+/// Most effect states a [`Plant`] carries: the library's car effects add at most 6 (the servo, the
+/// motor and the command delay's two lag chains), a custom
 /// term on a lagged command the 6 lagged commands
 /// ([`INPUT_LAG_STATES`](dynlab_learn::dynamics::physics::features::INPUT_LAG_STATES)).
-pub const MAX_EXTRA: usize = 8;
+pub const MAX_EXTRA: usize = 12;
 
 /// [`Model::rollout`] for car models whose step is the network alone (residual, NeuralODE
 /// Euler/RK4): the same arithmetic (bit for bit: tested), but one network field — and so one

@@ -114,7 +114,9 @@ pub fn push_dataset_with(
 /// use (the simulator's documented defaults unless noted), and mocap-like noise scaled by
 /// `noise` (1: 0.5 mm, 0.002 rad). `None`: the nominal car.
 pub fn car_scenario(effect: Option<Effect>, noise: f64) -> CarScenario {
-    use dynlab_sim::car::{AeroDrag, GripPatch, MotorLag, SteeringOffset, SteeringRateLimit};
+    use dynlab_sim::car::{
+        AeroDrag, CommandDelay, GripPatch, MotorLag, SteeringOffset, SteeringRateLimit,
+    };
     let mut s = CarScenario::default();
     s.noise.position_std = 0.0005 * noise;
     s.noise.yaw_std = 0.002 * noise;
@@ -148,6 +150,8 @@ pub fn car_scenario(effect: Option<Effect>, noise: f64) -> CarScenario {
                 tau: 0.05,
             })
         }
+        // both commands applied 60 ms late (exact; the library's delay is two lags of 30 ms)
+        Some(Effect::CommandDelay) => s.effects.command_delay = Some(CommandDelay::default()),
         _ => {}
     }
     s

@@ -50,6 +50,11 @@ pub const MOTOR_LAG_STATE: &str = "d_f";
 /// Name of the extra state added by [`Effect::SteeringLag`]: the wheel angle `δ_w` \[rad\].
 pub const STEERING_LAG_STATE: &str = "delta_w";
 
+/// Names of the extra states added by [`Effect::CommandDelay`]: each command through two lags
+/// of `t_d/2` in series, the steering's (`δ_c1`, `δ_c2` \[rad\]) then the throttle's (`d_c1`,
+/// `d_c2`); the second of each is the command as it reaches the car.
+pub const COMMAND_DELAY_STATES: [&str; 4] = ["delta_c1", "delta_c2", "d_c1", "d_c2"];
+
 /// Nominal car parameters, defaults from the ORCA 1:43 car (Liniger et al., MPCC project).
 pub static CAR_NOMINAL_PARAMS: [ParamSpec; 16] = [
     ps("m", "m", "kg", 0.01, 10.0, 0.041, "mass (ORCA 1:43)"),
@@ -235,8 +240,7 @@ pub(crate) fn rhs<R: Real>(
         ellipse,
     ] = [0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15].map(|i| p[i]);
     let (x, y, psi, vx, vy, om) = (s[0], s[1], s[2], s[3], s[4], s[5]);
-    let mut delta = steering_target(p, slots, active, u);
-    let mut d = u[1];
+    let (mut delta, mut d) = commands_at_car(p, slots, active, s, u);
     let mut grip = R::cst(1.0);
     for (sl, &on) in slots.iter().zip(active) {
         if !on {
@@ -306,6 +310,17 @@ fn steering_target<R: Real>(p: &[R], slots: &[Slot], active: &[bool], u: &[R]) -
     delta
 }
 
+/// The commands as they reach the car: the steering target ([`steering_target`]) and the
+/// throttle, each the end of its `command_delay` lag chain when that is active.
+fn commands_at_car<R: Real>(p: &[R], slots: &[Slot], active: &[bool], s: &[R], u: &[R]) -> (R, R) {
+    for (sl, &on) in slots.iter().zip(active) {
+        if on && sl.effect == Effect::CommandDelay {
+            return (s[sl.s_off + 1], s[sl.s_off + 3]);
+        }
+    }
+    (steering_target(p, slots, active, u), u[1])
+}
+
 /// The rates of the effect states (rows `6..` of `out`; 0 for inactive effects). They read only
 /// the effect states of `s` (rows `6..`), the input and the parameters — never the car's state —
 /// which is what lets [`PhysicsModel::effect_states_along`](super::PhysicsModel::effect_states_along)
@@ -321,18 +336,27 @@ pub(crate) fn effect_state_rates<R: Real>(
     for o in out.iter_mut().skip(6) {
         *o = R::cst(0.0);
     }
+    // the lags act on the commands as they reach the car
+    let (target, throttle) = commands_at_car(p, slots, active, s, u);
     for (sl, &on) in slots.iter().zip(active) {
         if !on {
             continue;
         }
         let q = &p[sl.p_off..];
+        let o = sl.s_off;
         match sl.effect {
-            Effect::MotorLag => out[sl.s_off] = (u[1] - s[sl.s_off]) / q[0],
+            Effect::MotorLag => out[o] = (throttle - s[o]) / q[0],
             Effect::SteeringLag => {
                 // δ̇_w = r·tanh((δ − δ_w)/(r·τ_s)): slope 1/τ_s at 0, |δ̇_w| < r
-                let target = steering_target(p, slots, active, u);
                 let rate = q[1];
-                out[sl.s_off] = rate * ((target - s[sl.s_off]) / (rate * q[0])).tanh();
+                out[o] = rate * ((target - s[o]) / (rate * q[0])).tanh();
+            }
+            Effect::CommandDelay => {
+                let tau = q[0] * 0.5;
+                out[o] = (steering_target(p, slots, active, u) - s[o]) / tau;
+                out[o + 1] = (s[o] - s[o + 1]) / tau;
+                out[o + 2] = (u[1] - s[o + 2]) / tau;
+                out[o + 3] = (s[o + 2] - s[o + 3]) / tau;
             }
             _ => {}
         }
@@ -340,13 +364,21 @@ pub(crate) fn effect_state_rates<R: Real>(
 }
 
 /// The effect states of a car model at rest under a held input (every lag settled):
-/// `d_f = d`, `δ_w = δ (+ δ₀)`.
+/// `d_f = d`, `δ_w = δ (+ δ₀)`, the delay chains at `δ (+ δ₀)` and `d`.
 pub(crate) fn settled_effect_states<R: Real>(p: &[R], slots: &[Slot], u: &[R], out: &mut [R]) {
     let active = vec![true; slots.len()];
+    let target = steering_target(p, slots, &active, u);
     for sl in slots {
+        let o = sl.s_off;
         match sl.effect {
-            Effect::MotorLag => out[sl.s_off] = u[1],
-            Effect::SteeringLag => out[sl.s_off] = steering_target(p, slots, &active, u),
+            Effect::MotorLag => out[o] = u[1],
+            Effect::SteeringLag => out[o] = target,
+            Effect::CommandDelay => {
+                out[o] = target;
+                out[o + 1] = target;
+                out[o + 2] = u[1];
+                out[o + 3] = u[1];
+            }
             _ => {}
         }
     }

@@ -33,7 +33,10 @@ mod push;
 mod step;
 mod support;
 
-pub use car::{CAR_FITTED_PARAMS, CAR_NOMINAL_PARAMS, MOTOR_LAG_STATE, STEERING_LAG_STATE};
+pub use car::{
+    CAR_FITTED_PARAMS, CAR_NOMINAL_PARAMS, COMMAND_DELAY_STATES, MOTOR_LAG_STATE,
+    STEERING_LAG_STATE,
+};
 pub use custom::{CustomEffect, CustomError, CustomTerm, Target};
 pub use features::{Feature, FeatureError};
 pub use fit::{ResidualJacobian, Transition, residuals, residuals_and_jacobian};
@@ -112,6 +115,11 @@ pub enum Effect {
     /// rate `r` at most for large ones (differentiable everywhere; `r` at its upper bound is a
     /// plain first-order lag).
     SteeringLag,
+    /// Car: a transport delay of both commands (radio link, bus, servo electronics): the car
+    /// acts on the commands sent `t_d` earlier. Modelled as two first-order lags of `t_d/2` in
+    /// series per command (mean delay `t_d`, no inverse response), four extra states (see
+    /// [`COMMAND_DELAY_STATES`]); `steering_lag` and `motor_lag` act on the delayed commands.
+    CommandDelay,
     /// Pushing: the block's centre of mass (centre of friction) is offset from its geometric
     /// centre by `(o_x, o_y)` in the block frame.
     ComOffset,
@@ -176,6 +184,16 @@ static STEERING_LAG: [ParamSpec; 2] = [
         "largest wheel-angle rate of the servo (default: the upper bound, no effective limit)",
     ),
 ];
+static COMMAND_DELAY: [ParamSpec; 1] = [ps(
+    "delay",
+    "t_d",
+    "s",
+    0.02,
+    0.5,
+    0.05,
+    "transport delay of both commands (two lags of t_d/2 in series; ≥ 20 ms: a lag of t_d/2 \
+     ≥ 10 ms keeps the model step's RK4 stable)",
+)];
 static GRIP_PATCH: [ParamSpec; 5] = [
     ps(
         "cx",
@@ -337,12 +355,13 @@ fn discs(
 
 impl Effect {
     /// Every effect in the library.
-    pub const ALL: [Effect; 9] = [
+    pub const ALL: [Effect; 10] = [
         Effect::AeroDrag,
         Effect::MotorLag,
         Effect::SteeringOffset,
         Effect::GripPatch,
         Effect::SteeringLag,
+        Effect::CommandDelay,
         Effect::ComOffset,
         Effect::TableTilt,
         Effect::FrictionPatch,
@@ -374,6 +393,7 @@ impl Effect {
             Effect::MotorLag => "motor_lag",
             Effect::SteeringOffset => "steering_offset",
             Effect::SteeringLag => "steering_lag",
+            Effect::CommandDelay => "command_delay",
             Effect::GripPatch => "grip_patch",
             Effect::ComOffset => "com_offset",
             Effect::TableTilt => "table_tilt",
@@ -394,6 +414,7 @@ impl Effect {
             | Effect::MotorLag
             | Effect::SteeringOffset
             | Effect::SteeringLag
+            | Effect::CommandDelay
             | Effect::GripPatch => Robot::Car,
             _ => Robot::Pushing,
         }
@@ -408,6 +429,7 @@ impl Effect {
             Effect::SteeringLag => {
                 "steering servo lag and rate limit (wheel angle behind the command)"
             }
+            Effect::CommandDelay => "transport delay of both commands (the car acts late)",
             Effect::GripPatch => "floor patch with different tire grip",
             Effect::ComOffset => "centre of mass away from the geometric centre",
             Effect::TableTilt => "tilted table: downhill drift while sliding",
@@ -423,6 +445,7 @@ impl Effect {
             Effect::MotorLag => &MOTOR_LAG,
             Effect::SteeringOffset => &STEERING_OFFSET,
             Effect::SteeringLag => &STEERING_LAG,
+            Effect::CommandDelay => &COMMAND_DELAY,
             Effect::GripPatch => &GRIP_PATCH,
             Effect::ComOffset => &COM_OFFSET,
             Effect::TableTilt => &TABLE_TILT,
@@ -449,6 +472,7 @@ impl Effect {
                 .into_iter()
                 .flat_map(|t| [50.0, 6.0, 2.0].map(|r| vec![("tau", t), ("rate", r)]))
                 .collect(),
+            Effect::CommandDelay => one("delay", &[0.03, 0.06, 0.12, 0.25]),
             Effect::SteeringOffset => one("delta0", &[-0.05, -0.01, 0.0, 0.01, 0.05]),
             Effect::GripPatch => discs(lo, hi, 3, 0.3 * extent.max(0.1), 0.05, [0.5, 1.5]),
             Effect::ComOffset => vec![vec![("ox", 0.0), ("oy", 0.0)]],
@@ -487,7 +511,19 @@ impl Effect {
         match self {
             Effect::MotorLag => &[MOTOR_LAG_STATE],
             Effect::SteeringLag => &[STEERING_LAG_STATE],
+            Effect::CommandDelay => &COMMAND_DELAY_STATES,
             _ => &[],
+        }
+    }
+
+    /// The shortest time constant of the effect's states that its parameters' bounds allow
+    /// (`None` without states): the effect-state integration's substeps follow from it.
+    pub fn shortest_time_constant(self) -> Option<f64> {
+        match self {
+            Effect::MotorLag | Effect::SteeringLag => Some(self.params()[0].lower),
+            // two lags of t_d/2
+            Effect::CommandDelay => Some(0.5 * self.params()[0].lower),
+            _ => None,
         }
     }
 }

@@ -790,8 +790,7 @@ impl PhysicsModel {
         let tau_min = self
             .slots
             .iter()
-            .filter(|sl| !sl.effect.extra_states().is_empty())
-            .map(|sl| sl.effect.params()[0].lower)
+            .filter_map(|sl| sl.effect.shortest_time_constant())
             .chain(lags.iter().copied())
             .fold(f64::INFINITY, f64::min)
             .max(1e-6);
@@ -917,19 +916,29 @@ impl PhysicsModel {
         };
         match self.robot {
             Robot::Car => {
+                let delay = has(Effect::CommandDelay).is_some();
+                // the commands as they reach the car, before the servo's and the motor's lags
+                let (d_in, target) = match (delay, has(Effect::SteeringOffset).is_some()) {
+                    (true, _) => ("d_c2", "δ_c2".to_string()),
+                    (false, true) => (
+                        "d",
+                        format!(
+                            "(δ {} {})",
+                            sign(pv(Effect::SteeringOffset, 0)),
+                            num(pv(Effect::SteeringOffset, 0).abs())
+                        ),
+                    ),
+                    (false, false) => ("d", "δ".to_string()),
+                };
                 let d = if has(Effect::MotorLag).is_some() {
                     "d_f"
                 } else {
-                    "d"
+                    d_in
                 };
-                let delta = match (has(Effect::SteeringLag), has(Effect::SteeringOffset)) {
-                    (Some(_), _) => "δ_w".to_string(),
-                    (None, Some(_)) => format!(
-                        "(δ {} {})",
-                        sign(pv(Effect::SteeringOffset, 0)),
-                        num(pv(Effect::SteeringOffset, 0).abs())
-                    ),
-                    (None, None) => "δ".to_string(),
+                let delta = if has(Effect::SteeringLag).is_some() {
+                    "δ_w".to_string()
+                } else {
+                    target.clone()
                 };
                 let _ = writeln!(
                     o,
@@ -956,16 +965,31 @@ impl PhysicsModel {
                 if has(Effect::MotorLag).is_some() {
                     let _ = writeln!(
                         o,
-                        "  ḋ_f = (d − d_f)/{}{}",
+                        "  ḋ_f = ({d_in} − d_f)/{}{}",
                         num(pv(Effect::MotorLag, 0)),
                         tag(Effect::MotorLag)
                     );
                 }
-                if has(Effect::SteeringLag).is_some() {
-                    let target = if has(Effect::SteeringOffset).is_some() {
+                if delay {
+                    let tau = num(0.5 * pv(Effect::CommandDelay, 0));
+                    let command = if has(Effect::SteeringOffset).is_some() {
                         "δ + δ₀"
                     } else {
                         "δ"
+                    };
+                    let _ = writeln!(
+                        o,
+                        "  δ̇_c1 = ({command} − δ_c1)/{tau},  δ̇_c2 = (δ_c1 − δ_c2)/{tau}   (two lags of t_d/2: the commands {} s late){}",
+                        num(pv(Effect::CommandDelay, 0)),
+                        tag(Effect::CommandDelay)
+                    );
+                    let _ = writeln!(o, "  ḋ_c1 = (d − d_c1)/{tau},  ḋ_c2 = (d_c1 − d_c2)/{tau}");
+                }
+                if has(Effect::SteeringLag).is_some() {
+                    let target = match (delay, has(Effect::SteeringOffset).is_some()) {
+                        (true, _) => "δ_c2",
+                        (false, true) => "δ + δ₀",
+                        (false, false) => "δ",
                     };
                     let _ = writeln!(
                         o,
