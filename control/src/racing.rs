@@ -44,7 +44,7 @@ pub use gd::{GdSettings, gradient, solve_gd, solve_gd_until};
 pub use laps::{LapReport, LapSettings, TracePoint, run_laps};
 pub use manoeuvre::Manoeuvre;
 pub use onpolicy::{OnPolicySettings, racing_episode};
-pub use plant::{CarDynamics, Input, Linearization, Plant, State};
+pub use plant::{CarDynamics, Input, Linearization, MAX_EXTRA, Plant, State};
 pub use profile::SpeedProfile;
 pub use race::{Optimizer, RaceStep, Racer, RacerSettings};
 pub use sqp::{SqpSettings, solve_sqp, solve_sqp_until};

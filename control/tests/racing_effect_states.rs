@@ -4,8 +4,8 @@
 //! its own command history.
 
 use dynlab_control::racing::{
-    CarDynamics, GdSettings, Input, InputLimits, Objective, Optimizer, Plant, Problem, Racer,
-    RacerSettings, Regulariser, SqpSettings, State, Target, gradient, solve_sqp,
+    CarDynamics, GdSettings, Input, InputLimits, MAX_EXTRA, Objective, Optimizer, Plant, Problem,
+    Racer, RacerSettings, Regulariser, SqpSettings, State, Target, gradient, solve_sqp,
 };
 use dynlab_learn::dynamics::ode::Solver;
 use dynlab_learn::dynamics::physics::{CustomEffect, Effect, PhysicsModel};
@@ -24,6 +24,9 @@ fn lagged_physics(effects: &[Effect]) -> PhysicsModel {
     if effects.contains(&Effect::SteeringLag) {
         p.set_param("steering_lag.tau", 0.06).unwrap();
         p.set_param("steering_lag.rate", 3.0).unwrap();
+    }
+    if effects.contains(&Effect::CommandDelay) {
+        p.set_param("command_delay.delay", 0.05).unwrap();
     }
     p
 }
@@ -85,15 +88,18 @@ fn target_problem(plant: Plant<'_>) -> Problem<'_> {
 #[test]
 fn the_augmented_linearization_matches_finite_differences() {
     // a steering delay as a custom term on the lagged steering rate: six lagged commands more
-    let mut delayed = lagged_physics(&[Effect::MotorLag]);
-    delayed
-        .add_custom(
-            CustomEffect::from_toml(
-                "name = \"delay\"\n[[term]]\nstate = \"delta\"\nfeature = \"delta_rate(0.1)\"\ncoefficient = -0.06\n",
-            )
-            .unwrap(),
+    let delay_term = || {
+        CustomEffect::from_toml(
+            "name = \"delay\"\n[[term]]\nstate = \"delta\"\nfeature = \"delta_rate(0.1)\"\ncoefficient = -0.06\n",
         )
-        .unwrap();
+        .unwrap()
+    };
+    let mut delayed = lagged_physics(&[Effect::MotorLag]);
+    delayed.add_custom(delay_term()).unwrap();
+    // every stateful effect at once: the plant's most effect states
+    let mut every = lagged_physics(&[Effect::MotorLag, Effect::SteeringLag, Effect::CommandDelay]);
+    every.add_custom(delay_term()).unwrap();
+    assert_eq!(every.dim_effect_states(), MAX_EXTRA);
     for (effects, model) in [
         ("motor_lag", lagged_car(&[Effect::MotorLag])),
         (
@@ -101,6 +107,10 @@ fn the_augmented_linearization_matches_finite_differences() {
             lagged_car(&[Effect::MotorLag, Effect::SteeringLag]),
         ),
         ("motor_lag, steering delay", car_model(delayed)),
+        (
+            "motor_lag, steering_lag, command_delay, steering delay",
+            car_model(every),
+        ),
     ] {
         let ne = model.dim_extra();
         let e0 = vec![0.2; ne];

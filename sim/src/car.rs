@@ -386,7 +386,8 @@ impl Default for SteeringRateLimit {
 /// controller and the motor drivers does. Before its first command reaches it after a reset
 /// the car holds the neutral command (straight, no throttle). Why: a model that applies the
 /// command at once sees every response early by the delay; no memoryless term can stand for
-/// that (the term search's lagged command rates can: `δ − t_d·δ̇`).
+/// that (the diagnosis library's `command_delay` can, as can the term search's lagged command
+/// rates for one command: `δ − t_d·δ̇`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct CommandDelay {
