@@ -34,7 +34,6 @@ CASES = {
     "aero_drag": ("aero_drag", ("aero_drag",)),
     "steering_offset": ("steering_offset", ("steering_offset",)),
     "motor_lag": ("motor_lag", ("motor_lag",)),
-    "servo_rate": ("servo_rate", ("steering_lag",)),
     "grip_patch": ("grip_patch", ("grip_patch",)),
     "aero_drag + steering_offset": ("aero_drag,steering_offset", ("aero_drag", "steering_offset")),
     "steering_offset + grip_patch": ("steering_offset,grip_patch", ("steering_offset", "grip_patch")),
@@ -42,6 +41,8 @@ CASES = {
     "grip_band*": ("grip_band", None),
     "cmd_delay": ("cmd_delay", ("command_delay",)),
     "yaw_damping*": ("yaw_damping", None),
+    # (appended: a case's index seeds its drive)
+    "servo_rate": ("servo_rate", ("steering_lag",)),
 }
 TRUTH = {"aero_drag.c": 0.01, "steering_offset.delta0": 0.03, "motor_lag.tau": 0.2,
          "steering_lag.tau": 0.025, "steering_lag.rate": 2.5,
