@@ -155,6 +155,46 @@ fn a_steering_lag_model_beats_the_model_without_it_on_held_out_data() {
     );
 }
 
+#[test]
+fn a_command_delay_model_recovers_the_delay_and_round_trips() {
+    let tmp = tempfile::tempdir().unwrap();
+    let truth = [("command_delay.delay", 0.08)];
+    let fit_data = lagged_data(tmp.path(), &[Effect::CommandDelay], &truth, 7);
+    let held_out = lagged_data(tmp.path(), &[Effect::CommandDelay], &truth, 17);
+    let with = train(
+        &fit_data,
+        &cfg(ModelKind::Physics, 8, &["command_delay"]),
+        &mut |_| {},
+    )
+    .unwrap()
+    .model;
+    let without = train(&fit_data, &cfg(ModelKind::Physics, 8, &[]), &mut |_| {})
+        .unwrap()
+        .model;
+    assert_eq!(
+        with.extra_state_names(),
+        vec!["delta_c1", "delta_c2", "d_c1", "d_c2"]
+    );
+    let p = with.physics().unwrap();
+    let delay = p.params()[p.param_index("command_delay.delay").unwrap()];
+    assert!(
+        (delay - 0.08).abs() < 0.01,
+        "fitted t_d = {delay}, true 0.08"
+    );
+    let err = |m: &Model| evaluate(m, &held_out, 20, 1.0).unwrap().k_step[5].rmse;
+    let (a, b) = (err(&with), err(&without));
+    eprintln!("command_delay: t_d = {delay:.4}; 20-step ω RMSE with {a:.3e}, without {b:.3e}");
+    assert!(
+        a < 0.5 * b,
+        "20-step ω RMSE with command_delay {a:.3e}, without {b:.3e}"
+    );
+    let dir = tmp.path().join("m");
+    save_model(&with, &dir, None, Default::default()).unwrap();
+    let (back, _) = load_model(&dir, None, None).unwrap();
+    assert_eq!(back.dim_extra(), 4);
+    assert_eq!(err(&back), a);
+}
+
 fn physics(effects: &[&str], values: &[(&str, f64)]) -> Model {
     let names: Vec<String> = effects.iter().map(|s| s.to_string()).collect();
     let mut p = physics_model(World::Car, &names).unwrap();
