@@ -30,6 +30,24 @@ fn lagged_data(dir: &Path, effects: &[Effect], values: &[(&str, f64)], seed: u64
     load_bags(&[bag], None, &Topics::default(), &SavGol::default()).unwrap()
 }
 
+/// Physics models trained with `effect` and without it on 2 × 12 s of data from the physics model
+/// with `effect` at `truth` (seed `seeds[0]`), and held-out data of the same car (`seeds[1]`).
+fn with_and_without(
+    dir: &Path,
+    effect: Effect,
+    truth: &[(&str, f64)],
+    seeds: [u64; 2],
+) -> (Model, Model, Dataset) {
+    let fit_data = lagged_data(dir, &[effect], truth, seeds[0]);
+    let held_out = lagged_data(dir, &[effect], truth, seeds[1]);
+    let fit = |effects: &[&str]| {
+        train(&fit_data, &cfg(ModelKind::Physics, 8, effects), &mut |_| {})
+            .unwrap()
+            .model
+    };
+    (fit(&[effect.name()]), fit(&[]), held_out)
+}
+
 fn cfg(kind: ModelKind, steps: usize, effects: &[&str]) -> TrainConfig {
     TrainConfig {
         kind,
@@ -84,28 +102,12 @@ fn physics_and_hybrid_train_with_motor_lag_at_any_steps() {
 #[test]
 fn a_motor_lag_model_recovers_tau_and_beats_the_model_without_it_on_held_out_data() {
     let tmp = tempfile::tempdir().unwrap();
-    let fit_data = lagged_data(
+    let (with, without, held_out) = with_and_without(
         tmp.path(),
-        &[Effect::MotorLag],
+        Effect::MotorLag,
         &[("motor_lag.tau", 0.15)],
-        3,
+        [3, 11],
     );
-    let held_out = lagged_data(
-        tmp.path(),
-        &[Effect::MotorLag],
-        &[("motor_lag.tau", 0.15)],
-        11,
-    );
-    let with = train(
-        &fit_data,
-        &cfg(ModelKind::Physics, 8, &["motor_lag"]),
-        &mut |_| {},
-    )
-    .unwrap()
-    .model;
-    let without = train(&fit_data, &cfg(ModelKind::Physics, 8, &[]), &mut |_| {})
-        .unwrap()
-        .model;
     let p = with.physics().unwrap();
     let tau = p.params()[p.param_index("motor_lag.tau").unwrap()];
     assert!((tau - 0.15).abs() < 0.03, "fitted τ = {tau}, true 0.15");
@@ -130,18 +132,8 @@ fn a_motor_lag_model_recovers_tau_and_beats_the_model_without_it_on_held_out_dat
 fn a_steering_lag_model_beats_the_model_without_it_on_held_out_data() {
     let tmp = tempfile::tempdir().unwrap();
     let truth = [("steering_lag.tau", 0.08), ("steering_lag.rate", 4.0)];
-    let fit_data = lagged_data(tmp.path(), &[Effect::SteeringLag], &truth, 5);
-    let held_out = lagged_data(tmp.path(), &[Effect::SteeringLag], &truth, 13);
-    let with = train(
-        &fit_data,
-        &cfg(ModelKind::Physics, 8, &["steering_lag"]),
-        &mut |_| {},
-    )
-    .unwrap()
-    .model;
-    let without = train(&fit_data, &cfg(ModelKind::Physics, 8, &[]), &mut |_| {})
-        .unwrap()
-        .model;
+    let (with, without, held_out) =
+        with_and_without(tmp.path(), Effect::SteeringLag, &truth, [5, 13]);
     assert_eq!(with.extra_state_names(), vec!["delta_w"]);
     let p = with.physics().unwrap();
     let tau = p.params()[p.param_index("steering_lag.tau").unwrap()];
@@ -159,18 +151,8 @@ fn a_steering_lag_model_beats_the_model_without_it_on_held_out_data() {
 fn a_command_delay_model_recovers_the_delay_and_round_trips() {
     let tmp = tempfile::tempdir().unwrap();
     let truth = [("command_delay.delay", 0.08)];
-    let fit_data = lagged_data(tmp.path(), &[Effect::CommandDelay], &truth, 7);
-    let held_out = lagged_data(tmp.path(), &[Effect::CommandDelay], &truth, 17);
-    let with = train(
-        &fit_data,
-        &cfg(ModelKind::Physics, 8, &["command_delay"]),
-        &mut |_| {},
-    )
-    .unwrap()
-    .model;
-    let without = train(&fit_data, &cfg(ModelKind::Physics, 8, &[]), &mut |_| {})
-        .unwrap()
-        .model;
+    let (with, without, held_out) =
+        with_and_without(tmp.path(), Effect::CommandDelay, &truth, [7, 17]);
     assert_eq!(
         with.extra_state_names(),
         vec!["delta_c1", "delta_c2", "d_c1", "d_c2"]
