@@ -12,7 +12,7 @@ Hidden effects (comma-separated `--effects`): `aero_drag` (−c·vₓ|vₓ| on t
 `steering_offset` (+0.03 rad), `motor_lag` (first-order duty, τ 0.2 s), `grip_patch` (a disc at
 (0.5, 0) of radius 0.6 m where both tyres keep 45 % of their force), `cmd_delay` (both
 commands reach the car 60 ms after they are sent: radio and servo electronics, a transport delay;
-dynlab's `command_delay` approximates it by lags), `servo_rate` (a steering servo that follows
+dynlab's `command_delay` approximates it by a Padé filter), `servo_rate` (a steering servo that follows
 the command with a 25 ms proportional loop and turns the wheels at most 2.5 rad/s; dynlab's
 `steering_lag` has a smooth rate limit), and outside dynlab's library `steering_gain_speed` (the
 steering angle divided by 1 + vₓ²/4), `grip_band` (a 0.8 m wide band through (0, 0.3) at 0.5

@@ -183,7 +183,7 @@ fn true_model(car: &CarScenario, case: &[Hidden], like: &Model) -> Option<Model>
                 ("grip_patch.r", 0.6),
                 ("grip_patch.k", 0.5),
             ],
-            // the simulator's delay is exact, the model's two lags of t_d/2
+            // the simulator's delay is exact, the model's a Padé filter
             Hidden::Delay => &[("command_delay.delay", 0.06)],
             Hidden::GainSpeed | Hidden::Band => &[],
         };

@@ -108,7 +108,7 @@ fn car_steering_servo_rate_limit_is_found() {
 
 #[test]
 fn car_command_delay_is_found_and_its_delay_recovered() {
-    // both commands applied 60 ms late (exact); the library's delay is two lags of 30 ms
+    // both commands applied 60 ms late (exact); the library's delay a Padé filter
     let d = run_car(Some(Effect::CommandDelay), 9);
     assert_found(&d, Effect::CommandDelay, "delay", 0.06, 0.015);
 }

@@ -263,7 +263,7 @@ fn a_term_on_a_lagged_command_carries_the_lagged_commands_as_effect_states() {
 }
 
 #[test]
-fn a_command_delay_is_two_lags_of_half_the_delay_per_command_ahead_of_the_servo_and_the_motor() {
+fn a_command_delay_is_a_pade_filter_per_command_ahead_of_the_servo_and_the_motor() {
     let mut m = PhysicsModel::car(&[
         Effect::SteeringOffset,
         Effect::MotorLag,
@@ -275,31 +275,33 @@ fn a_command_delay_is_two_lags_of_half_the_delay_per_command_ahead_of_the_servo_
     m.set_param("motor_lag.tau", 0.07).unwrap();
     m.set_param("steering_lag.tau", 0.04).unwrap();
     m.set_param("steering_lag.rate", 3.0).unwrap();
-    m.set_param("command_delay.delay", 0.08).unwrap();
+    m.set_param("command_delay.delay", 0.09).unwrap();
     // the ellipse's weight inside its range [0, 1], for the central differences
     m.set_param("ellipse", 0.8).unwrap();
     assert_eq!(
         m.effect_state_names(),
-        vec!["d_f", "delta_w", "delta_c1", "delta_c2", "d_c1", "d_c2"]
+        vec!["d_f", "delta_w", "delta_c", "delta_c_dot", "d_c", "d_c_dot"]
     );
     let s = [
-        0.9, 0.1, 0.4, 1.2, 0.15, 2.0, 0.3, 0.1, 0.25, 0.18, 0.45, 0.35,
+        0.9, 0.1, 0.4, 1.2, 0.15, 2.0, 0.3, 0.1, 0.25, 1.5, 0.45, -0.6,
     ];
     let u = [0.2, 0.5];
     let mut f = vec![0.0; 12];
     m.eval_one(&s, &u, &mut f);
-    let tau = 0.04; // t_d/2
+    // what reaches the car: c − (t_d/3)·ċ
+    let (steer, throttle) = (0.25 - 0.03 * 1.5, 0.45 + 0.03 * 0.6);
+    let k = 6.0 / (0.09f64 * 0.09);
     let want = [
-        (0.35 - 0.3) / 0.07, // the motor lags the delayed throttle
-        3.0 * ((0.18 - 0.1) / (3.0 * 0.04f64)).tanh(), // the servo the delayed steering
-        (0.2 + 0.02 - 0.25) / tau, // the chain takes the trimmed command
-        (0.25 - 0.18) / tau,
-        (0.5 - 0.45) / tau,
-        (0.45 - 0.35) / tau,
+        (throttle - 0.3) / 0.07, // the motor lags the delayed throttle
+        3.0 * ((steer - 0.1) / (3.0 * 0.04f64)).tanh(), // the servo the delayed steering
+        1.5,
+        (0.2 + 0.02 - 0.25 - 0.06 * 1.5) * k, // the filter takes the trimmed command
+        -0.6,
+        (0.5 - 0.45 + 0.06 * 0.6) * k,
     ];
     for (i, w) in want.iter().enumerate() {
         assert!(
-            (f[6 + i] - w).abs() < 1e-12,
+            (f[6 + i] - w).abs() < 1e-9 * w.abs().max(1.0),
             "state {}: {} vs {w}",
             6 + i,
             f[6 + i]
@@ -307,9 +309,10 @@ fn a_command_delay_is_two_lags_of_half_the_delay_per_command_ahead_of_the_servo_
     }
     assert_exact_jacobians(&m, &s, &u);
 
-    // the chains along commands: the exact solution of two lags under zero-order hold
+    // along commands: the filter integrated finely under zero-order hold
     let mut delay = PhysicsModel::car(&[Effect::CommandDelay]).unwrap();
-    delay.set_param("command_delay.delay", 0.06).unwrap();
+    let td = 0.06;
+    delay.set_param("command_delay.delay", td).unwrap();
     let dt = 0.01;
     let n = 120;
     let u: Vec<f64> = (0..n)
@@ -318,34 +321,44 @@ fn a_command_delay_is_two_lags_of_half_the_delay_per_command_ahead_of_the_servo_
     let e = delay.effect_states_along(&u, dt);
     assert_eq!(
         &e[..4],
-        &[0.0, 0.0, 0.1, 0.1],
+        &[0.0, 0.0, 0.1, 0.0],
         "settled at the first command"
     );
-    let (mut x1, mut x2) = ([0.0, 0.1], [0.0, 0.1]);
-    let a = (-dt / 0.03f64).exp();
+    let mut x = [[0.0, 0.0], [0.1, 0.0]];
+    let fine = 200;
+    let h = dt / fine as f64;
     for i in 0..n {
         for c in 0..2 {
-            assert!(
-                (e[i * 4 + 2 * c] - x1[c]).abs() < 1e-6,
-                "sample {i}: {} vs {}",
-                e[i * 4 + 2 * c],
-                x1[c]
-            );
-            assert!(
-                (e[i * 4 + 2 * c + 1] - x2[c]).abs() < 1e-6,
-                "sample {i}: {} vs {}",
-                e[i * 4 + 2 * c + 1],
-                x2[c]
-            );
+            for j in 0..2 {
+                let (got, want) = (e[i * 4 + 2 * c + j], x[c][j]);
+                assert!(
+                    (got - want).abs() < 1e-5 * want.abs().max(1.0),
+                    "sample {i}, command {c}, state {j}: {got} vs {want}"
+                );
+            }
             let v = u[i * 2 + c];
-            let (y1, y2) = (x1[c] - v, x2[c] - v);
-            x1[c] = v + y1 * a;
-            x2[c] = v + y2 * a + y1 * (dt / 0.03) * a;
+            // classic RK4 of (ċ, c̈)
+            let rate = |[a, b]: [f64; 2]| [b, 6.0 / (td * td) * (v - a - 2.0 * td / 3.0 * b)];
+            let add = |x: [f64; 2], k: [f64; 2], w: f64| [x[0] + w * k[0], x[1] + w * k[1]];
+            for _ in 0..fine {
+                let k1 = rate(x[c]);
+                let k2 = rate(add(x[c], k1, 0.5 * h));
+                let k3 = rate(add(x[c], k2, 0.5 * h));
+                let k4 = rate(add(x[c], k3, h));
+                for j in 0..2 {
+                    x[c][j] += h / 6.0 * (k1[j] + 2.0 * k2[j] + 2.0 * k3[j] + k4[j]);
+                }
+            }
         }
     }
-    // the commands arrive 60 ms late on average: ∫(1 − response) of the step at sample 10
-    let lag: f64 = (10..n).map(|i| (1.0 - e[i * 4 + 1] / 0.3) * dt).sum();
-    assert!((lag - 0.06).abs() < 0.006, "mean delay {lag}");
-    // nothing reaches the car at once
-    assert!(e[11 * 4 + 1] < 0.3 * 0.1);
+    // the steering step at sample 10 as it reaches the car
+    let seen: Vec<f64> = (0..n).map(|i| e[i * 4] - td / 3.0 * e[i * 4 + 1]).collect();
+    // it arrives 60 ms late on average: ∫(1 − response)
+    let lag: f64 = (10..n).map(|i| (1.0 - seen[i] / 0.3) * dt).sum();
+    assert!((lag - td).abs() < 0.006, "mean delay {lag}");
+    // nothing reaches the car at once, the filter's undershoot (a Padé filter's, 17 % of the step
+    // 10 ms after it) stays below a fifth of the step, and it settles
+    assert!(seen[11].abs() < 0.2 * 0.3, "{}", seen[11]);
+    assert!(seen.iter().all(|&y| y > -0.2 * 0.3), "{seen:?}");
+    assert!((seen[n - 1] - 0.3).abs() < 1e-3);
 }

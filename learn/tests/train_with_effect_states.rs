@@ -155,7 +155,7 @@ fn a_command_delay_model_recovers_the_delay_and_round_trips() {
         with_and_without(tmp.path(), Effect::CommandDelay, &truth, [7, 17]);
     assert_eq!(
         with.extra_state_names(),
-        vec!["delta_c1", "delta_c2", "d_c1", "d_c2"]
+        vec!["delta_c", "delta_c_dot", "d_c", "d_c_dot"]
     );
     let p = with.physics().unwrap();
     let delay = p.params()[p.param_index("command_delay.delay").unwrap()];

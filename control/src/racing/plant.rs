@@ -123,7 +123,7 @@ impl CarDynamics for Model {
 }
 
 /// Most effect states a [`Plant`] carries: the library's car effects add at most 6 (the servo, the
-/// motor and the command delay's two lag chains), a custom
+/// motor and the command delay's two filters), a custom
 /// term on a lagged command the 6 lagged commands
 /// ([`INPUT_LAG_STATES`](dynlab_learn::dynamics::physics::features::INPUT_LAG_STATES)).
 pub const MAX_EXTRA: usize = 12;

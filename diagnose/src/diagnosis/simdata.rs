@@ -150,7 +150,7 @@ pub fn car_scenario(effect: Option<Effect>, noise: f64) -> CarScenario {
                 tau: 0.05,
             })
         }
-        // both commands applied 60 ms late (exact; the library's delay is two lags of 30 ms)
+        // both commands applied 60 ms late (exact; the library's delay a Padé filter)
         Some(Effect::CommandDelay) => s.effects.command_delay = Some(CommandDelay::default()),
         _ => {}
     }

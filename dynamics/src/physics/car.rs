@@ -50,10 +50,10 @@ pub const MOTOR_LAG_STATE: &str = "d_f";
 /// Name of the extra state added by [`Effect::SteeringLag`]: the wheel angle `δ_w` \[rad\].
 pub const STEERING_LAG_STATE: &str = "delta_w";
 
-/// Names of the extra states added by [`Effect::CommandDelay`]: each command through two lags
-/// of `t_d/2` in series, the steering's (`δ_c1`, `δ_c2` \[rad\]) then the throttle's (`d_c1`,
-/// `d_c2`); the second of each is the command as it reaches the car.
-pub const COMMAND_DELAY_STATES: [&str; 4] = ["delta_c1", "delta_c2", "d_c1", "d_c2"];
+/// Names of the extra states added by [`Effect::CommandDelay`]: per command (the steering's
+/// \[rad\], then the throttle's) the filtered command `c` and its rate `ċ` of the delay's
+/// second-order Padé filter; the car sees `c − (t_d/3)·ċ`.
+pub const COMMAND_DELAY_STATES: [&str; 4] = ["delta_c", "delta_c_dot", "d_c", "d_c_dot"];
 
 /// Nominal car parameters, defaults from the ORCA 1:43 car (Liniger et al., MPCC project).
 pub static CAR_NOMINAL_PARAMS: [ParamSpec; 16] = [
@@ -311,11 +311,12 @@ fn steering_target<R: Real>(p: &[R], slots: &[Slot], active: &[bool], u: &[R]) -
 }
 
 /// The commands as they reach the car: the steering target ([`steering_target`]) and the
-/// throttle, each the end of its `command_delay` lag chain when that is active.
+/// throttle, each through its `command_delay` filter when that is active.
 fn commands_at_car<R: Real>(p: &[R], slots: &[Slot], active: &[bool], s: &[R], u: &[R]) -> (R, R) {
     for (sl, &on) in slots.iter().zip(active) {
         if on && sl.effect == Effect::CommandDelay {
-            return (s[sl.s_off + 1], s[sl.s_off + 3]);
+            let (o, third) = (sl.s_off, p[sl.p_off] * (1.0 / 3.0));
+            return (s[o] - third * s[o + 1], s[o + 2] - third * s[o + 3]);
         }
     }
     (steering_target(p, slots, active, u), u[1])
@@ -352,11 +353,15 @@ pub(crate) fn effect_state_rates<R: Real>(
                 out[o] = rate * ((target - s[o]) / (rate * q[0])).tanh();
             }
             Effect::CommandDelay => {
-                let tau = q[0] * 0.5;
-                out[o] = (steering_target(p, slots, active, u) - s[o]) / tau;
-                out[o + 1] = (s[o] - s[o + 1]) / tau;
-                out[o + 2] = (u[1] - s[o + 2]) / tau;
-                out[o + 3] = (s[o + 2] - s[o + 3]) / tau;
+                // the [1/2] Padé approximant of e^(−s·t_d), (1 − s·t_d/3)/(1 + 2s·t_d/3 + s²·t_d²/6):
+                // c̈ = 6(u − c − (2t_d/3)·ċ)/t_d², seen: c − (t_d/3)·ċ
+                let td = q[0];
+                let k = R::cst(6.0) / (td * td);
+                let target = steering_target(p, slots, active, u);
+                for (i, command) in [(0, target), (2, u[1])] {
+                    out[o + i] = s[o + i + 1];
+                    out[o + i + 1] = (command - s[o + i] - td * (2.0 / 3.0) * s[o + i + 1]) * k;
+                }
             }
             _ => {}
         }
@@ -364,7 +369,7 @@ pub(crate) fn effect_state_rates<R: Real>(
 }
 
 /// The effect states of a car model at rest under a held input (every lag settled):
-/// `d_f = d`, `δ_w = δ (+ δ₀)`, the delay chains at `δ (+ δ₀)` and `d`.
+/// `d_f = d`, `δ_w = δ (+ δ₀)`, the delay's filters at `δ (+ δ₀)` and `d` with no rate.
 pub(crate) fn settled_effect_states<R: Real>(p: &[R], slots: &[Slot], u: &[R], out: &mut [R]) {
     let active = vec![true; slots.len()];
     let target = steering_target(p, slots, &active, u);
@@ -375,9 +380,9 @@ pub(crate) fn settled_effect_states<R: Real>(p: &[R], slots: &[Slot], u: &[R], o
             Effect::SteeringLag => out[o] = target,
             Effect::CommandDelay => {
                 out[o] = target;
-                out[o + 1] = target;
+                out[o + 1] = R::cst(0.0);
                 out[o + 2] = u[1];
-                out[o + 3] = u[1];
+                out[o + 3] = R::cst(0.0);
             }
             _ => {}
         }

@@ -116,9 +116,11 @@ pub enum Effect {
     /// plain first-order lag).
     SteeringLag,
     /// Car: a transport delay of both commands (radio link, bus, servo electronics): the car
-    /// acts on the commands sent `t_d` earlier. Modelled as two first-order lags of `t_d/2` in
-    /// series per command (mean delay `t_d`, no inverse response), four extra states (see
-    /// [`COMMAND_DELAY_STATES`]); `steering_lag` and `motor_lag` act on the delayed commands.
+    /// acts on the commands sent `t_d` earlier. Modelled per command by the [1/2] Padé
+    /// approximant of the delay, `(1 − s·t_d/3)/(1 + 2s·t_d/3 + s²·t_d²/6)` (exact to third
+    /// order in frequency, strictly proper: nothing of a command step reaches the car at once),
+    /// four extra states (see [`COMMAND_DELAY_STATES`]); `steering_lag` and `motor_lag` act on
+    /// the delayed commands.
     CommandDelay,
     /// Pushing: the block's centre of mass (centre of friction) is offset from its geometric
     /// centre by `(o_x, o_y)` in the block frame.
@@ -191,8 +193,8 @@ static COMMAND_DELAY: [ParamSpec; 1] = [ps(
     0.02,
     0.5,
     0.05,
-    "transport delay of both commands (two lags of t_d/2 in series; ≥ 20 ms: a lag of t_d/2 \
-     ≥ 10 ms keeps the model step's RK4 stable)",
+    "transport delay of both commands (a second-order Padé filter; ≥ 20 ms: its poles, \
+     √6/t_d from the origin, keep the model step's RK4 stable)",
 )];
 static GRIP_PATCH: [ParamSpec; 5] = [
     ps(
@@ -521,8 +523,8 @@ impl Effect {
     pub fn shortest_time_constant(self) -> Option<f64> {
         match self {
             Effect::MotorLag | Effect::SteeringLag => Some(self.params()[0].lower),
-            // two lags of t_d/2
-            Effect::CommandDelay => Some(0.5 * self.params()[0].lower),
+            // the Padé filter's poles lie √6/t_d from the origin
+            Effect::CommandDelay => Some(self.params()[0].lower / 6f64.sqrt()),
             _ => None,
         }
     }

@@ -919,7 +919,7 @@ impl PhysicsModel {
                 let delay = has(Effect::CommandDelay).is_some();
                 // the commands as they reach the car, before the servo's and the motor's lags
                 let (d_in, target) = match (delay, has(Effect::SteeringOffset).is_some()) {
-                    (true, _) => ("d_c2", "δ_c2".to_string()),
+                    (true, _) => ("d̃", "δ̃".to_string()),
                     (false, true) => (
                         "d",
                         format!(
@@ -971,23 +971,24 @@ impl PhysicsModel {
                     );
                 }
                 if delay {
-                    let tau = num(0.5 * pv(Effect::CommandDelay, 0));
+                    let td = pv(Effect::CommandDelay, 0);
                     let command = if has(Effect::SteeringOffset).is_some() {
                         "δ + δ₀"
                     } else {
                         "δ"
                     };
+                    let (k, a, b) = (num(6.0 / (td * td)), num(2.0 * td / 3.0), num(td / 3.0));
                     let _ = writeln!(
                         o,
-                        "  δ̇_c1 = ({command} − δ_c1)/{tau},  δ̇_c2 = (δ_c1 − δ_c2)/{tau}   (two lags of t_d/2: the commands {} s late){}",
-                        num(pv(Effect::CommandDelay, 0)),
+                        "  δ̈_c = {k}·({command} − δ_c − {a}·δ̇_c),  δ̃ = δ_c − {b}·δ̇_c   (the commands {} s late: second-order Padé){}",
+                        num(td),
                         tag(Effect::CommandDelay)
                     );
-                    let _ = writeln!(o, "  ḋ_c1 = (d − d_c1)/{tau},  ḋ_c2 = (d_c1 − d_c2)/{tau}");
+                    let _ = writeln!(o, "  d̈_c = {k}·(d − d_c − {a}·ḋ_c),  d̃ = d_c − {b}·ḋ_c");
                 }
                 if has(Effect::SteeringLag).is_some() {
                     let target = match (delay, has(Effect::SteeringOffset).is_some()) {
-                        (true, _) => "δ_c2",
+                        (true, _) => "δ̃",
                         (false, true) => "δ + δ₀",
                         (false, false) => "δ",
                     };
