@@ -308,6 +308,16 @@ fn a_command_delay_is_a_pade_filter_per_command_ahead_of_the_servo_and_the_motor
         );
     }
     assert_exact_jacobians(&m, &s, &u);
+    // the equations name what reaches the car and what the lags follow
+    let eq = m.equations();
+    for line in [
+        "δ̃ = δ_c − ",
+        "d̃ = d_c − ",
+        "ḋ_f = (d̃ − d_f)",
+        "tanh((δ̃ − δ_w)",
+    ] {
+        assert!(eq.contains(line), "{line} not in\n{eq}");
+    }
 
     // along commands: the filter integrated finely under zero-order hold
     let mut delay = PhysicsModel::car(&[Effect::CommandDelay]).unwrap();

@@ -938,7 +938,7 @@ impl PhysicsModel {
                 let delta = if has(Effect::SteeringLag).is_some() {
                     "δ_w".to_string()
                 } else {
-                    target.clone()
+                    target
                 };
                 let _ = writeln!(
                     o,
