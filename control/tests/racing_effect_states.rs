@@ -155,11 +155,12 @@ fn the_augmented_linearization_matches_finite_differences() {
             worst < 1e-6,
             "{effects}: worst relative Jacobian error {worst:e}"
         );
-        // the throttle acts on the filtered throttle, not directly on the car
+        // the throttle acts on the filtered throttle, not directly on the car (behind a delay
+        // the Padé filter's first response to a step is a dip against it: no sign to check)
         let ie = 6; // first effect state: d_f
         assert!(
-            lin.b[k][ie * 2 + 1] > 0.0,
-            "∂d_f/∂d = {}",
+            effects.contains("command_delay") || lin.b[k][ie * 2 + 1] > 0.0,
+            "{effects}: ∂d_f/∂d = {}",
             lin.b[k][ie * 2 + 1]
         );
     }
