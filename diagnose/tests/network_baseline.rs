@@ -72,9 +72,12 @@ fn a_network_model_is_diagnosed_on_car_data() {
     let d = diagnose(&model, &data, &cfg).unwrap();
     eprintln!("{:.1} s\n{}", t0.elapsed().as_secs_f64(), d.table());
     assert_eq!(d.model_kind, "residual");
-    // every car effect of the library: aero_drag, motor_lag, steering_offset, grip_patch,
-    // steering_lag
-    assert_eq!(d.candidates.len(), 5, "{}", d.table());
+    // every car effect of the library
+    let car_effects = dynlab_learn::dynamics::physics::PhysicsModel::available_effects(
+        dynlab_learn::dynamics::physics::Robot::Car,
+    );
+    assert_eq!(d.candidates.len(), car_effects.len(), "{}", d.table());
+    assert!(car_effects.contains(&"command_delay"));
     assert!(d.candidates.iter().all(|c| c.error_after.is_finite()));
 }
 
