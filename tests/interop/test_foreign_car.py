@@ -40,17 +40,22 @@ def test_the_generator_rejects_an_unknown_effect(tmp_path):
     assert p.returncode != 0 and "wind" in p.stderr, p.stderr
 
 
-def test_the_generators_delay_and_yaw_damping_act_as_documented():
+def test_the_generators_delay_servo_and_yaw_damping_act_as_documented():
     sys.path.insert(0, str(REPO / "launch_scripts"))
     import numpy as np
     import foreign_car as fc
 
     p = dict(fc.car_params(1, 0.1), friction_ellipse=False)
-    s = np.array([0.1, 0.2, 0.3, 1.2, 0.1, 2.5, 0.2])
+    s = np.array([0.1, 0.2, 0.3, 1.2, 0.1, 2.5, 0.2, 0.05])
     plain = fc.deriv(p, set(), s, 0.2, 0.3)
     damped = fc.deriv(p, {"yaw_damping"}, s, 0.2, 0.3)
     assert damped[5] - plain[5] == pytest.approx(-4.0 * 2.5)
     assert np.array_equal(np.delete(damped, 5), np.delete(plain, 5))
+    # the servo: the wheels at the servo's angle, turning at most 2.5 rad/s towards the command
+    servo = fc.deriv(p, {"servo_rate"}, s, 0.2, 0.3)
+    assert servo[7] == pytest.approx(2.5)
+    assert fc.deriv(p, {"servo_rate"}, s, 0.052, 0.3)[7] == pytest.approx(0.002 / 0.025)
+    assert np.allclose(servo[:7], fc.deriv(p, set(), s, 0.05, 0.3)[:7])
     # the delayed car's first 60 ms see no command: it coasts as a car sent zeros
     delayed, _ = fc.episode(p, {"cmd_delay"}, np.random.default_rng(3), 0.2)
     coast = delayed[0][1]
