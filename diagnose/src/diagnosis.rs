@@ -72,7 +72,9 @@ use dynlab_learn::dynamics::data::{
     DataError, Split, SplitMix64, StateTrajectory, Window, split_trajectories, windows,
 };
 use dynlab_learn::dynamics::physics::features::{Atom, Feature};
-use dynlab_learn::dynamics::physics::{Effect, ModelError, PhysicsModel, Target};
+use dynlab_learn::dynamics::physics::{
+    CustomEffect, CustomTerm, Effect, ModelError, PhysicsModel, Target,
+};
 use dynlab_learn::fit::{
     SENSITIVITY_LIMIT, bounded_least_squares, calm_windows, cluster_jackknife_std,
     initial_states_after,
@@ -541,6 +543,12 @@ pub struct Diagnosis {
     /// The selected effects refitted jointly; `None` when nothing was selected.
     #[serde(default)]
     pub joint: Option<JointFit>,
+    /// Selected effects dropped by the backward check: each scored again against the model
+    /// with the other selected effects and the terms the term search found after them, where
+    /// it no longer counts (`note` says why). `effects`, `joint` and `discovery` are those
+    /// without them.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub dropped: Vec<Candidate>,
     /// The first step's candidates, best (largest held-out error reduction) first.
     pub candidates: Vec<Candidate>,
     /// Terms beyond the library found on the residual of the model with the selected effects
@@ -1057,6 +1065,15 @@ impl<'a> Ctx<'a> {
                 with.effect_param_range(e)
                     .ok_or(ModelError::NotEnabled(e))?,
             );
+        }
+        // a joint refit also frees the custom terms the diagnosis added (the backward check's
+        // term search terms); the model's own stay as given
+        if joint {
+            for c in with.custom_effects() {
+                if self.base.custom_param_range(c.name()).is_none() {
+                    idx.extend(with.custom_param_range(c.name()).unwrap_or_default());
+                }
+            }
         }
         if idx.is_empty() {
             return Ok(None);
@@ -2060,6 +2077,119 @@ pub fn diagnose(
         joint = Some(step_fit);
         cur = next;
     }
+    // beyond the library: terms on the residual of the model with the selected effects
+    let search_terms = |physics: &PhysicsModel| -> Result<Option<Discovery>, DiagnosisError> {
+        if !(cfg.discover && pure_physics) {
+            return Ok(None);
+        }
+        let dcfg = DiscoveryConfig {
+            steps: Some(k),
+            seed: cfg.seed,
+            ..cfg.discovery.clone()
+        };
+        Ok(Some(discover_terms_split(
+            physics,
+            &model.physics_solver(),
+            model.physics_time(),
+            &trajs,
+            &split.train,
+            &ctx.fit_w,
+            &ctx.test_w,
+            k,
+            [split.train.len(), split.validation.len()],
+            &dcfg,
+            &|_| true,
+            &ctx.strips.lock().unwrap_or_else(|e| e.into_inner()),
+        )?))
+    };
+    let mut discovery = search_terms(&cur.physics)?;
+    // backward check: every selected effect scored again against the model with the others
+    // and the terms found after them (all refitted jointly); one that no longer counts stood
+    // in for part of what a term now explains, and is dropped, and the terms searched again
+    let found = discovery.as_ref().and_then(|d| d.effect.clone());
+    let dropped = match found {
+        Some(terms) if cur.effects().len() > have.len() => {
+            let second = SecondLook {
+                ctx: ctx.swapped(),
+                model: Mutex::new(None),
+            };
+            let mut dropped: Vec<Candidate> = Vec::new();
+            for e in cur.effects()[have.len()..].to_vec() {
+                // the terms on what the effect changes itself refine it, not rival it
+                let others: Vec<CustomTerm> = terms
+                    .terms()
+                    .iter()
+                    .filter(|t| !acts_on(e).contains(&t.target))
+                    .cloned()
+                    .collect();
+                if others.is_empty() {
+                    continue;
+                }
+                let equations: Vec<String> = others
+                    .iter()
+                    .filter_map(|t| {
+                        let d = discovery.as_ref()?;
+                        d.terms
+                            .iter()
+                            .find(|d| {
+                                d.significant
+                                    && d.state == t.target.name()
+                                    && d.feature == t.feature.name()
+                            })
+                            .map(|d| d.equation.clone())
+                    })
+                    .collect();
+                let mut rest = cur.physics.without_effects(&[e])?;
+                rest.add_custom(
+                    CustomEffect::new(terms.name(), others).map_err(ModelError::from)?,
+                )?;
+                let rest = ctx.step_model(&ctx.current(rest, Vec::new(), Vec::new()))?;
+                *second.model.lock().unwrap_or_else(|p| p.into_inner()) = None;
+                if let Some((mut c, _)) = ctx.candidate(&rest, e, 1, &second)?
+                    && !c.significant
+                {
+                    c.note = Some(format!(
+                        "with the term{} the term search found after the selection ({}), it removes only {:.1} % of the held-out error (bootstrap lower bound {:.1} %): it stood in for part of what {} explain{}",
+                        if equations.len() == 1 { "" } else { "s" },
+                        equations.join(", "),
+                        100.0 * c.raw_reduction,
+                        100.0 * c.ci_lower,
+                        if equations.len() == 1 { "it" } else { "they" },
+                        if equations.len() == 1 { "s" } else { "" },
+                    ));
+                    dropped.push(c);
+                }
+            }
+            dropped
+        }
+        _ => Vec::new(),
+    };
+    if !dropped.is_empty() {
+        let names: Vec<Effect> = dropped
+            .iter()
+            .filter_map(|c| Effect::from_name(&c.effect))
+            .collect();
+        let kept = cur.physics.without_effects(&names)?;
+        if kept.effects().len() > have.len() {
+            let f = ctx
+                .fit(
+                    &ctx.current(kept.clone(), Vec::new(), Vec::new()),
+                    None,
+                    true,
+                )?
+                .ok_or(DiagnosisError::Setting {
+                    name: "effects",
+                    value: names.iter().map(|e| e.name()).collect::<Vec<_>>().join(","),
+                    hint: "the selected effects without the dropped ones could not be refitted",
+                })?;
+            cur = ctx.current_of(&f);
+            joint = Some(f);
+        } else {
+            cur = baseline.clone();
+            joint = None;
+        }
+        discovery = search_terms(&cur.physics)?;
+    }
     let added: Vec<Effect> = cur.effects()[have.len()..].to_vec();
     let joint = joint.map(|f| {
         let ea = mean(&cur.test);
@@ -2122,33 +2252,9 @@ pub fn diagnose(
         .first()
         .map(|s| s.candidates.clone())
         .unwrap_or_default();
-    // beyond the library: terms on the residual of the model with the selected effects
-    let discovery = if cfg.discover && pure_physics {
-        let dcfg = DiscoveryConfig {
-            steps: Some(k),
-            seed: cfg.seed,
-            ..cfg.discovery.clone()
-        };
-        Some(discover_terms_split(
-            &cur.physics,
-            &model.physics_solver(),
-            model.physics_time(),
-            &trajs,
-            &split.train,
-            &ctx.fit_w,
-            &ctx.test_w,
-            k,
-            [split.train.len(), split.validation.len()],
-            &dcfg,
-            &|_| true,
-            &ctx.strips.lock().unwrap_or_else(|e| e.into_inner()),
-        )?)
-    } else {
-        None
-    };
     let verdict = added.first().map(|e| e.name().to_string());
     let correlations = residual_correlations(model, &ctx.d, &ctx.fit_w, &ctx.test_w);
-    let summary = match &joint {
+    let mut summary = match &joint {
         Some(j) if j.effects.len() > 1 => format!(
             "verdict: {} together explain {:.0} % of the held-out {k}-step error (each significant when added)",
             j.effects.join(" + "),
@@ -2164,11 +2270,22 @@ pub fn diagnose(
             100.0 * cfg.min_reduction
         ),
     };
+    if !dropped.is_empty() {
+        summary.push_str(&format!(
+            "; dropped by the backward check: {} (the terms found after the selection explain what it took up)",
+            dropped
+                .iter()
+                .map(|c| c.effect.as_str())
+                .collect::<Vec<_>>()
+                .join(", ")
+        ));
+    }
     Ok(Diagnosis {
         verdict,
         effects: added.iter().map(|e| e.name().to_string()).collect(),
         selection,
         joint,
+        dropped,
         candidates,
         discovery,
         world,
@@ -2446,6 +2563,28 @@ fn rival(e: Effect) -> Option<Rival> {
             meaning: "the wheels follow the command late (a delay), not through a servo's lag",
         }),
         _ => None,
+    }
+}
+
+/// The state derivatives and inputs effect `e` changes itself: a term the search finds on one
+/// of them after `e` is a refinement of `e` (a steering term that corrects a fitted offset at
+/// speed), on another one a rival in the backward check (a yaw term that explains what a
+/// small drag took up). A pushing effect moves the block's every rate.
+fn acts_on(e: Effect) -> &'static [Target] {
+    match e {
+        Effect::AeroDrag | Effect::MotorLag => &[Target::Vx],
+        Effect::SteeringOffset | Effect::SteeringLag => &[Target::Delta],
+        Effect::CommandDelay => &[Target::Delta, Target::Vx],
+        Effect::GripPatch => &[Target::Grip, Target::Vy, Target::Omega],
+        Effect::ComOffset | Effect::TableTilt | Effect::FrictionPatch | Effect::PusherFriction => {
+            &[
+                Target::X,
+                Target::Y,
+                Target::Theta,
+                Target::BlockX,
+                Target::BlockY,
+            ]
+        }
     }
 }
 
@@ -2803,6 +2942,13 @@ impl Diagnosis {
                     let _ = writeln!(o, "  → no candidate is significant: the selection stops");
                 }
             }
+        }
+        if !self.dropped.is_empty() {
+            let _ = writeln!(
+                o,
+                "backward check: each selected effect against the others and the terms found after them; dropped:"
+            );
+            o.push_str(&candidate_table(&self.dropped, self));
         }
         if let Some(j) = &self.joint {
             let _ = writeln!(

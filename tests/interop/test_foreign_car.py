@@ -93,3 +93,35 @@ def test_diagnose_names_both_hidden_effects_and_applies_them(foreign):
                            timeout=300).stdout)
     # the trajectory validation error (open-loop position error over 3 s segments) falls
     assert after["tve"]["tve"] < 0.5 * before["tve"]["tve"], (before["tve"], after["tve"])
+
+
+def test_a_yaw_damper_is_a_yaw_term_and_the_drag_it_passed_as_is_dropped(tmp_path):
+    """Car seed 2 of `eval_foreign.py`'s `yaw_damping*` case, outside the library: a yaw moment
+    −4·ω·I_z. On this drive `aero_drag` passes the selection's first step (a small drag takes up
+    part of the damping). The term search then finds a yaw term, and the backward check scores
+    the drag again against it: the drag no longer counts and is dropped. No library name is left,
+    and a yaw term that damps ω is."""
+    gen = [sys.executable, str(REPO / "launch_scripts" / "foreign_car.py")]
+    nominal, bag = tmp_path / "nominal", tmp_path / "yaw"
+    # the evaluation's seeds: 1000·car + 1 for the nominal drive, 1000·car + 2 + the case's index
+    subprocess.run([*gen, str(nominal), "--car-seed", "2", "--seed", "2001"], check=True,
+                   capture_output=True, timeout=300)
+    subprocess.run([*gen, str(bag), "--car-seed", "2", "--seed", "2012", "--effects", "yaw_damping"],
+                   check=True, capture_output=True, timeout=300)
+    model, out = tmp_path / "model", tmp_path / "diagnosis"
+    run("dynlab", "train", "--world", "car", "--kind", "physics", "--bag", nominal, "--out", model,
+        *TOPICS, timeout=600)
+    proc = run("dynlab", "diagnose", "--model", model, "--bag", bag, "--out", out, "--seed", "2", *TOPICS,
+               timeout=900)
+    j = json.loads((out / "diagnosis.json").read_text())
+    assert j["effects"] == [] and j["joint"] is None, proc.stdout
+    first = j["selection"][0]
+    assert first["added"] == "aero_drag", proc.stdout
+    dropped = j.get("dropped") or []
+    assert [c["effect"] for c in dropped] == ["aero_drag"], proc.stdout
+    assert "the term search found after the selection" in dropped[0]["note"], dropped[0]
+    assert not dropped[0]["significant"], dropped[0]
+    assert "backward check" in proc.stdout and "dropped by the backward check: aero_drag" in proc.stdout
+    terms = [t for t in j["discovery"]["terms"] if t["significant"]]
+    assert terms and all(t["state"] == "omega" and t["coefficient"] < 0 for t in terms), j["discovery"]["summary"]
+    assert j["discovery"]["error_reduction"] >= 0.4, j["discovery"]["summary"]

@@ -106,6 +106,13 @@ pub fn diagnosis_html(d: &Diagnosis) -> String {
             ),
         };
     }
+    if !d.dropped.is_empty() {
+        let _ = writeln!(
+            o,
+            "<h3>Backward check: dropped</h3><p>Each selected effect scored again against the model with the other selected effects and the terms the term search found after them. These no longer count, and are not in the set below:</p>"
+        );
+        o.push_str(&candidate_table(&d.dropped, None, d));
+    }
     if let Some(j) = &d.joint {
         let _ = writeln!(
             o,

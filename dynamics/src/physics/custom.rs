@@ -762,6 +762,23 @@ coefficient = -3.2
             m3.params()[m3.param_index("custom.steering_gain_speed.0").unwrap()],
             -1.5
         );
+        // and dropping an effect keeps the others' parameters and the coefficient
+        let mut m4 = m3
+            .with_effects(&[crate::physics::Effect::MotorLag])
+            .unwrap();
+        m4.set_param("aero_drag.c", 0.02).unwrap();
+        m4.set_param("motor_lag.tau", 0.3).unwrap();
+        let m5 = m4
+            .without_effects(&[crate::physics::Effect::AeroDrag])
+            .unwrap();
+        assert_eq!(m5.effects(), vec![crate::physics::Effect::MotorLag]);
+        assert!(m5.param_index("aero_drag.c").is_none());
+        assert_eq!(m5.params()[m5.param_index("motor_lag.tau").unwrap()], 0.3);
+        assert_eq!(
+            m5.params()[m5.param_index("custom.steering_gain_speed.0").unwrap()],
+            -1.5
+        );
+        assert_eq!(m5.params().len(), m4.params().len() - 1);
         // pushing, no push (ℓ = 0): a block-frame drift of 5 mm per push, world x then
         let text =
             "name = \"drift\"\n[[term]]\nstate = \"bx\"\nfeature = \"1\"\ncoefficient = 0.005\n";

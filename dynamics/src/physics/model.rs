@@ -410,7 +410,20 @@ impl PhysicsModel {
     pub fn with_effects(&self, extra: &[Effect]) -> Result<PhysicsModel, ModelError> {
         let mut effects = self.effects();
         effects.extend_from_slice(extra);
-        let mut m = PhysicsModel::new(self.robot, &effects)?;
+        self.with_library(&effects)
+    }
+
+    /// A copy of this model without the library effects `drop`: every other parameter
+    /// (nominal, effect, custom) keeps its value.
+    pub fn without_effects(&self, drop: &[Effect]) -> Result<PhysicsModel, ModelError> {
+        let mut effects = self.effects();
+        effects.retain(|e| !drop.contains(e));
+        self.with_library(&effects)
+    }
+
+    /// A copy of this model with the library effects `effects`; parameters kept by name.
+    fn with_library(&self, effects: &[Effect]) -> Result<PhysicsModel, ModelError> {
+        let mut m = PhysicsModel::new(self.robot, effects)?;
         m.limit_surface = self.limit_surface;
         for c in self.custom_effects() {
             m.add_custom(c)?;
