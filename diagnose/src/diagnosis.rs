@@ -2149,13 +2149,12 @@ pub fn diagnose(
                     && !c.significant
                 {
                     c.note = Some(format!(
-                        "with the term{} the term search found after the selection ({}), it removes only {:.1} % of the held-out error (bootstrap lower bound {:.1} %): it stood in for part of what {} explain{}",
-                        if equations.len() == 1 { "" } else { "s" },
+                        "against the term{s} found after the selection ({}), it removes only {:.1} % of the held-out error (bootstrap lower bound {:.1} %): it stood in for part of what the term{s} explain{}",
                         equations.join(", "),
                         100.0 * c.raw_reduction,
                         100.0 * c.ci_lower,
-                        if equations.len() == 1 { "it" } else { "they" },
                         if equations.len() == 1 { "s" } else { "" },
+                        s = if equations.len() == 1 { "" } else { "s" },
                     ));
                     dropped.push(c);
                 }

@@ -120,7 +120,7 @@ def test_a_yaw_damper_is_a_yaw_term_and_the_drag_it_passed_as_is_dropped(tmp_pat
     assert first["added"] == "aero_drag", proc.stdout
     dropped = j.get("dropped") or []
     assert [c["effect"] for c in dropped] == ["aero_drag"], proc.stdout
-    assert "the term search found after the selection" in dropped[0]["note"], dropped[0]
+    assert dropped[0]["note"].startswith("against the term found after the selection (ω̇ += "), dropped[0]
     assert not dropped[0]["significant"], dropped[0]
     assert "backward check" in proc.stdout and "dropped by the backward check: aero_drag" in proc.stdout
     terms = [t for t in j["discovery"]["terms"] if t["significant"]]
