@@ -866,6 +866,16 @@ struct Current {
 }
 
 impl Current {
+    /// A start for a fit: the model alone, not yet scored (a fit reads only its physics).
+    fn unscored(physics: PhysicsModel) -> Current {
+        Current {
+            physics,
+            test: Vec::new(),
+            fit: Vec::new(),
+            calm: Vec::new(),
+        }
+    }
+
     fn effects(&self) -> Vec<Effect> {
         self.physics.effects()
     }
@@ -1687,20 +1697,16 @@ impl<'a> Ctx<'a> {
     /// The step's model `cur` refitted on this context's fit windows (its added effects jointly,
     /// with the refitted nominal parameters), or as it is where nothing is fitted.
     fn step_model(&self, cur: &Current) -> Result<Current, DiagnosisError> {
-        let start = Current {
-            physics: cur.physics.clone(),
-            test: Vec::new(),
-            fit: Vec::new(),
-            calm: Vec::new(),
-        };
-        Ok(match self.fit(&start, None, true)? {
-            Some(f) => self.current_of(&f),
-            None => {
-                let test = self.errors(cur.physics.clone(), &self.test_w, None);
-                let fit = self.errors(cur.physics.clone(), &self.fit_w, None);
-                self.current(cur.physics.clone(), test, fit)
-            }
-        })
+        Ok(
+            match self.fit(&Current::unscored(cur.physics.clone()), None, true)? {
+                Some(f) => self.current_of(&f),
+                None => {
+                    let test = self.errors(cur.physics.clone(), &self.test_w, None);
+                    let fit = self.errors(cur.physics.clone(), &self.fit_w, None);
+                    self.current(cur.physics.clone(), test, fit)
+                }
+            },
+        )
     }
 
     /// Every candidate of one step, fitted on parallel threads, best first.
@@ -1972,12 +1978,7 @@ pub fn diagnose(
         strips: Mutex::default(),
     };
     // the baseline: the model as given, or with its nominal parameters refitted on the fit half
-    let given = Current {
-        physics: base.clone(),
-        test: Vec::new(),
-        fit: Vec::new(),
-        calm: Vec::new(),
-    };
+    let given = Current::unscored(base.clone());
     let mut nominal_refit = BTreeMap::new();
     let mut nominal_on_bound = Vec::new();
     let mut cur = match ctx.fit(&given, None, false)? {
@@ -2143,7 +2144,7 @@ pub fn diagnose(
                 rest.add_custom(
                     CustomEffect::new(terms.name(), others).map_err(ModelError::from)?,
                 )?;
-                let rest = ctx.step_model(&ctx.current(rest, Vec::new(), Vec::new()))?;
+                let rest = ctx.step_model(&Current::unscored(rest))?;
                 *second.model.lock().unwrap_or_else(|p| p.into_inner()) = None;
                 if let Some((mut c, _)) = ctx.candidate(&rest, e, 1, &second)?
                     && !c.significant
@@ -2170,17 +2171,13 @@ pub fn diagnose(
             .collect();
         let kept = cur.physics.without_effects(&names)?;
         if kept.effects().len() > have.len() {
-            let f = ctx
-                .fit(
-                    &ctx.current(kept.clone(), Vec::new(), Vec::new()),
-                    None,
-                    true,
-                )?
-                .ok_or(DiagnosisError::Setting {
-                    name: "effects",
-                    value: names.iter().map(|e| e.name()).collect::<Vec<_>>().join(","),
-                    hint: "the selected effects without the dropped ones could not be refitted",
-                })?;
+            let f =
+                ctx.fit(&Current::unscored(kept), None, true)?
+                    .ok_or(DiagnosisError::Setting {
+                        name: "effects",
+                        value: names.iter().map(|e| e.name()).collect::<Vec<_>>().join(","),
+                        hint: "the selected effects without the dropped ones could not be refitted",
+                    })?;
             cur = ctx.current_of(&f);
             joint = Some(f);
         } else {
