@@ -1639,6 +1639,13 @@ fn bounded_term(target: Target, feature: Feature, coefficient: f64) -> CustomTer
 
 /// Fits the coefficients of `effect` (added to `physics`) on the fit windows' k-step error;
 /// returns them with standard errors clustered by trajectory.
+///
+/// The chaotic windows ([`robust_windows`]) are left out at the start and again at the fitted
+/// coefficients, and the fit repeated without the ones that became chaotic there: a term that
+/// damps or drives the yaw can carry a window into a spin that was calm at the start, and that
+/// one window then holds nearly all of `JᵀJ` (on the independent generator's yaw-damped car
+/// 3 of 593 windows held 99.98 % of it, and the clustered σ came out 0.0002 on a coefficient of
+/// −4: one segment decided both the coefficient and its spread).
 fn fit_effect(
     physics: &PhysicsModel,
     effect: &CustomEffect,
@@ -1650,80 +1657,96 @@ fn fit_effect(
     with.add_custom(effect.clone())?;
     let range = with.custom_param_range(effect.name()).unwrap_or(0..0);
     let nt = range.len();
-    let theta0: Vec<f64> = with.params()[range.clone()].to_vec();
     let model_of = |th: &[f64]| -> Option<PhysicsModel> {
         let mut m = with.clone();
         let mut p = m.params().to_vec();
         p[range.clone()].copy_from_slice(th);
         m.set_params(&p).ok().map(|_| m)
     };
-    let fit_w = robust_windows(
-        fit_w,
-        ctx.ds,
-        &theta0,
-        &|c: usize| 1e-4 * theta0[c].abs().max(1e-3),
-        &|th: &[f64], r: &mut Vec<f64>| {
-            model_of(th)
-                .map(|m| {
-                    ctx.errors(&m, fit_w, Some(r));
-                })
-                .is_some()
-        },
-        SENSITIVITY_LIMIT,
-        effect
-            .terms()
-            .iter()
-            .any(|t| t.feature.depends_on_position()),
-    );
-    let fit_w = fit_w.as_slice();
-    let nr = (fit_w.len() * ctx.k * ctx.ds) as f64;
-    let resid_of = |th: &[f64]| -> Vec<f64> {
-        match model_of(th) {
-            Some(m) => {
-                let mut r = Vec::new();
-                ctx.errors(&m, fit_w, Some(&mut r));
-                r.iter().map(|v| v / nr.sqrt()).collect()
-            }
-            None => vec![f64::INFINITY],
-        }
-    };
-    let mut eval = |th: &[f64], with_j: bool| -> (Vec<f64>, Vec<f64>) {
-        let r = resid_of(th);
-        if !with_j {
-            return (r, Vec::new());
-        }
-        let mut jac = vec![0.0; r.len() * nt];
-        for c in 0..nt {
-            let hstep = 1e-4 * th[c].abs().max(1e-3);
-            let mut t2 = th.to_vec();
-            t2[c] += hstep;
-            let r2 = resid_of(&t2);
-            if r2.len() != r.len() {
-                continue;
-            }
-            for (i, (a, b)) in r2.iter().zip(&r).enumerate() {
-                jac[i * nt + c] = (a - b) / hstep;
-            }
-        }
-        (r, jac)
+    let calm = |ws: &[Window], th: &[f64]| {
+        robust_windows(
+            ws,
+            ctx.ds,
+            th,
+            &|c: usize| 1e-4 * th[c].abs().max(1e-3),
+            &|th: &[f64], r: &mut Vec<f64>| {
+                model_of(th)
+                    .map(|m| {
+                        ctx.errors(&m, ws, Some(r));
+                    })
+                    .is_some()
+            },
+            SENSITIVITY_LIMIT,
+            effect
+                .terms()
+                .iter()
+                .any(|t| t.feature.depends_on_position()),
+        )
     };
     let (lower, upper): (Vec<f64>, Vec<f64>) = effect.terms().iter().map(|t| t.bounds()).unzip();
     let free = vec![true; nt];
-    let res = bounded_least_squares(&theta0, &lower, &upper, &free, iterations, &mut eval);
-    let (r, jac) = eval(&res.theta, true);
-    let cluster: Vec<usize> = (0..ctx.k)
-        .flat_map(|_| {
-            fit_w
-                .iter()
-                .flat_map(|w| std::iter::repeat_n(w.trajectory, ctx.ds))
-        })
-        .collect();
-    let std = if r.len() == cluster.len() {
-        cluster_std(&jac, &r, nt, &free, &cluster)
-    } else {
-        vec![f64::NAN; nt]
+    // the coefficients fitted from `start` on the windows `ws`, with their σ
+    let fit_on = |ws: &[Window], start: &[f64]| -> (Vec<f64>, Vec<f64>) {
+        let nr = (ws.len() * ctx.k * ctx.ds) as f64;
+        let resid_of = |th: &[f64]| -> Vec<f64> {
+            match model_of(th) {
+                Some(m) => {
+                    let mut r = Vec::new();
+                    ctx.errors(&m, ws, Some(&mut r));
+                    r.iter().map(|v| v / nr.sqrt()).collect()
+                }
+                None => vec![f64::INFINITY],
+            }
+        };
+        let mut eval = |th: &[f64], with_j: bool| -> (Vec<f64>, Vec<f64>) {
+            let r = resid_of(th);
+            if !with_j {
+                return (r, Vec::new());
+            }
+            let mut jac = vec![0.0; r.len() * nt];
+            for c in 0..nt {
+                let hstep = 1e-4 * th[c].abs().max(1e-3);
+                let mut t2 = th.to_vec();
+                t2[c] += hstep;
+                let r2 = resid_of(&t2);
+                if r2.len() != r.len() {
+                    continue;
+                }
+                for (i, (a, b)) in r2.iter().zip(&r).enumerate() {
+                    jac[i * nt + c] = (a - b) / hstep;
+                }
+            }
+            (r, jac)
+        };
+        let theta = bounded_least_squares(start, &lower, &upper, &free, iterations, &mut eval).theta;
+        let (r, jac) = eval(&theta, true);
+        let cluster: Vec<usize> = (0..ctx.k)
+            .flat_map(|_| {
+                ws.iter()
+                    .flat_map(|w| std::iter::repeat_n(w.trajectory, ctx.ds))
+            })
+            .collect();
+        let std = if r.len() == cluster.len() {
+            cluster_std(&jac, &r, nt, &free, &cluster)
+        } else {
+            vec![f64::NAN; nt]
+        };
+        (theta, std)
     };
-    Ok((res.theta, std))
+    let theta0 = with.params()[range.clone()].to_vec();
+    let mut fit_w = calm(fit_w, &theta0);
+    let mut fitted = fit_on(&fit_w, &theta0);
+    // at most this many fits: the windows a refit makes chaotic could go on moving
+    const FITS: usize = 3;
+    for _ in 1..FITS {
+        let still = calm(&fit_w, &fitted.0);
+        if still.len() == fit_w.len() {
+            break;
+        }
+        fit_w = still;
+        fitted = fit_on(&fit_w, &fitted.0);
+    }
+    Ok(fitted)
 }
 
 /// `∂(v̇ₓ, v̇_y, ω̇)/∂input` of `physics` for the input `target` (`δ`, `μ`) at each state of
