@@ -16,8 +16,10 @@ dynlab's `command_delay` approximates it by a Padé filter), `servo_rate` (a ste
 the command with a 25 ms proportional loop and turns the wheels at most 2.5 rad/s; dynlab's
 `steering_lag` has a smooth rate limit), and outside dynlab's library `steering_gain_speed` (the
 steering angle divided by 1 + vₓ²/4), `grip_band` (a 0.8 m wide band through (0, 0.3) at 0.5
-rad where the tyres keep half their force) and `yaw_damping` (a yaw moment −c·ω, c = 4 s⁻¹
-times I_z: the tyres' relaxation and the chassis' scrub).
+rad where the tyres keep half their force), `yaw_damping` (a yaw moment −c·ω, c = 4 s⁻¹
+times I_z: the tyres' relaxation and the chassis' scrub) and `floor_tilt` (the floor slopes
+1.5° down towards the heading 2 rad: gravity pulls the car along it with g·sin 1.5° =
+0.257 m/s², in the body frame `v̇ₓ += a·cos(ψ − 2)`, `v̇_y −= a·sin(ψ − 2)`).
 
 The car's parameters are the datasheet's scaled by seeded factors in [1 − f, 1 + f]
 (`--perturb f`, default 0.1), the same for every bag of one `--car-seed`: a nominal bag and an
@@ -41,9 +43,10 @@ DATASHEET = dict(m=0.041, Iz=27.8e-6, lf=0.029, lr=0.033, Bf=2.579, Cf=1.2, Df=0
 STEER_MAX = 0.35
 FLOOR = 1.3  # the driver keeps the car within ±FLOOR m
 EFFECTS = ("aero_drag", "steering_offset", "motor_lag", "grip_patch", "steering_gain_speed", "grip_band",
-           "cmd_delay", "yaw_damping", "servo_rate")
+           "cmd_delay", "yaw_damping", "servo_rate", "floor_tilt")
 DELAY = 0.06  # s, cmd_delay
 SERVO_TAU, SERVO_RATE = 0.025, 2.5  # s, rad/s: servo_rate
+TILT_ACC, TILT_DIR = 9.81 * math.sin(math.radians(1.5)), 2.0  # m/s², rad: floor_tilt
 
 
 def car_params(car_seed, perturb):
@@ -87,12 +90,15 @@ def deriv(p, effects, s, steer, duty):
         frx -= 0.01 * vx * abs(vx)
     m, iz = p["m"], p["Iz"]
     c, sn = math.cos(psi), math.sin(psi)
+    # the slope's pull in the body frame
+    ax, ay = ((TILT_ACC * math.cos(psi - TILT_DIR), -TILT_ACC * math.sin(psi - TILT_DIR))
+              if "floor_tilt" in effects else (0.0, 0.0))
     return np.array([
         vx * c - vy * sn,
         vx * sn + vy * c,
         om,
-        (frx - ffy * math.sin(delta) + m * vy * om) / m,
-        (fry + ffy * math.cos(delta) - m * vx * om) / m,
+        (frx - ffy * math.sin(delta) + m * vy * om) / m + ax,
+        (fry + ffy * math.cos(delta) - m * vx * om) / m + ay,
         (ffy * p["lf"] * math.cos(delta) - fry * p["lr"]) / iz - (4.0 * om if "yaw_damping" in effects else 0.0),
         (duty - dstate) / 0.2,
         min(max((steer - wheels) / SERVO_TAU, -SERVO_RATE), SERVO_RATE),

@@ -21,7 +21,7 @@
 //! | `sat_alpha_f`, `sat_alpha_r` | `tanh(α_f/α₀)` | - | saturating slip, `α₀` = [`SLIP_SCALE_RAD`] |
 //! | `beta` | `β` | rad | sideslip `atan(vy/√(vx² + v_reg²))` |
 //! | `sat_vx2(v0)` | `vₓ²/(vₓ² + v₀²)` | - | saturating speed with the scale `v₀` \[m/s\] (> 0): `δ·(1 − vₓ²/(vₓ² + v₀²))` is the steady-state steering gain `1/(1 + vₓ²/v₀²)` of a car that understeers with the characteristic speed `v₀` |
-//! | `cos_psi`, `sin_psi` | `cos ψ`, `sin ψ` | - | heading |
+//! | `cos_psi`, `sin_psi` | `cos ψ`, `sin ψ` | - | heading; on a velocity derivative a pull fixed in the world frame (a sloping floor, a steady wind): `v̇ₓ += a·cos(ψ − φ)` for a pull `a` towards `φ` is `a·cos φ·cos ψ + a·sin φ·sin ψ` |
 //!
 //! Atoms of the pusher (state `(x, y, θ)`, action `(p, φ, ℓ)`): `p`, `phi` (`φ`, rad), `l`
 //! (`ℓ`), `cos_phi`, `sin_phi`, `theta` (`θ`, rad), `cos_theta`, `sin_theta`, and the doubled
@@ -925,7 +925,8 @@ pub struct Area {
 
 /// The candidate features of the term search for `robot`: the physics-informed products of
 /// states and inputs, slip angles and their saturating functions, the car's lagged command
-/// rates (a command that acts late), `x`, `y`, and, when `area`
+/// rates (a command that acts late) and heading (a pull fixed in the world), `x`, `y`, and,
+/// when `area`
 /// is given, Gaussian bumps on a `grid × grid` lattice over it (width: the lattice spacing) and
 /// for the car bands at 4 directions and `grid` offsets across it (width: half the spacing).
 pub fn library(robot: Robot, area: Option<Area>, grid: usize) -> Vec<Feature> {
@@ -961,6 +962,8 @@ pub fn library(robot: Robot, area: Option<Area>, grid: usize) -> Vec<Feature> {
             "d_rate(0.1)",
             "d_rate(0.3)",
             "1",
+            "cos_psi",
+            "sin_psi",
             "x",
             "y",
         ],
