@@ -1642,11 +1642,11 @@ fn bounded_term(target: Target, feature: Feature, coefficient: f64) -> CustomTer
 ///
 /// The chaotic windows ([`robust_windows`]) are left out at the start and, unless a term is a
 /// region's, again at the fitted coefficients, and the fit repeated without the ones that
-/// became chaotic there: a term that
-/// damps or drives the yaw can carry a window into a spin that was calm at the start, and that
-/// one window then holds nearly all of `JᵀJ` (on the independent generator's yaw-damped car
-/// 3 of 593 windows held 99.98 % of it, and the clustered σ came out 0.0002 on a coefficient of
-/// −4: one segment decided both the coefficient and its spread).
+/// became chaotic there: a term that damps or drives the yaw can carry a window into a spin
+/// that was calm at the start, and that one window then holds nearly all of `JᵀJ` (on the
+/// independent generator's yaw-damped car 3 of 593 windows held 99.98 % of it, and the
+/// clustered σ came out 0.0002 on a coefficient of −4: one segment decided both the
+/// coefficient and its spread).
 fn fit_effect(
     physics: &PhysicsModel,
     effect: &CustomEffect,
