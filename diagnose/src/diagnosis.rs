@@ -77,7 +77,7 @@ use dynlab_learn::dynamics::physics::{
 };
 use dynlab_learn::fit::{
     SENSITIVITY_LIMIT, bounded_least_squares, calm_windows, cluster_jackknife_std,
-    initial_states_after,
+    forward_jacobian, initial_states_after,
 };
 use dynlab_learn::train::{segment, segment_origins};
 use dynlab_learn::{Dataset, LearnError, Model, World};
@@ -1277,23 +1277,8 @@ impl<'a> Ctx<'a> {
                 if !with_j {
                     return (r, Vec::new());
                 }
-                let np = th.len();
-                let mut jac = vec![0.0; r.len() * np];
-                for c in 0..np {
-                    if !free[c] {
-                        continue;
-                    }
-                    let h = fd_step(c, th);
-                    let mut t2 = th.to_vec();
-                    t2[c] += h;
-                    let r2 = resid_of(&t2);
-                    if r2.len() != r.len() {
-                        continue;
-                    }
-                    for (i, (a, b)) in r2.iter().zip(&r).enumerate() {
-                        jac[i * np + c] = (a - b) / h;
-                    }
-                }
+                let step = |c: usize| if free[c] { fd_step(c, th) } else { 0.0 };
+                let jac = forward_jacobian(th, &r, &step, &resid_of);
                 (r, jac)
             };
             let mut res = bounded_least_squares(&th0, &lower, &upper, free, iterations, &mut eval);
@@ -2462,20 +2447,15 @@ pub(crate) fn robust_windows(
     if n == 0 || !resid(theta0, &mut r0) {
         return fit_w.to_vec();
     }
-    let mut sens = vec![0.0; n];
-    for c in 0..theta0.len() {
-        let h = step(c);
-        if !(h.is_finite() && h != 0.0) {
-            continue;
-        }
-        let mut t = theta0.to_vec();
-        t[c] += h;
+    let np = theta0.len();
+    let jac = forward_jacobian(theta0, &r0, step, &|t: &[f64]| {
         let mut r = Vec::new();
-        if !resid(&t, &mut r) || r.len() != r0.len() {
-            continue;
-        }
-        for (row, (a, b)) in r.iter().zip(&r0).enumerate() {
-            let d = (a - b) / h;
+        if resid(t, &mut r) { r } else { Vec::new() }
+    });
+    let mut sens = vec![0.0; n];
+    for c in 0..np {
+        for row in 0..r0.len() {
+            let d = jac[row * np + c];
             sens[(row / ds) % n] += d * d;
         }
     }

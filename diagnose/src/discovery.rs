@@ -74,7 +74,9 @@ use dynlab_learn::dynamics::physics::features::{
 use dynlab_learn::dynamics::physics::{
     CustomEffect, CustomTerm, ModelError, PhysicsModel, Robot, Target, lattice,
 };
-use dynlab_learn::fit::{SENSITIVITY_LIMIT, bounded_least_squares, cluster_std, initial_states};
+use dynlab_learn::fit::{
+    SENSITIVITY_LIMIT, bounded_least_squares, cluster_std, forward_jacobian, initial_states,
+};
 use dynlab_learn::train::segment;
 use dynlab_learn::{Dataset, LearnError, Model, World};
 use serde::{Deserialize, Serialize};
@@ -1705,19 +1707,7 @@ fn fit_effect(
             if !with_j {
                 return (r, Vec::new());
             }
-            let mut jac = vec![0.0; r.len() * nt];
-            for c in 0..nt {
-                let hstep = 1e-4 * th[c].abs().max(1e-3);
-                let mut t2 = th.to_vec();
-                t2[c] += hstep;
-                let r2 = resid_of(&t2);
-                if r2.len() != r.len() {
-                    continue;
-                }
-                for (i, (a, b)) in r2.iter().zip(&r).enumerate() {
-                    jac[i * nt + c] = (a - b) / hstep;
-                }
-            }
+            let jac = forward_jacobian(th, &r, &|c: usize| 1e-4 * th[c].abs().max(1e-3), &resid_of);
             (r, jac)
         };
         let theta =

@@ -137,6 +137,36 @@ pub fn bounded_least_squares(
     }
 }
 
+/// The forward-difference Jacobian of `resid` at `theta`, whose residuals `r0` the caller has:
+/// `m × n` row-major, column `c` from the step `step(c)`. A column whose step is 0 or not finite
+/// (a fixed parameter), or whose trial returns another number of residuals than `r0` (a model
+/// the trial made invalid), is left 0.
+pub fn forward_jacobian(
+    theta: &[f64],
+    r0: &[f64],
+    step: &dyn Fn(usize) -> f64,
+    resid: &dyn Fn(&[f64]) -> Vec<f64>,
+) -> Vec<f64> {
+    let n = theta.len();
+    let mut jac = vec![0.0; r0.len() * n];
+    for c in 0..n {
+        let h = step(c);
+        if !(h.is_finite() && h != 0.0) {
+            continue;
+        }
+        let mut t = theta.to_vec();
+        t[c] += h;
+        let r = resid(&t);
+        if r.len() != r0.len() {
+            continue;
+        }
+        for (i, (a, b)) in r.iter().zip(r0).enumerate() {
+            jac[i * n + c] = (a - b) / h;
+        }
+    }
+    jac
+}
+
 /// How many times the median window's sensitivity a fit window may have by default (see
 /// [`calm_windows`]).
 pub const SENSITIVITY_LIMIT: f64 = 100.0;
