@@ -44,6 +44,9 @@ CASES = {
     # (appended: a case's index seeds its drive)
     "servo_rate": ("servo_rate", ("steering_lag",)),
     "floor_tilt*": ("floor_tilt", None),
+    "steer_stop*": ("steer_stop", None),
+    "traction_limit*": ("traction_limit", None),
+    "battery_sag*": ("battery_sag", None),
 }
 TRUTH = {"aero_drag.c": 0.01, "steering_offset.delta0": 0.03, "motor_lag.tau": 0.2,
          "steering_lag.tau": 0.025, "steering_lag.rate": 2.5,

@@ -17,9 +17,13 @@ the command with a 25 ms proportional loop and turns the wheels at most 2.5 rad/
 `steering_lag` has a smooth rate limit), and outside dynlab's library `steering_gain_speed` (the
 steering angle divided by 1 + vₓ²/4), `grip_band` (a 0.8 m wide band through (0, 0.3) at 0.5
 rad where the tyres keep half their force), `yaw_damping` (a yaw moment −c·ω, c = 4 s⁻¹
-times I_z: the tyres' relaxation and the chassis' scrub) and `floor_tilt` (the floor slopes
+times I_z: the tyres' relaxation and the chassis' scrub), `floor_tilt` (the floor slopes
 1.5° down towards the heading 2 rad: gravity pulls the car along it with g·sin 1.5° =
-0.257 m/s², in the body frame `v̇ₓ += a·cos(ψ − 2)`, `v̇_y −= a·sin(ψ − 2)`).
+0.257 m/s², in the body frame `v̇ₓ += a·cos(ψ − 2)`, `v̇_y −= a·sin(ψ − 2)`), `steer_stop` (the
+wheels meet a mechanical end stop at ±0.25 rad, the commands reach ±0.35 rad), `traction_limit`
+(the rear tyres pass at most 0.06 N of drive force before they spin) and `battery_sag` (the
+drive force falls with the battery's charge, by 30 % from the first drive of the bag to its
+last).
 
 The car's parameters are the datasheet's scaled by seeded factors in [1 − f, 1 + f]
 (`--perturb f`, default 0.1), the same for every bag of one `--car-seed`: a nominal bag and an
@@ -43,10 +47,14 @@ DATASHEET = dict(m=0.041, Iz=27.8e-6, lf=0.029, lr=0.033, Bf=2.579, Cf=1.2, Df=0
 STEER_MAX = 0.35
 FLOOR = 1.3  # the driver keeps the car within ±FLOOR m
 EFFECTS = ("aero_drag", "steering_offset", "motor_lag", "grip_patch", "steering_gain_speed", "grip_band",
-           "cmd_delay", "yaw_damping", "servo_rate", "floor_tilt")
+           "cmd_delay", "yaw_damping", "servo_rate", "floor_tilt", "steer_stop", "traction_limit",
+           "battery_sag")
 DELAY = 0.06  # s, cmd_delay
 SERVO_TAU, SERVO_RATE = 0.025, 2.5  # s, rad/s: servo_rate
 TILT_ACC, TILT_DIR = 9.81 * math.sin(math.radians(1.5)), 2.0  # m/s², rad: floor_tilt
+STOP = 0.25  # rad, steer_stop: the wheels' mechanical end stop
+TRACTION = 0.06  # N, traction_limit: the most drive force the rear tyres pass before they spin
+SAG = 0.3  # battery_sag: the drive force's loss over the bag
 
 
 def car_params(car_seed, perturb):
@@ -70,6 +78,8 @@ def deriv(p, effects, s, steer, duty):
     x, y, psi, vx, vy, om, dstate, wheels = s
     d = dstate if "motor_lag" in effects else duty
     delta = wheels if "servo_rate" in effects else steer
+    if "steer_stop" in effects:
+        delta = min(max(delta, -STOP), STOP)
     if "steering_offset" in effects:
         delta += 0.03
     if "steering_gain_speed" in effects:
@@ -80,7 +90,9 @@ def deriv(p, effects, s, steer, duty):
     g = grip(effects, x, y)
     ffy = g * p["Df"] * math.sin(p["Cf"] * math.atan(p["Bf"] * af))
     fry = g * p["Dr"] * math.sin(p["Cr"] * math.atan(p["Br"] * ar))
-    drive = (p["Cm1"] - p["Cm2"] * vx) * d
+    drive = (p["Cm1"] - p["Cm2"] * vx) * d * p.get("charge", 1.0)
+    if "traction_limit" in effects:
+        drive = min(max(drive, -TRACTION), TRACTION)
     if p["friction_ellipse"]:
         total = math.hypot(drive, fry)
         if total > g * p["Dr"]:
@@ -194,6 +206,8 @@ def main():
         msgs = []
         t_start = 1_750_000_000 * 10**9
         for ep in range(a.episodes):
+            # battery_sag: the battery's charge falls from one drive to the next
+            p["charge"] = 1.0 - (SAG * ep / max(a.episodes - 1, 1) if "battery_sag" in effects else 0.0)
             states, cmds = episode(p, effects, rng, a.duration)
             t0 = t_start + ep * int((a.duration + 5.0) * 1e9)
             # 120 Hz poses with jitter, noise and dropouts

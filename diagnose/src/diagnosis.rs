@@ -1469,7 +1469,9 @@ impl<'a> Ctx<'a> {
     /// `steering_offset` against a steering term with `δ` as a factor: a steering gain that
     /// falls with speed is lowered on most segments by a constant offset (22 % removed, named on
     /// one of five seeds before this check), and the term search finds the gain. A
-    /// `steering_lag` against a term on the lagged steering's rate: a transport delay. (Without the
+    /// `steering_lag` against a term on the lagged steering's rate: a transport delay. An
+    /// `aero_drag` or a `motor_lag` against the throttle beyond a level: a drive force capped by
+    /// traction. (Without the
     /// margin a Gaussian bump of grip that removed 85.7 % refused a right-fitted disc's 85.1 %.)
     /// A disc's rivals include the strip through it fitted on the k-step error
     /// ([`strip_through`]): a band the data cross in two places, of which the disc covers one.
@@ -2101,11 +2103,14 @@ pub fn diagnose(
             };
             let mut dropped: Vec<Candidate> = Vec::new();
             for e in cur.effects()[have.len()..].to_vec() {
-                // the terms on what the effect changes itself refine it, not rival it
+                // the terms on what the effect changes itself refine it, not rival it, but for
+                // a command's hard limit: a drive force capped by traction is another shape
+                // than a drag, which took up part of it (named at 3 to 8 times its
+                // coefficient on the independent generator's traction-limited car)
                 let others: Vec<CustomTerm> = terms
                     .terms()
                     .iter()
-                    .filter(|t| !acts_on(e).contains(&t.target))
+                    .filter(|t| !acts_on(e).contains(&t.target) || t.feature.beyond_a_level())
                     .cloned()
                     .collect();
                 if others.is_empty() {
@@ -2517,7 +2522,11 @@ const MAX_LOG_RATIO: f64 = 6.907_755_278_982_137; // ln 1000
 /// in another guise (on a car with a true 0.03 rad offset, `δ += 0.12·d` removed 36 % against
 /// the offset's 31 %). A steering servo's lag against the lagged steering's rate (`δ̇_τ`): a
 /// command that reaches the wheels a fixed time late is `δ − t_d·δ̇`, which a first-order lag
-/// with a rate limit follows only in part.
+/// with a rate limit follows only in part. A drag's and a motor lag's against the throttle
+/// beyond a level on `v̇ₓ` (`d_{>l}`): a drive force capped by the tyres' traction lowers the
+/// acceleration at high throttle, which a drag (at 3 to 8 times a real one's coefficient) and a
+/// slow motor (τ 0.63 s) each follow in part; both were named on the independent generator's
+/// traction-limited car.
 fn rival(e: Effect) -> Option<Rival> {
     match e {
         Effect::GripPatch => Some(Rival {
@@ -2538,6 +2547,18 @@ fn rival(e: Effect) -> Option<Rival> {
             term: "a lagged-steering",
             meaning: "the wheels follow the command late (a delay), not through a servo's lag",
         }),
+        Effect::AeroDrag => Some(Rival {
+            target: Target::Vx,
+            among: Feature::beyond_a_level,
+            term: "a drive-limit",
+            meaning: "the drive force is capped (the tyres' traction, the motor's current limit), not opposed by a drag",
+        }),
+        Effect::MotorLag => Some(Rival {
+            target: Target::Vx,
+            among: Feature::beyond_a_level,
+            term: "a drive-limit",
+            meaning: "the drive force is capped (the tyres' traction, the motor's current limit), not lagged",
+        }),
         _ => None,
     }
 }
@@ -2545,7 +2566,8 @@ fn rival(e: Effect) -> Option<Rival> {
 /// The state derivatives and inputs effect `e` changes itself: a term the search finds on one
 /// of them after `e` is a refinement of `e` (a steering term that corrects a fitted offset at
 /// speed), on another one a rival in the backward check (a yaw term that explains what a
-/// small drag took up). A pushing effect moves the block's every rate.
+/// small drag took up), and so is a command's hard limit on any of them. A pushing effect
+/// moves the block's every rate.
 fn acts_on(e: Effect) -> &'static [Target] {
     match e {
         Effect::AeroDrag | Effect::MotorLag => &[Target::Vx],

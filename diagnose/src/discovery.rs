@@ -18,7 +18,10 @@
 //!    lattice, explains the most of its residual alone (a region's edges then fall where the
 //!    data put them), and `δ` the saturating steering term `δ·vₓ²/(vₓ² + v₀²)` whose speed
 //!    scale `v₀` does (an understeering car's steady-state gain `1/(1 + vₓ²/v₀²)`, which `δ·vₓ`
-//!    and `δ·vₓ²` follow only over part of the speeds). A caller may add grip regions of its own,
+//!    and `δ·vₓ²` follow only over part of the speeds). Each command also gets the part of it
+//!    beyond the level that, screened the same way, explains the most alone (`δ_{>l}` on `δ`,
+//!    `d_{>l}` on `v̇ₓ`): an actuator's hard limit, a steering end stop or a drive force capped by
+//!    traction. A caller may add grip regions of its own,
 //!    chosen on the k-step error: the diagnosis adds the strip through a disc it found
 //!    ([`strip_through`]), which the screen then passes whatever its one-step `t`.
 //! 2. **Screen** per target: every feature regressed alone on the residual; a (target, feature)
@@ -934,7 +937,6 @@ fn fitted_speed_scale(
     du: usize,
 ) -> Option<Feature> {
     const SCALES: usize = 40;
-    let n = one.trans.len();
     let top = one
         .s0
         .chunks(one.dp)
@@ -943,16 +945,72 @@ fn fitted_speed_scale(
     if top <= 0.05 {
         return None;
     }
+    let (lo, hi) = (0.1 * top, 2.0 * top);
+    let scales = (0..SCALES).map(|i| lo * (hi / lo).powf(i as f64 / (SCALES - 1) as f64));
+    best_of(
+        reg,
+        one,
+        physics,
+        du,
+        scales.map(|v0| format!("delta*sat_vx2({})", round3(v0).max(1e-3))),
+    )
+}
+
+/// The command `input` (0: `δ`, 1: `d`) beyond the level `l`, `u_{>l}`, whose level, screened
+/// on a lattice from a tenth of the fit half's largest `|u|` to 95 % of it, explains the most
+/// of the regression `reg` (the steering's, or `v̇ₓ`'s for the throttle) alone: an actuator's
+/// hard limit. A steering end stop at `l` is `δ += −1·δ_{>l}`, which the library's `δ` gain
+/// follows only on average; a drive force capped by the tyres' traction or the motor's current
+/// limit is a negative `v̇ₓ` term on `d_{>l}`, which the library's aero drag took up in part
+/// (named at 3 to 8 times its coefficient on the independent generator's traction-limited
+/// car). It joins the library as one more candidate on that target.
+fn fitted_command_level(
+    reg: &Regression,
+    one: &OneStep,
+    physics: &PhysicsModel,
+    du: usize,
+    input: usize,
+) -> Option<Feature> {
+    const LEVELS: usize = 30;
+    let top = one
+        .u0
+        .chunks(du)
+        .map(|u| u[input].abs())
+        .fold(0.0, f64::max);
+    if !(top.is_finite() && top > 1e-3) {
+        return None;
+    }
+    let name = ["delta", "d"][input];
+    let (lo, hi) = (0.1 * top, 0.95 * top);
+    let levels = (0..LEVELS).map(|i| lo + (hi - lo) * i as f64 / (LEVELS - 1) as f64);
+    best_of(
+        reg,
+        one,
+        physics,
+        du,
+        levels.map(|l| format!("{name}_beyond({})", round3(l).max(1e-3))),
+    )
+}
+
+/// `v` rounded to 3 decimals (a fitted shape's printed scale).
+fn round3(v: f64) -> f64 {
+    (v * 1000.0).round() / 1000.0
+}
+
+/// Of the car features named `names` (one shape at a lattice of its scale), the one that
+/// explains the most of the regression `reg` alone on the transitions of `one`.
+fn best_of(
+    reg: &Regression,
+    one: &OneStep,
+    physics: &PhysicsModel,
+    du: usize,
+    names: impl Iterator<Item = String>,
+) -> Option<Feature> {
+    let n = one.trans.len();
     let sums = RowSums::of(reg, one.positions());
     let params = physics.params();
-    let round = |v: f64| (v * 1000.0).round() / 1000.0;
-    let (lo, hi) = (0.1 * top, 2.0 * top);
     let mut best: Option<(f64, Feature)> = None;
-    for i in 0..SCALES {
-        let v0 = round(lo * (hi / lo).powf(i as f64 / (SCALES - 1) as f64)).max(1e-3);
-        let Ok(feature) = Feature::parse(&format!("delta*sat_vx2({v0})")) else {
-            continue;
-        };
+    for feature in names.filter_map(|name| Feature::parse(&name).ok()) {
         let column = (0..n).map(|i| {
             let s = &one.s0[i * one.dp..(i + 1) * one.dp];
             let u = &one.u0[i * du..(i + 1) * du];
@@ -1190,8 +1248,8 @@ pub fn discover_terms_split(
     // features
     let area = area_of(&one.positions());
     let mut feats: Vec<Feature> = library(robot, Some(area), cfg.grid);
-    // the shapes fitted to one input's residual are tried on that input alone: the regions on
-    // the grip, the speed scale on the steering
+    // the shapes fitted to one target's residual are tried on that target alone: the regions
+    // on the grip, the speed scale on the steering, a command's level on what it drives
     let fitted_from = feats.len();
     let mut fitted_for: Vec<Target> = Vec::new();
     if cfg.grid > 0
@@ -1212,6 +1270,16 @@ pub fn discover_terms_split(
     {
         feats.push(f);
         fitted_for.push(Target::Delta);
+    }
+    // the commands' hard limits: the steering's on `δ`, the throttle's on the drive
+    for (target, input) in [(Target::Delta, 0), (Target::Vx, 1)] {
+        if let Some(reg) = regs.iter().find(|r| r.target == target)
+            && let Some(f) = fitted_command_level(reg, &one, physics, du, input)
+            && !feats.contains(&f)
+        {
+            feats.push(f);
+            fitted_for.push(target);
+        }
     }
     // (target, feature) pairs with the shape of a nominal parameter's own term are that
     // parameter, not an effect, and the inputs take only their own shapes: not tried
@@ -1666,10 +1734,12 @@ fn fit_effect(
         p[range.clone()].copy_from_slice(th);
         m.set_params(&p).ok().map(|_| m)
     };
-    let regional = effect
+    // a region's term, or a command's beyond a level, reaches only the windows that enter
+    // the region or pass the level: their sensitivity is measured against those windows'
+    let local = effect
         .terms()
         .iter()
-        .any(|t| t.feature.depends_on_position());
+        .any(|t| t.feature.depends_on_position() || t.feature.beyond_a_level());
     let calm = |ws: &[Window], th: &[f64]| {
         robust_windows(
             ws,
@@ -1684,7 +1754,7 @@ fn fit_effect(
                     .is_some()
             },
             SENSITIVITY_LIMIT,
-            regional,
+            local,
         )
     };
     let (lower, upper): (Vec<f64>, Vec<f64>) = effect.terms().iter().map(|t| t.bounds()).unzip();
@@ -1733,8 +1803,9 @@ fn fit_effect(
     // terms are fitted once: the windows that cross the region are its evidence, and those its
     // fitted strength makes chaotic are the ones where it acts most (refitted without them a
     // low-grip strip came out at −0.32 where the truth is −0.5 and one fit gives −0.38, and
-    // removed 37 % of the held-out error against 42 %)
-    let fits = if regional { 1 } else { 3 };
+    // removed 37 % of the held-out error against 42 %); so are a command's beyond a level, for
+    // the same reason
+    let fits = if local { 1 } else { 3 };
     for _ in 1..fits {
         let still = calm(&fit_w, &fitted.0);
         if still.len() == fit_w.len() {

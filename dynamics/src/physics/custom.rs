@@ -161,8 +161,8 @@ impl Target {
 
     /// Whether the term search tries `feature` on this target: every feature on a derivative;
     /// on the steering angle `δ` only features of the commands and the speed (`δ`, `d`, `vₓ`,
-    /// `|vₓ|`, `|v|`, `vₓ²/(vₓ² + v₀²)`, the lagged steering command), the shapes of an input's
-    /// nonlinearity. A lagged command is tried only through the input it lags: the steering's
+    /// `|vₓ|`, `|v|`, `vₓ²/(vₓ² + v₀²)`, the lagged steering command, the steering beyond a
+    /// level), the shapes of an input's nonlinearity. A lagged command is tried only through the input it lags: the steering's
     /// on `δ`, the throttle's on `v̇ₓ` (the drive). With a slip
     /// angle, `ω`, `v_y` or a position in it a `δ` term is a change of the tire model (on a car
     /// whose tires were 10 % off the model's, `δ += 0.48·α_r·vₓ` passed the search's test). A
@@ -194,6 +194,7 @@ impl Target {
                                 | Atom::SatVx2 { .. }
                                 | Atom::LaggedInput { .. }
                                 | Atom::InputRate { .. }
+                                | Atom::Beyond { input: 0, .. }
                         )
                     })
             }

@@ -22,6 +22,7 @@
 //! | `beta` | `β` | rad | sideslip `atan(vy/√(vx² + v_reg²))` |
 //! | `sat_vx2(v0)` | `vₓ²/(vₓ² + v₀²)` | - | saturating speed with the scale `v₀` \[m/s\] (> 0): `δ·(1 − vₓ²/(vₓ² + v₀²))` is the steady-state steering gain `1/(1 + vₓ²/v₀²)` of a car that understeers with the characteristic speed `v₀` |
 //! | `cos_psi`, `sin_psi` | `cos ψ`, `sin ψ` | - | heading; on a velocity derivative a pull fixed in the world frame (a sloping floor, a steady wind): `v̇ₓ += a·cos(ψ − φ)` for a pull `a` towards `φ` is `a·cos φ·cos ψ + a·sin φ·sin ψ` |
+//! | `delta_beyond(l)`, `d_beyond(l)` | `δ_{>l}`, `d_{>l}` | - | the part of a command beyond the level `l` (> 0), with its sign: `sgn(u)·max(\|u\| − l, 0)`, the shape of an actuator's hard limit: `δ += −1·δ_{>l}` is a steering end stop at `l` rad, a negative `v̇ₓ` term on `d_{>l}` a drive force capped by the tyres' traction or the motor's current limit |
 //!
 //! Atoms of the pusher (state `(x, y, θ)`, action `(p, φ, ℓ)`): `p`, `phi` (`φ`, rad), `l`
 //! (`ℓ`), `cos_phi`, `sin_phi`, `theta` (`θ`, rad), `cos_theta`, `sin_theta`, and the doubled
@@ -318,6 +319,15 @@ pub enum Atom {
         /// Time constant \[s\].
         tau: f64,
     },
+    /// Car: the part of the command `input` beyond `level`, with the command's sign,
+    /// `sgn(u)·max(|u| − level, 0)`: the shape of an actuator's hard limit (a steering end
+    /// stop, a drive force capped by traction or by the motor's current limit).
+    Beyond {
+        /// 0: the steering angle `δ`; 1: the throttle `d`.
+        input: usize,
+        /// Level (> 0), in the command's unit.
+        level: f64,
+    },
     /// Flat-topped strip `½·(tanh((e + w/2)/ε) − tanh((e − w/2)/ε))`, `e = n·(x, y) − d` as for
     /// [`Atom::Band`], `ε = w/20`: a straight strip `w` wide with sharp edges (a wet stripe, a
     /// rug, a painted line), 1 inside and 0 outside, which a Gaussian band follows only near
@@ -467,6 +477,9 @@ impl Atom {
             Atom::InputRate { input, tau } => {
                 format!("{}_rate({})", COMMAND_NAMES[*input], short(*tau))
             }
+            Atom::Beyond { input, level } => {
+                format!("{}_beyond({})", COMMAND_NAMES[*input], short(*level))
+            }
             a => entry(a).map(|e| e.1).unwrap_or("?").to_string(),
         }
     }
@@ -499,6 +512,9 @@ impl Atom {
             Atom::InputRate { input, tau } => {
                 format!("{}_{{{} s}}", COMMAND_RATE_SYMBOLS[*input], short(*tau))
             }
+            Atom::Beyond { input, level } => {
+                format!("{}_{{>{}}}", COMMAND_SYMBOLS[*input], short(*level))
+            }
             a => entry(a).map(|e| e.2).unwrap_or("?").to_string(),
         }
     }
@@ -510,7 +526,8 @@ impl Atom {
             | Atom::Band { .. }
             | Atom::Strip { .. }
             | Atom::SatVx2 { .. }
-            | Atom::LaggedInput { .. } => Unit::default(),
+            | Atom::LaggedInput { .. }
+            | Atom::Beyond { .. } => Unit::default(),
             Atom::InputRate { .. } => Unit::new(0, -1),
             a => entry(a).map(|e| e.3).unwrap_or_default(),
         }
@@ -520,7 +537,10 @@ impl Atom {
     pub fn belongs_to(&self, robot: Robot) -> bool {
         let owner = match self {
             Atom::Gauss { .. } | Atom::Band { .. } | Atom::Strip { .. } => Owner::Both,
-            Atom::SatVx2 { .. } | Atom::LaggedInput { .. } | Atom::InputRate { .. } => Owner::Car,
+            Atom::SatVx2 { .. }
+            | Atom::LaggedInput { .. }
+            | Atom::InputRate { .. }
+            | Atom::Beyond { .. } => Owner::Car,
             a => entry(a).map(|e| e.4).unwrap_or(Owner::Both),
         };
         match owner {
@@ -550,8 +570,9 @@ impl Atom {
         )
     }
 
-    /// Names of the atoms of `robot` (those with parameters last: `sat_vx2(v0)` and the lagged
-    /// commands of the car, `gauss(cx,cy,r)`, `band(a,d,w)`, `strip(a,d,w)`).
+    /// Names of the atoms of `robot` (those with parameters last: `sat_vx2(v0)`, the lagged
+    /// commands and the commands beyond a level of the car, `gauss(cx,cy,r)`, `band(a,d,w)`,
+    /// `strip(a,d,w)`).
     pub fn names(robot: Robot) -> Vec<String> {
         let car_only: &[&str] = match robot {
             Robot::Car => &[
@@ -560,6 +581,8 @@ impl Atom {
                 "d_lag(tau)",
                 "delta_rate(tau)",
                 "d_rate(tau)",
+                "delta_beyond(l)",
+                "d_beyond(l)",
             ],
             Robot::Pushing => &[],
         };
@@ -606,6 +629,18 @@ impl Atom {
             return Ok(Atom::Strip { a, d, w });
         }
         for (input, command) in COMMAND_NAMES.iter().enumerate() {
+            if let Some(inner) = n
+                .strip_prefix(command)
+                .and_then(|r| r.strip_prefix("_beyond("))
+                .and_then(|r| r.strip_suffix(')'))
+            {
+                return match inner.trim().parse::<f64>() {
+                    Ok(level) if level.is_finite() && level > 0.0 => {
+                        Ok(Atom::Beyond { input, level })
+                    }
+                    _ => Err(FeatureError::BadLevel(n.to_string())),
+                };
+            }
             for (kind, rate) in [("_lag(", false), ("_rate(", true)] {
                 let Some(inner) = n
                     .strip_prefix(command)
@@ -656,6 +691,14 @@ impl Atom {
                 Some(l) => (u[*input] - l) / *tau,
                 None => R::cst(f64::NAN),
             },
+            (Robot::Car, Atom::Beyond { input, level }) => {
+                let c = u[*input];
+                if c.value().abs() > *level {
+                    (c.abs() - *level) * c.value().signum()
+                } else {
+                    R::cst(0.0)
+                }
+            }
             (_, Atom::X) => s[0],
             (_, Atom::Y) => s[1],
             (_, Atom::One) => R::cst(1.0),
@@ -766,6 +809,11 @@ pub enum FeatureError {
         "bad lagged command '{0}'; write delta_lag(tau), d_lag(tau), delta_rate(tau) or d_rate(tau) with tau one of 0.03, 0.1, 0.3 (seconds)"
     )]
     BadInputLag(String),
+    /// A command beyond a level that is not finite and positive.
+    #[error(
+        "bad command level '{0}'; write delta_beyond(l) or d_beyond(l) with a finite level l > 0 (rad for the steering, the throttle's unit for d)"
+    )]
+    BadLevel(String),
     /// No factors or too many.
     #[error("feature '{name}' has {got} factors; use 1 to {max} atoms joined by '*'")]
     FactorCount {
@@ -859,6 +907,15 @@ impl Feature {
     /// a region's term, which the term search tries only after the terms that hold everywhere.
     pub fn depends_on_position(&self) -> bool {
         self.factors.iter().any(Atom::is_position)
+    }
+
+    /// Whether the feature is a command beyond a level ([`Atom::Beyond`]): 0 wherever the
+    /// command stays within it, so its coefficient reaches only the part of the data where
+    /// the command goes past.
+    pub fn beyond_a_level(&self) -> bool {
+        self.factors
+            .iter()
+            .any(|a| matches!(a, Atom::Beyond { .. }))
     }
 
     /// Name used in files: the atoms joined by `*`.
@@ -1207,6 +1264,63 @@ mod tests {
     }
 
     #[test]
+    fn a_command_beyond_a_level_is_an_actuators_hard_limit() {
+        let f = Feature::parse("delta_beyond(0.25)").unwrap();
+        assert_eq!(
+            f.factors(),
+            &[Atom::Beyond {
+                input: 0,
+                level: 0.25
+            }]
+        );
+        assert_eq!(Feature::parse(&f.name()).unwrap(), f);
+        assert_eq!(f.symbol(), "δ_{>0.25}");
+        assert_eq!(f.unit(), Unit::default());
+        assert!(f.beyond_a_level() && !f.depends_on_position() && !f.uses_input_lags());
+        f.check_robot(Robot::Car).unwrap();
+        assert!(f.check_robot(Robot::Pushing).is_err());
+        let g = Feature::parse("d_beyond(0.3)").unwrap();
+        assert_eq!(
+            (g.name().as_str(), g.symbol().as_str()),
+            ("d_beyond(0.3)", "d_{>0.3}")
+        );
+        // δ − 1·δ_{>0.25} is the steering held at an end stop of ±0.25 rad
+        let p = crate::physics::PhysicsModel::car(&[])
+            .unwrap()
+            .params()
+            .to_vec();
+        let s = [0.0, 0.0, 0.0, 1.0, 0.0, 0.0];
+        for (delta, seen) in [
+            (0.1, 0.1),
+            (0.25, 0.25),
+            (0.35, 0.25),
+            (-0.35, -0.25),
+            (-0.2, -0.2),
+        ] {
+            let v = f.eval(Robot::Car, &p, &s, &[delta, 0.4]);
+            assert!((delta - v - seen).abs() < 1e-12, "δ {delta}: {v}");
+        }
+        for (d, beyond) in [(0.2, 0.0), (0.5, 0.2), (-0.4, -0.1)] {
+            let v = g.eval(Robot::Car, &p, &s, &[0.0, d]);
+            assert!((v - beyond).abs() < 1e-12, "d {d}: {v}");
+        }
+        for bad in [
+            "delta_beyond(0)",
+            "d_beyond(-0.1)",
+            "d_beyond(inf)",
+            "delta_beyond()",
+        ] {
+            assert!(
+                matches!(Atom::parse(bad), Err(FeatureError::BadLevel(_))),
+                "{bad}"
+            );
+        }
+        let names = Atom::names(Robot::Car);
+        assert!(names.contains(&"delta_beyond(l)".to_string()));
+        assert!(names.contains(&"d_beyond(l)".to_string()));
+    }
+
+    #[test]
     fn region_features_are_told_from_global_ones() {
         let area = Area {
             lo: [-1.0, -1.0],
@@ -1291,8 +1405,15 @@ mod tests {
         // the commands, then their lagged copies (constants here: a model's effect states)
         let u = [0.15, 0.4, 0.1, 0.3, 0.05, 0.35, 0.0, 0.2];
         // the fitted shapes, a strip's edge passing near the state's position
-        let fitted =
-            ["delta*sat_vx2(0.9)", "strip(0.5,0.07,0.8)"].map(|n| Feature::parse(n).unwrap());
+        // and commands beyond a level, on either side of it
+        let fitted = [
+            "delta*sat_vx2(0.9)",
+            "strip(0.5,0.07,0.8)",
+            "delta_beyond(0.1)",
+            "d_beyond(0.3)",
+            "d_beyond(0.5)",
+        ]
+        .map(|n| Feature::parse(n).unwrap());
         for f in library(Robot::Car, None, 0).into_iter().chain(fitted) {
             let pd: Vec<Dual<8>> = p.iter().map(|&v| Dual::cst(v)).collect();
             let sd: Vec<Dual<8>> = (0..6).map(|i| Dual::var(s[i], i)).collect();
