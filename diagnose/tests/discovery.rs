@@ -357,9 +357,12 @@ fn a_nominal_parameter_change_is_not_reported_as_a_term() {
         })
         .sum();
     assert_eq!(lagged_elsewhere, 3 + 6 + 6);
+    // each command beyond the level fitted to the residual of what it drives: the steering's
+    // on δ, the throttle's on v̇ₓ
+    let levels = 2;
     assert_eq!(
         d.pairs_tried,
-        3 * features - shaped.len() - lagged_elsewhere + steering + grip,
+        3 * features - shaped.len() - lagged_elsewhere + steering + grip + levels,
         "{}",
         d.table()
     );

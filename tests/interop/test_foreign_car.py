@@ -197,7 +197,7 @@ def test_a_drive_force_capped_by_traction_is_a_throttle_limit_term_not_a_drag(fo
     out = d / "traction_diagnosis"
     # (the two effects that take part of it among the candidates, for time)
     proc = run("dynlab", "diagnose", "--model", model, "--bag", bag, "--out", out,
-               "--effects", "aero_drag,motor_lag", *TOPICS, timeout=900)
+               "--effects", "aero_drag,motor_lag", "--apply", *TOPICS, timeout=900)
     j = json.loads((out / "diagnosis.json").read_text())
     assert j["effects"] == [], proc.stdout
     terms = [t for t in j["discovery"]["terms"] if t["significant"]]
@@ -213,3 +213,8 @@ def test_a_drive_force_capped_by_traction_is_a_throttle_limit_term_not_a_drag(fo
     assert p["Cm1"] - 1.5 * p["Cm2"] - 0.1 < slope < p["Cm1"] + 0.1, (slope, p["Cm1"])
     assert j["discovery"]["error_reduction"] >= 0.4, j["discovery"]["summary"]
     assert "d_{>" in proc.stdout, proc.stdout
+    # the model trained with the term predicts another drive of the car far better
+    other = generate(d / "traction_other", 16, "traction_limit")
+    before, after = (json.loads(run("dynlab", "eval-model", "--model", m, "--bag", other, *TOPICS, "--json",
+                                    timeout=300).stdout)["tve"]["tve"] for m in (model, out / "model"))
+    assert after < 0.5 * before, (before, after)
