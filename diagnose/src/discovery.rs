@@ -718,7 +718,7 @@ fn fitted_regions(reg: &Regression, one: &OneStep) -> Vec<Feature> {
     let sums = RowSums::of(reg, one.positions());
     let Area { lo, hi } = sums.area();
     let side = (hi[0] - lo[0]).max(hi[1] - lo[1]).max(1e-3);
-    let round = |v: f64| (v * 1000.0).round() / 1000.0;
+    let round = round3;
     let strip = |[a, d, w]: [f64; 3]| Atom::Strip { a, d, w };
     let strips = (0..STRIP_WIDTHS).flat_map(|k| {
         let q = 0.06 * (0.45f64 / 0.06).powf(k as f64 / (STRIP_WIDTHS - 1) as f64);
@@ -870,7 +870,7 @@ pub fn strip_through(
     while physics.custom_effects().iter().any(|c| c.name() == name) {
         name.push('_');
     }
-    let round = |v: f64| (v * 1000.0).round() / 1000.0;
+    let round = round3;
     let strip = |[a, d, w]: [f64; 3]| Feature::new(vec![Atom::Strip { a, d, w }]).ok();
     let mut failed = None;
     let mut gain = |shape: [f64; 3]| -> f64 {
@@ -952,7 +952,14 @@ fn fitted_speed_scale(
         one,
         physics,
         du,
-        scales.map(|v0| format!("delta*sat_vx2({})", round3(v0).max(1e-3))),
+        scales.map(|v0| {
+            vec![
+                Atom::Delta,
+                Atom::SatVx2 {
+                    v0: round3(v0).max(1e-3),
+                },
+            ]
+        }),
     )
 }
 
@@ -980,7 +987,6 @@ fn fitted_command_level(
     if !(top.is_finite() && top > 1e-3) {
         return None;
     }
-    let name = ["delta", "d"][input];
     let (lo, hi) = (0.1 * top, 0.95 * top);
     let levels = (0..LEVELS).map(|i| lo + (hi - lo) * i as f64 / (LEVELS - 1) as f64);
     best_of(
@@ -988,7 +994,12 @@ fn fitted_command_level(
         one,
         physics,
         du,
-        levels.map(|l| format!("{name}_beyond({})", round3(l).max(1e-3))),
+        levels.map(|l| {
+            vec![Atom::Beyond {
+                input,
+                level: round3(l).max(1e-3),
+            }]
+        }),
     )
 }
 
@@ -997,20 +1008,20 @@ fn round3(v: f64) -> f64 {
     (v * 1000.0).round() / 1000.0
 }
 
-/// Of the car features named `names` (one shape at a lattice of its scale), the one that
-/// explains the most of the regression `reg` alone on the transitions of `one`.
+/// Of the car features with the factors `shapes` (one shape at a lattice of its scale), the one
+/// that explains the most of the regression `reg` alone on the transitions of `one`.
 fn best_of(
     reg: &Regression,
     one: &OneStep,
     physics: &PhysicsModel,
     du: usize,
-    names: impl Iterator<Item = String>,
+    shapes: impl Iterator<Item = Vec<Atom>>,
 ) -> Option<Feature> {
     let n = one.trans.len();
     let sums = RowSums::of(reg, one.positions());
     let params = physics.params();
     let mut best: Option<(f64, Feature)> = None;
-    for feature in names.filter_map(|name| Feature::parse(&name).ok()) {
+    for feature in shapes.filter_map(|f| Feature::new(f).ok()) {
         let column = (0..n).map(|i| {
             let s = &one.s0[i * one.dp..(i + 1) * one.dp];
             let u = &one.u0[i * du..(i + 1) * du];
