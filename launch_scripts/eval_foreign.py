@@ -111,6 +111,7 @@ def one(root, case, car_seed, floor):
     joint = j.get("joint") or {}
     disc = j.get("discovery") or {}
     terms = [t["equation"].split("   [")[0] for t in disc.get("terms", []) if t["significant"]]
+    drift = j.get("drift") or {}
     return {
         "case": case, "seed": car_seed, "named": named,
         "right": (named == () if library is None else set(named) == set(library)),
@@ -119,6 +120,8 @@ def one(root, case, car_seed, floor):
         "params": joint.get("params", {}),
         "terms": terms, "terms_removed": disc.get("error_reduction") if terms else None,
         "floor": best,
+        "drift": (f"{drift['quantity']} {100 * drift['change']:+.0f} % ({100 * drift['error_reduction']:.0f} % removed)"
+                  if drift.get("significant") else None),
     }
 
 
@@ -148,7 +151,8 @@ def main():
         results = []
         for r in ex.map(lambda cs: one(root, *cs, a.floor), [(c, s) for c in cases for s in seeds]):
             print(f"{r['case']}, seed {r['seed']}: {', '.join(r['named']) or 'none'}; "
-                  f"{'; '.join(r['terms']) or 'no term'}", file=sys.stderr, flush=True)
+                  f"{'; '.join(r['terms']) or 'no term'}; drift {r['drift'] or 'none'}",
+                  file=sys.stderr, flush=True)
             results.append(r)
     # the nominal model's error on another drive without hidden effects: what no effect removes
     floor = {r["seed"]: r["before"] for r in results if r["case"] == "nominal"}
@@ -169,13 +173,14 @@ def main():
         removed = f"{100 * r['removed']:.0f} %" if r["removed"] is not None else "—"
         print(f"{r['case']:30} {r['seed']:>4}  {','.join(r['named']) or 'none':32} {removed:>8} "
               f"{share(r, floor.get(r['seed'])):>7} {share(r, r['floor']):>7}  "
-              f"{' / '.join(x for x in (fitted, terms) if x)}")
+              f"{' / '.join(x for x in (fitted, terms, r['drift'] and 'drift ' + r['drift']) if x)}")
     print("\nremoved: of the held-out 50-step error; excess: of what the error exceeds the nominal "
           "model's on the nominal drive of the same car (the case nominal; — without it); of true: of what it "
           "exceeds the generator's own car's error with its fitted effects on the same windows (--floor)")
     for c in cases:
         rs = [r for r in results if r["case"] == c]
-        print(f"{c:30} right {sum(r['right'] for r in rs)}/{len(rs)}")
+        print(f"{c:30} right {sum(r['right'] for r in rs)}/{len(rs)}, "
+              f"drift significant {sum(r['drift'] is not None for r in rs)}/{len(rs)}")
 
 
 if __name__ == "__main__":

@@ -46,6 +46,10 @@ pub struct DiagnoseArgs {
     /// default: within its physical bounds, pushing's measured depth `a` within ±10 %).
     #[arg(long)]
     refit_tolerance: Option<f64>,
+    /// Skip the drift check (whether a nominal parameter, e.g. the drive force as a battery
+    /// runs down, changes from the bag's first data to its last).
+    #[arg(long)]
+    no_drift: bool,
     /// Forward selection adds at most this many effects.
     #[arg(long, default_value_t = 3)]
     max_effects: usize,
@@ -111,6 +115,7 @@ pub fn run(args: DiagnoseArgs) -> anyhow::Result<()> {
         max_effects: args.max_effects,
         refit_params: args.refit.clone(),
         refit_tolerance: args.refit_tolerance,
+        drift: !args.no_drift,
         ..DiagnoseConfig::default()
     };
     let d = diagnose(&model, &data, &cfg)?;

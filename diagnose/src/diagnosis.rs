@@ -61,6 +61,7 @@
 //! moves the centre only along the push, by no more than the depth's tolerance moves the arm,
 //! is not counted.
 
+pub mod drift;
 pub mod html;
 pub mod simdata;
 
@@ -89,6 +90,7 @@ use crate::discovery::{
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
+pub use drift::Drift;
 pub use html::{diagnosis_html, diagnosis_page};
 
 /// Errors of a diagnosis (outcomes such as "nothing explains the residual" are data, not errors).
@@ -237,6 +239,9 @@ pub struct DiagnoseConfig {
     pub discover: bool,
     /// Settings of that search (its split, windows and seed are the diagnosis's own).
     pub discovery: DiscoveryConfig,
+    /// After the selection, check whether a nominal parameter changes along the recording (a
+    /// battery's charge, tyres that warm up; [`drift`]; physics models only; default true).
+    pub drift: bool,
     /// A patch effect whose disc holds at least this fraction of the data's positions is a
     /// global change of the nominal parameters, not a patch, and is not counted (`None`: the
     /// world's, [`DiagnoseConfig::patch_cover_limit`]).
@@ -265,6 +270,7 @@ impl Default for DiagnoseConfig {
             max_effects: 3,
             discover: true,
             discovery: DiscoveryConfig::default(),
+            drift: true,
             max_patch_cover: None,
         }
     }
@@ -555,6 +561,10 @@ pub struct Diagnosis {
     /// (`None`: not searched — a network model, or [`DiagnoseConfig::discover`] off).
     #[serde(default)]
     pub discovery: Option<Discovery>,
+    /// The drift check's best parameter ([`drift`]; `None`: not checked). It counts when
+    /// [`Drift::significant`].
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub drift: Option<Drift>,
     /// The world.
     pub world: World,
     /// The model kind.
@@ -607,6 +617,9 @@ struct Data<'a> {
     /// Per segment: the commands of its recording before it (at most
     /// [`EFFECT_HISTORY_S`]), from which effect states are rebuilt with the segment's own.
     history: &'a [Vec<f64>],
+    /// Per segment: the share of the data recorded before it, in `[0, 1)` (the drift check's
+    /// time).
+    place: &'a [f64],
     ds: usize,
     du: usize,
     k: usize,
@@ -911,6 +924,9 @@ struct Ctx<'a> {
     /// Grip strips that removed more than a disc set against them ([`Ctx::rival_term_note`]),
     /// tried again by the term search after the selection.
     strips: Mutex<Vec<(Feature, f64)>>,
+    /// The baseline's drift ([`Ctx::drift`]), checked before the selection: a candidate on what
+    /// a significant one changes must remove more ([`Ctx::drift_note`]).
+    drift: Option<Drift>,
 }
 
 fn mean(v: &[f64]) -> f64 {
@@ -1616,6 +1632,9 @@ impl<'a> Ctx<'a> {
         if counts && note.is_none() && self.pure_physics {
             note = self.rival_term_note(cur, e, &f, raw)?;
         }
+        if counts && note.is_none() {
+            note = self.drift_note(e, raw);
+        }
         let significant = counts && note.is_none();
         let mine: Vec<usize> = (0..f.names.len())
             .filter(|&i| f.owners[i] == Some(e))
@@ -1678,6 +1697,7 @@ impl<'a> Ctx<'a> {
             swap: [Vec::new(), Vec::new()],
             held_trajs: Vec::new(),
             strips: Mutex::default(),
+            drift: self.drift.clone(),
         }
     }
 
@@ -1827,31 +1847,57 @@ pub fn diagnose(
         });
     }
     let k = cfg.steps_for(world);
-    let (trajs, history) = match world {
+    // the share of the data recorded before each trajectory's first state
+    let total = data
+        .trajectories
+        .iter()
+        .map(|t| t.len())
+        .sum::<usize>()
+        .max(1) as f64;
+    let before: Vec<f64> = data
+        .trajectories
+        .iter()
+        .scan(0, |n, t| {
+            let b = *n;
+            *n += t.len();
+            Some(b as f64 / total)
+        })
+        .collect();
+    let (trajs, history, place) = match world {
         World::Car => {
             let len = (cfg.segment_s / data.pose_dt_s.max(1e-9)).round().max(2.0) as usize + 1;
             let keep = (EFFECT_HISTORY_S / data.pose_dt_s.max(1e-9)).ceil() as usize;
-            let history = segment_origins(&data.trajectories, len)
-                .into_iter()
-                .map(|(i, a, _)| {
+            let origins = segment_origins(&data.trajectories, len);
+            let history = origins
+                .iter()
+                .map(|&(i, a, _)| {
                     let u = &data.trajectories[i].u;
                     let du = data.trajectories[i].dim_u;
                     u[a.saturating_sub(keep) * du..a * du].to_vec()
                 })
                 .collect();
-            (segment(&data.trajectories, len), history)
+            let place = origins
+                .iter()
+                .map(|&(i, a, _)| before[i] + a as f64 / total)
+                .collect();
+            (segment(&data.trajectories, len), history, place)
         }
         // the loader gives one state per push (`dynlab_learn::dataset::one_state_per_push`)
         World::Push => (
             data.trajectories.clone(),
             vec![Vec::new(); data.trajectories.len()],
+            before,
         ),
     };
-    let (trajs, history): (Vec<StateTrajectory>, Vec<Vec<f64>>) = trajs
-        .into_iter()
-        .zip(history)
-        .filter(|(t, _)| t.len() > k)
-        .unzip();
+    let mut kept = (Vec::new(), Vec::new(), Vec::new());
+    for ((t, h), p) in trajs.into_iter().zip(history).zip(place) {
+        if t.len() > k {
+            kept.0.push(t);
+            kept.1.push(h);
+            kept.2.push(p);
+        }
+    }
+    let (trajs, history, place): (Vec<StateTrajectory>, Vec<Vec<f64>>, Vec<f64>) = kept;
     let lengths: Vec<usize> = trajs.iter().map(|t| t.len()).collect();
     let WindowSplit {
         split,
@@ -1903,7 +1949,8 @@ pub fn diagnose(
         World::Car => &[],
         World::Push => &PUSH_MEASURED,
     };
-    let refit: Vec<String> = if pure_physics && cfg.refit_nominal_for(world) {
+    // the identifiable nominal parameters: refitted (where set) and checked for a drift
+    let identifiable: Vec<String> = if pure_physics {
         base.default_free()
             .iter()
             .zip(base.param_specs())
@@ -1927,6 +1974,10 @@ pub fn diagnose(
     } else {
         Vec::new()
     };
+    let refit = match cfg.refit_nominal_for(world) {
+        true => identifiable.clone(),
+        false => Vec::new(),
+    };
     let have = base.effects();
     let positions = fit_w
         .iter()
@@ -1936,12 +1987,13 @@ pub fn diagnose(
             [t.s[w.start * ds], t.s[w.start * ds + 1]]
         })
         .collect();
-    let ctx = Ctx {
+    let mut ctx = Ctx {
         model,
         cfg,
         d: Data {
             trajs: &trajs,
             history: &history,
+            place: &place,
             ds,
             du,
             k,
@@ -1963,6 +2015,7 @@ pub fn diagnose(
         swap: swapped,
         held_trajs: split.validation.clone(),
         strips: Mutex::default(),
+        drift: None,
     };
     // the baseline: the model as given, or with its nominal parameters refitted on the fit half
     let given = Current::unscored(base.clone());
@@ -1993,6 +2046,16 @@ pub fn diagnose(
     };
     let baseline = cur.clone();
     let baseline_error = mean(&baseline.test);
+    // whether a nominal quantity changes along the recording, against the baseline
+    if cfg.drift {
+        let params: Vec<String> = identifiable
+            .iter()
+            .filter(|n| !measured.iter().any(|(m, _)| m == n))
+            .cloned()
+            .collect();
+        ctx.drift = ctx.drift(&baseline, &params);
+    }
+    let ctx = ctx;
     // the model as given, per held-out window, and where it spins
     let (given_test, given_calm) = if nominal_refit.is_empty() {
         (baseline.test.clone(), baseline.calm.clone())
@@ -2266,6 +2329,10 @@ pub fn diagnose(
                 .join(", ")
         ));
     }
+    let drift = ctx.drift.clone();
+    if let Some(d) = drift.as_ref().filter(|d| d.significant) {
+        summary.push_str(&format!("; drift: {}: {}", d.text(), d.advice()));
+    }
     Ok(Diagnosis {
         verdict,
         effects: added.iter().map(|e| e.name().to_string()).collect(),
@@ -2274,6 +2341,7 @@ pub fn diagnose(
         dropped,
         candidates,
         discovery,
+        drift,
         world,
         model_kind: model.kind().name().to_string(),
         model_effects: have.iter().map(|e| e.name().to_string()).collect(),
@@ -3000,6 +3068,24 @@ impl Diagnosis {
         }
         if let Some(disc) = &self.discovery {
             o.push_str(&disc.table());
+        }
+        if let Some(d) = &self.drift {
+            let tried: Vec<String> = d
+                .tried
+                .iter()
+                .map(|(n, r)| format!("{n} {:.1} %", 100.0 * r))
+                .collect();
+            let _ = writeln!(
+                o,
+                "drift check ({}; held-out error removed by each quantity fitted block by block, against one scale: {}): {}",
+                if d.significant {
+                    "significant"
+                } else {
+                    "no drift significant, the largest"
+                },
+                tried.join(", "),
+                d.text()
+            );
         }
         let _ = writeln!(o, "{}", self.summary);
         o

@@ -2,7 +2,7 @@
 
 use std::fmt::Write as _;
 
-use super::{Candidate, Diagnosis, coupled_text, cross_fit_text, g4, param_text};
+use super::{Candidate, Diagnosis, Drift, coupled_text, cross_fit_text, g4, param_text};
 
 fn esc(s: &str) -> String {
     s.replace('&', "&amp;")
@@ -162,6 +162,9 @@ pub fn diagnosis_html(d: &Diagnosis) -> String {
     if let Some(disc) = &d.discovery {
         o.push_str(&crate::discovery::discovery_html(disc));
     }
+    if let Some(dr) = &d.drift {
+        o.push_str(&drift_html(dr));
+    }
     if !d.correlations.is_empty() {
         let _ = writeln!(
             o,
@@ -247,4 +250,62 @@ pub fn diagnosis_page(d: &Diagnosis) -> String {
         "<!doctype html>\n<html><head><meta charset=\"utf-8\"><title>dynlab diagnosis</title></head><body>\n{}</body></html>\n",
         diagnosis_html(d)
     )
+}
+
+/// The drift check: the best parameter's drift, every parameter's share, and for a significant
+/// drift the plot of its per-block values against the line fitted over the recording.
+fn drift_html(dr: &Drift) -> String {
+    use crate::report::{Chart, LineChart, Series};
+    let mut o = String::new();
+    let _ = writeln!(
+        o,
+        "<h3>Did the robot change while it was recorded?</h3><p>{}.</p>",
+        esc(&dr.text())
+    );
+    let tried: Vec<String> = dr
+        .tried
+        .iter()
+        .map(|(n, r)| format!("{n} {:.1} %", 100.0 * r))
+        .collect();
+    let _ = writeln!(
+        o,
+        "<p>Held-out error removed by each quantity fitted block by block, against one scale for the whole recording: {}. {}</p>",
+        esc(&tried.join(", ")),
+        if dr.significant {
+            esc(&format!("Significant: {}.", dr.advice()))
+        } else {
+            "None significant: the robot stayed the same as far as these data tell.".to_string()
+        }
+    );
+    if dr.blocks.is_empty() {
+        return o;
+    }
+    let chart = LineChart::new(
+        format!("{} along the recording", dr.quantity),
+        "share of the recording before",
+        format!("scale of {} (× the model's)", dr.params.join(", ")),
+    )
+    .series(Series::points(
+        "fitted on one block alone",
+        dr.blocks.iter().map(|b| (b[0], b[1])).collect(),
+    ))
+    .series(Series::line(
+        "the line through them",
+        vec![(0.0, dr.start), (1.0, dr.end)],
+    ))
+    .hline(1.0, "the model's values");
+    match chart.render_svg() {
+        Ok(svg) => {
+            let _ = writeln!(
+                o,
+                "<figure>{svg}<figcaption>{} ({}) fitted on each sixth of the recording alone (points) and the line through them</figcaption></figure>",
+                esc(&dr.quantity),
+                esc(&dr.params.join(", "))
+            );
+        }
+        Err(e) => {
+            let _ = writeln!(o, "<p><i>plot not drawn: {}</i></p>", esc(&e.to_string()));
+        }
+    }
+    o
 }
