@@ -78,6 +78,10 @@ fn car_nominal_data_has_no_significant_effect() {
     assert!(d.candidates.iter().all(|c| !c.significant), "{}", d.table());
     assert!(d.summary.contains("no effect in the library explains"));
     assert!(!d.correlations.is_empty());
+    // the car stayed the same while it was recorded
+    let drift = d.drift.as_ref().expect("the drift is checked");
+    assert!(!drift.significant, "{}", d.table());
+    assert!(!d.summary.contains("drift:"), "{}", d.summary);
 }
 
 #[test]

@@ -583,3 +583,64 @@ impl Ctx<'_> {
         Some(best)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_line_through_the_blocks_is_not_tilted_by_one_block_far_off() {
+        // a staircase falling 30 % over the recording, one block fitted far off
+        let pts: Vec<[f64; 3]> = [1.0, 0.9, 0.52, 0.8, 0.72, 0.7]
+            .iter()
+            .enumerate()
+            .map(|(b, &s)| [centre(b), s, 0.01])
+            .collect();
+        let [mid, beta, sd] = trend(&pts);
+        assert!((mid - 0.85).abs() < 0.03, "{mid}");
+        assert!((-0.5..-0.3).contains(&beta), "{beta}");
+        assert!(sd > 0.0 && beta.abs() > 2.0 * sd, "{beta} ± {sd}");
+        // a scatter without a trend: the change is within two standard errors
+        let flat: Vec<[f64; 3]> = [1.02, 0.97, 1.03, 0.98, 1.01, 0.99]
+            .iter()
+            .enumerate()
+            .map(|(b, &s)| [centre(b), s, 0.01])
+            .collect();
+        let [_, beta, sd] = trend(&flat);
+        assert!(beta.abs() <= 2.0 * sd, "{beta} ± {sd}");
+        // two blocks give a line but no standard error
+        assert!(trend(&pts[..2])[2].is_nan());
+        assert_eq!(median(vec![3.0, 1.0, 2.0, 10.0]), 2.5);
+    }
+
+    #[test]
+    fn the_car_quantities_group_the_parameters_and_keep_the_rest_alone() {
+        let names: Vec<String> = ["Df", "Dr", "Cm1", "Cm2", "Cr0", "Iz"]
+            .iter()
+            .map(|s| s.to_string())
+            .collect();
+        let qs = quantities(World::Car, &names);
+        let got: Vec<(&str, Vec<&str>)> = qs
+            .iter()
+            .map(|q| {
+                (
+                    q.name.as_str(),
+                    q.params.iter().map(|s| s.as_str()).collect(),
+                )
+            })
+            .collect();
+        assert_eq!(
+            got,
+            [
+                ("the drive force", vec!["Cm1", "Cm2"]),
+                ("the tyres' grip", vec!["Df", "Dr"]),
+                ("the rolling resistance", vec!["Cr0"]),
+                ("Iz", vec!["Iz"]),
+            ]
+        );
+        // a quantity with none of its parameters identifiable is not tried
+        let qs = quantities(World::Car, &["Cm1".to_string()]);
+        assert_eq!(qs.len(), 1);
+        assert_eq!(qs[0].params, ["Cm1"]);
+    }
+}
