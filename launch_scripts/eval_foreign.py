@@ -2,8 +2,9 @@
 """The loop a user runs, on car data dynlab's simulator did not make (`foreign_car.py`): per car
 seed a nominal bag, `dynlab train --kind physics` on it, then per case a bag of the same car with
 hidden effects, `dynlab diagnose` on it. Prints per case and seed what was named, the held-out
-error removed, the fitted strengths against the truth and the terms found beyond the library;
-then per case how often the named set is exactly the hidden library effects.
+error removed, the fitted strengths against the truth, the terms found beyond the library and a
+significant drift of the car along the recording; then per case how often the named set is
+exactly the hidden library effects, and how often a drift was found.
 
 With `--floor`, each library case is diagnosed a second time with the generator's own car as the
 model (its parameters, the friction ellipse's weight and `v_reg` as the generator has them, only
