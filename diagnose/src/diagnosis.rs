@@ -239,8 +239,9 @@ pub struct DiagnoseConfig {
     pub discover: bool,
     /// Settings of that search (its split, windows and seed are the diagnosis's own).
     pub discovery: DiscoveryConfig,
-    /// After the selection, check whether a nominal parameter changes along the recording (a
-    /// battery's charge, tyres that warm up; [`drift`]; physics models only; default true).
+    /// Check whether a quantity of the nominal model changes along the recording (a battery's
+    /// charge, tyres that warm up; [`drift`], on the baseline; physics models only; default
+    /// true).
     pub drift: bool,
     /// A patch effect whose disc holds at least this fraction of the data's positions is a
     /// global change of the nominal parameters, not a patch, and is not counted (`None`: the
@@ -561,8 +562,8 @@ pub struct Diagnosis {
     /// (`None`: not searched — a network model, or [`DiagnoseConfig::discover`] off).
     #[serde(default)]
     pub discovery: Option<Discovery>,
-    /// The drift check's best parameter ([`drift`]; `None`: not checked). It counts when
-    /// [`Drift::significant`].
+    /// The drift check's quantity that removes the most ([`drift`], on the baseline; `None`:
+    /// not checked). It counts when [`Drift::significant`].
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub drift: Option<Drift>,
     /// The world.
@@ -924,9 +925,6 @@ struct Ctx<'a> {
     /// Grip strips that removed more than a disc set against them ([`Ctx::rival_term_note`]),
     /// tried again by the term search after the selection.
     strips: Mutex<Vec<(Feature, f64)>>,
-    /// The baseline's drift ([`Ctx::drift`]), checked before the selection: a candidate on what
-    /// a significant one changes must remove more ([`Ctx::drift_note`]).
-    drift: Option<Drift>,
 }
 
 fn mean(v: &[f64]) -> f64 {
@@ -1632,9 +1630,7 @@ impl<'a> Ctx<'a> {
         if counts && note.is_none() && self.pure_physics {
             note = self.rival_term_note(cur, e, &f, raw)?;
         }
-        if counts && note.is_none() {
-            note = self.drift_note(e, raw);
-        }
+
         let significant = counts && note.is_none();
         let mine: Vec<usize> = (0..f.names.len())
             .filter(|&i| f.owners[i] == Some(e))
@@ -1697,7 +1693,6 @@ impl<'a> Ctx<'a> {
             swap: [Vec::new(), Vec::new()],
             held_trajs: Vec::new(),
             strips: Mutex::default(),
-            drift: self.drift.clone(),
         }
     }
 
@@ -1987,7 +1982,7 @@ pub fn diagnose(
             [t.s[w.start * ds], t.s[w.start * ds + 1]]
         })
         .collect();
-    let mut ctx = Ctx {
+    let ctx = Ctx {
         model,
         cfg,
         d: Data {
@@ -2015,7 +2010,6 @@ pub fn diagnose(
         swap: swapped,
         held_trajs: split.validation.clone(),
         strips: Mutex::default(),
-        drift: None,
     };
     // the baseline: the model as given, or with its nominal parameters refitted on the fit half
     let given = Current::unscored(base.clone());
@@ -2047,15 +2041,17 @@ pub fn diagnose(
     let baseline = cur.clone();
     let baseline_error = mean(&baseline.test);
     // whether a nominal quantity changes along the recording, against the baseline
-    if cfg.drift {
-        let params: Vec<String> = identifiable
-            .iter()
-            .filter(|n| !measured.iter().any(|(m, _)| m == n))
-            .cloned()
-            .collect();
-        ctx.drift = ctx.drift(&baseline, &params);
-    }
-    let ctx = ctx;
+    let drift = match cfg.drift {
+        true => {
+            let params: Vec<String> = identifiable
+                .iter()
+                .filter(|n| !measured.iter().any(|(m, _)| m == n))
+                .cloned()
+                .collect();
+            ctx.drift(&baseline, &params)
+        }
+        false => None,
+    };
     // the model as given, per held-out window, and where it spins
     let (given_test, given_calm) = if nominal_refit.is_empty() {
         (baseline.test.clone(), baseline.calm.clone())
@@ -2329,7 +2325,6 @@ pub fn diagnose(
                 .join(", ")
         ));
     }
-    let drift = ctx.drift.clone();
     if let Some(d) = drift.as_ref().filter(|d| d.significant) {
         summary.push_str(&format!("; drift: {}: {}", d.text(), d.advice()));
     }
@@ -3070,20 +3065,15 @@ impl Diagnosis {
             o.push_str(&disc.table());
         }
         if let Some(d) = &self.drift {
-            let tried: Vec<String> = d
-                .tried
-                .iter()
-                .map(|(n, r)| format!("{n} {:.1} %", 100.0 * r))
-                .collect();
             let _ = writeln!(
                 o,
-                "drift check ({}; held-out error removed by each quantity fitted block by block, against one scale: {}): {}",
+                "drift check ({}; held-out error removed by each quantity's line through its blocks, against their median: {}): {}",
                 if d.significant {
                     "significant"
                 } else {
                     "no drift significant, the largest"
                 },
-                tried.join(", "),
+                d.tried_text(),
                 d.text()
             );
         }

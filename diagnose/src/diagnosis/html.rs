@@ -262,15 +262,10 @@ fn drift_html(dr: &Drift) -> String {
         "<h3>Did the robot change while it was recorded?</h3><p>{}.</p>",
         esc(&dr.text())
     );
-    let tried: Vec<String> = dr
-        .tried
-        .iter()
-        .map(|(n, r)| format!("{n} {:.1} %", 100.0 * r))
-        .collect();
     let _ = writeln!(
         o,
-        "<p>Held-out error removed by each quantity fitted block by block, against one scale for the whole recording: {}. {}</p>",
-        esc(&tried.join(", ")),
+        "<p>Held-out error removed by each quantity's line through its blocks, against their median: {}. {}</p>",
+        esc(&dr.tried_text()),
         if dr.significant {
             esc(&format!("Significant: {}.", dr.advice()))
         } else {
