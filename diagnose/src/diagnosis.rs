@@ -1630,7 +1630,6 @@ impl<'a> Ctx<'a> {
         if counts && note.is_none() && self.pure_physics {
             note = self.rival_term_note(cur, e, &f, raw)?;
         }
-
         let significant = counts && note.is_none();
         let mine: Vec<usize> = (0..f.names.len())
             .filter(|&i| f.owners[i] == Some(e))
