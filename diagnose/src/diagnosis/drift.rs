@@ -373,15 +373,18 @@ impl Ctx<'_> {
             self.cfg.iterations,
             &mut eval,
         );
-        // clustered by segment: residual rows are (step, window, dimension)
+        // clustered by segment, rows as `drifting_errors` gives them: block by block, then
+        // (step, window, dimension)
         let (r, jac) = eval(&res.theta, true);
-        let cluster: Vec<usize> = (0..k)
-            .flat_map(|_| {
-                fit_w
-                    .iter()
-                    .flat_map(|w| std::iter::repeat_n(w.trajectory, ds))
-            })
-            .collect();
+        let mut cluster = Vec::with_capacity(r.len());
+        for b in 0..DRIFT_BLOCKS {
+            let here: Vec<&Window> = fit_w.iter().filter(|w| self.block(w) == b).collect();
+            for _ in 0..k {
+                for w in &here {
+                    cluster.extend(std::iter::repeat_n(w.trajectory, ds));
+                }
+            }
+        }
         let sd = cluster_jackknife_std(&jac, &r, 1, &[true], &cluster)[0];
         [res.theta[0], if sd.is_finite() { sd } else { res.std[0] }]
     }
