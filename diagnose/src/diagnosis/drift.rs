@@ -587,25 +587,25 @@ impl Ctx<'_> {
 mod tests {
     use super::*;
 
-    #[test]
-    fn the_line_through_the_blocks_is_not_tilted_by_one_block_far_off() {
-        // a staircase falling 30 % over the recording, one block fitted far off
-        let pts: Vec<[f64; 3]> = [1.0, 0.9, 0.52, 0.8, 0.72, 0.7]
+    /// Blocks with these scales, one per block from the first.
+    fn blocks(scales: &[f64]) -> Vec<[f64; 3]> {
+        scales
             .iter()
             .enumerate()
             .map(|(b, &s)| [centre(b), s, 0.01])
-            .collect();
+            .collect()
+    }
+
+    #[test]
+    fn the_line_through_the_blocks_is_not_tilted_by_one_block_far_off() {
+        // a staircase falling 30 % over the recording, one block fitted far off
+        let pts = blocks(&[1.0, 0.9, 0.52, 0.8, 0.72, 0.7]);
         let [mid, beta, sd] = trend(&pts);
         assert!((mid - 0.85).abs() < 0.03, "{mid}");
         assert!((-0.5..-0.3).contains(&beta), "{beta}");
         assert!(sd > 0.0 && beta.abs() > 2.0 * sd, "{beta} ± {sd}");
         // a scatter without a trend: the change is within two standard errors
-        let flat: Vec<[f64; 3]> = [1.02, 0.97, 1.03, 0.98, 1.01, 0.99]
-            .iter()
-            .enumerate()
-            .map(|(b, &s)| [centre(b), s, 0.01])
-            .collect();
-        let [_, beta, sd] = trend(&flat);
+        let [_, beta, sd] = trend(&blocks(&[1.02, 0.97, 1.03, 0.98, 1.01, 0.99]));
         assert!(beta.abs() <= 2.0 * sd, "{beta} ± {sd}");
         // two blocks give a line but no standard error
         assert!(trend(&pts[..2])[2].is_nan());
