@@ -433,7 +433,9 @@ impl Effect {
             }
             Effect::CommandDelay => "transport delay of both commands (the car acts late)",
             Effect::GripPatch => "floor patch with different tire grip",
-            Effect::ComOffset => "centre of mass away from the geometric centre",
+            Effect::ComOffset => {
+                "centre of mass away from the geometric centre (to a point pusher, o_y is nearly the same as the contact sitting −o_y off its commanded point along the face: a pusher's calibration, a finger's corner)"
+            }
             Effect::TableTilt => "tilted table: downhill drift while sliding",
             Effect::FrictionPatch => "table patch with different friction",
             Effect::PusherFriction => "friction at the pusher contact (sticking/sliding)",
