@@ -91,3 +91,97 @@ fn diagnose_rejects_a_bag_of_the_other_robot_with_a_clear_message() {
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(err.contains("/car/pose"), "{err}");
 }
+
+fn nominal_push_model(dir: &Path) {
+    let m = Model::new(
+        ModelKind::Physics,
+        World::Push,
+        2.0,
+        None,
+        None,
+        Some(PhysicsModel::pushing(&[]).unwrap()),
+        default_physics_solver(World::Push),
+    )
+    .unwrap();
+    save_model(&m, dir, None, serde_json::Map::new()).unwrap();
+}
+
+/// `dynlab diagnose` on `bag` with `--effects com_offset`: (terminal, diagnosis.json, html).
+fn diagnose_push(model: &Path, bag: &Path, out: &Path) -> (String, serde_json::Value, String) {
+    let o = Command::new(env!("CARGO_BIN_EXE_dynlab"))
+        .args([
+            "diagnose",
+            "--no-drift",
+            "--effects",
+            "com_offset",
+            "--model",
+        ])
+        .arg(model)
+        .arg("--bag")
+        .arg(bag)
+        .arg("--out")
+        .arg(out)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let j = serde_json::from_str(&std::fs::read_to_string(out.join("diagnosis.json")).unwrap())
+        .unwrap();
+    let html = std::fs::read_to_string(out.join("diagnosis.html")).unwrap();
+    (String::from_utf8_lossy(&o.stdout).into_owned(), j, html)
+}
+
+#[test]
+fn pushes_that_all_start_at_one_pose_get_a_caution_that_place_and_heading_go_together() {
+    let tmp = tempfile::tempdir().unwrap();
+    let model = tmp.path().join("model");
+    nominal_push_model(&model);
+    // the bundled bag's world and explorer, every episode from the scenario's start
+    let explore = tmp.path().join("explore.toml");
+    std::fs::write(&explore, "start_jitter = [0.0, 0.0, 0.0]\n").unwrap();
+    let bag = tmp.path().join("one_start");
+    let o = Command::new(env!("CARGO_BIN_EXE_dynlab"))
+        .args([
+            "collect",
+            "push",
+            "--episodes",
+            "20",
+            "--seed",
+            "7",
+            "--scenario",
+        ])
+        .arg(repo("launch_scripts/scenarios/push_com_offset.toml"))
+        .arg("--explore")
+        .arg(&explore)
+        .arg("--out")
+        .arg(&bag)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let (stdout, j, html) = diagnose_push(&model, &bag, &tmp.path().join("d1"));
+    assert_eq!(j["verdict"], "com_offset", "{stdout}");
+    assert_eq!(j["one_start"]["trajectories"], 20, "{j}");
+    let spread = j["one_start"]["spread"][0].as_f64().unwrap();
+    assert!(spread <= 0.01, "{spread}");
+    assert!(
+        j["summary"]
+            .as_str()
+            .unwrap()
+            .contains("caution: all 20 trajectories start at one pose"),
+        "{}",
+        j["summary"]
+    );
+    assert!(
+        stdout.contains("data: every one of the 20 trajectories starts at"),
+        "{stdout}"
+    );
+    assert!(html.contains("Data: every one of the 20 trajectories"));
+    // the bundled bag's starts are spread (±5 cm, ±45°): no caution
+    let (stdout, j, _) = diagnose_push(
+        &model,
+        &repo("bags/push_com_offset"),
+        &tmp.path().join("d2"),
+    );
+    assert_eq!(j["verdict"], "com_offset", "{stdout}");
+    assert!(j["one_start"].is_null(), "{j}");
+    assert!(!stdout.contains("caution") && !stdout.contains("data: every one"));
+}

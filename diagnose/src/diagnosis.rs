@@ -535,6 +535,68 @@ pub struct Correlation {
     pub r: f64,
 }
 
+/// Every trajectory of pushing data starts at (nearly) one pose: within [`ONE_START_M`] of its
+/// place and [`ONE_START_RAD`] of its heading (Tu & Lin's data set starts all 100 at
+/// (0.4, 0, 0.2π)). A block's place on the table and its heading then go together, step by step
+/// from that start, so an effect of the place (a `friction_patch`, a `table_tilt`) and one of
+/// the heading (a grain of the table, a flat pusher held at one world yaw) explain the same
+/// residual; only data from other starts tell them apart.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct OneStart {
+    /// Trajectories.
+    pub trajectories: usize,
+    /// The first trajectory's start `(x, y, θ)` \[m, m, rad\].
+    pub pose: [f64; 3],
+    /// The largest distance of another start from it \[m\] and the largest heading
+    /// difference \[rad\].
+    pub spread: [f64; 2],
+}
+
+/// Starts within this distance \[m\] of the first count as one ([`OneStart`]): a pose
+/// measurement's noise, not a choice of start.
+pub const ONE_START_M: f64 = 0.01;
+/// … and within this heading difference \[rad\].
+pub const ONE_START_RAD: f64 = 0.05;
+
+impl OneStart {
+    /// The trajectories' (at least three) one start, if they have one: the first three state
+    /// dimensions `(x, y, θ)` of each trajectory's first state.
+    pub fn of(trajs: &[StateTrajectory]) -> Option<OneStart> {
+        let starts: Vec<&[f64]> = trajs
+            .iter()
+            .filter(|t| t.dim_s >= 3 && t.s.len() >= 3)
+            .map(|t| &t.s[..3])
+            .collect();
+        let first = starts.first()?;
+        if starts.len() < 3 {
+            return None;
+        }
+        let (mut d, mut a) = (0.0f64, 0.0f64);
+        for p in &starts {
+            d = d.max((p[0] - first[0]).hypot(p[1] - first[1]));
+            a = a.max(wrap_angle(p[2] - first[2]).abs());
+        }
+        (d <= ONE_START_M && a <= ONE_START_RAD).then(|| OneStart {
+            trajectories: starts.len(),
+            pose: [first[0], first[1], first[2]],
+            spread: [d, a],
+        })
+    }
+
+    /// The caution, in words.
+    pub fn text(&self) -> String {
+        format!(
+            "every one of the {} trajectories starts at ({}, {}, {} rad) (within {} m, {} rad): where the block is and how it is turned go together in these data, so an effect of the place on the table (friction_patch, table_tilt) and one of the block's heading (a grain of the table, a flat pusher held at one world yaw) look alike; record pushes from other start poses to tell them apart",
+            self.trajectories,
+            g4(self.pose[0]),
+            g4(self.pose[1]),
+            g4(self.pose[2]),
+            g4(self.spread[0]),
+            g4(self.spread[1])
+        )
+    }
+}
+
 /// What [`diagnose`] found.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Diagnosis {
@@ -566,6 +628,11 @@ pub struct Diagnosis {
     /// not checked). It counts when [`Drift::significant`].
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub drift: Option<Drift>,
+    /// Pushing data whose every trajectory starts at (nearly) one pose ([`OneStart`]; `None`:
+    /// the starts differ, or car data). Where the block is and how it is turned then go
+    /// together, and an effect of the place and one of the heading look alike.
+    #[serde(default)]
+    pub one_start: Option<OneStart>,
     /// The world.
     pub world: World,
     /// The model kind.
@@ -2327,6 +2394,17 @@ pub fn diagnose(
     if let Some(d) = drift.as_ref().filter(|d| d.significant) {
         summary.push_str(&format!("; drift: {}: {}", d.text(), d.advice()));
     }
+    let one_start = match world {
+        World::Push => OneStart::of(&trajs),
+        World::Car => None,
+    };
+    let found_term = discovery.as_ref().is_some_and(|x| x.effect.is_some());
+    if let Some(o) = one_start.as_ref().filter(|_| joint.is_some() || found_term) {
+        summary.push_str(&format!(
+            "; caution: all {} trajectories start at one pose, so an effect of the place on the table and one of the block's heading look alike (record pushes from other starts to tell them apart)",
+            o.trajectories
+        ));
+    }
     Ok(Diagnosis {
         verdict,
         effects: added.iter().map(|e| e.name().to_string()).collect(),
@@ -2336,6 +2414,7 @@ pub fn diagnose(
         candidates,
         discovery,
         drift,
+        one_start,
         world,
         model_kind: model.kind().name().to_string(),
         model_effects: have.iter().map(|e| e.name().to_string()).collect(),
@@ -2975,6 +3054,9 @@ impl Diagnosis {
         for b in &self.nominal_on_bound {
             let _ = writeln!(o, "  on a bound: the baseline's {b}");
         }
+        if let Some(s) = &self.one_start {
+            let _ = writeln!(o, "data: {}", s.text());
+        }
         for step in &self.selection {
             let _ = writeln!(
                 o,
@@ -3190,6 +3272,65 @@ pub(crate) fn g4(v: f64) -> String {
 mod tests {
     use super::*;
     use crate::discovery::normal_quantile;
+
+    fn starts(poses: &[[f64; 3]]) -> Vec<StateTrajectory> {
+        poses
+            .iter()
+            .map(|p| StateTrajectory {
+                s: [p.as_slice(), &[p[0] + 0.05, p[1], p[2]]].concat(),
+                u: vec![0.0; 6],
+                dim_s: 3,
+                dim_u: 3,
+                dt: 2.0,
+            })
+            .collect()
+    }
+
+    #[test]
+    fn one_start_is_every_trajectory_from_one_pose_within_the_noise() {
+        let pi = std::f64::consts::PI;
+        let same = starts(&[
+            [0.4, 0.0, 0.63],
+            [0.403, -0.004, 0.61],
+            [0.398, 0.002, 0.67],
+        ]);
+        let o = OneStart::of(&same).unwrap();
+        assert_eq!((o.trajectories, o.pose), (3, [0.4, 0.0, 0.63]));
+        assert!((o.spread[0] - 0.005).abs() < 1e-12 && (o.spread[1] - 0.04).abs() < 1e-12);
+        assert!(
+            o.text()
+                .contains("every one of the 3 trajectories starts at (0.4000, 0, 0.6300 rad)")
+        );
+        // a heading across ±π is one heading
+        assert!(
+            OneStart::of(&starts(&[
+                [0.0, 0.0, pi - 0.01],
+                [0.0, 0.0, -pi + 0.01],
+                [0.0, 0.0, pi]
+            ]))
+            .is_some()
+        );
+        // a start 2 cm away, or turned by 0.1 rad, is another start
+        assert!(
+            OneStart::of(&starts(&[
+                [0.4, 0.0, 0.6],
+                [0.4, 0.02, 0.6],
+                [0.4, 0.0, 0.6]
+            ]))
+            .is_none()
+        );
+        assert!(
+            OneStart::of(&starts(&[
+                [0.4, 0.0, 0.6],
+                [0.4, 0.0, 0.7],
+                [0.4, 0.0, 0.6]
+            ]))
+            .is_none()
+        );
+        // two trajectories say nothing about how the data were started
+        assert!(OneStart::of(&starts(&[[0.4, 0.0, 0.6], [0.4, 0.0, 0.6]])).is_none());
+        assert!(OneStart::of(&[]).is_none());
+    }
 
     /// The cross-fit's windows swap the halves: it fits on held-out segments only and scores
     /// on fit-half segments only, with at most the fit and score counts.

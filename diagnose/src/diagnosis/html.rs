@@ -78,6 +78,9 @@ pub fn diagnosis_html(d: &Diagnosis) -> String {
             esc(b)
         );
     }
+    if let Some(s) = &d.one_start {
+        let _ = writeln!(o, "<p>Data: {}.</p>", esc(&s.text()));
+    }
     for step in &d.selection {
         let _ = writeln!(
             o,
