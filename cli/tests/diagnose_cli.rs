@@ -13,15 +13,20 @@ fn repo(p: &str) -> std::path::PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join(p)
 }
 
-fn nominal_car_model(dir: &Path) {
+/// The world's nominal physics model at its documented values, saved to `dir`.
+fn nominal_model(dir: &Path, world: World) {
+    let (physics, dt) = match world {
+        World::Car => (PhysicsModel::car(&[]), 0.01),
+        World::Push => (PhysicsModel::pushing(&[]), 2.0),
+    };
     let m = Model::new(
         ModelKind::Physics,
-        World::Car,
-        0.01,
+        world,
+        dt,
         None,
         None,
-        Some(PhysicsModel::car(&[]).unwrap()),
-        default_physics_solver(World::Car),
+        Some(physics.unwrap()),
+        default_physics_solver(world),
     )
     .unwrap();
     save_model(&m, dir, None, serde_json::Map::new()).unwrap();
@@ -31,7 +36,7 @@ fn nominal_car_model(dir: &Path) {
 fn diagnose_names_the_steering_offset_of_the_bundled_bag_and_writes_json_and_html() {
     let tmp = tempfile::tempdir().unwrap();
     let model = tmp.path().join("model");
-    nominal_car_model(&model);
+    nominal_model(&model, World::Car);
     let out = tmp.path().join("diag");
     let o = Command::new(env!("CARGO_BIN_EXE_dynlab"))
         .args(["diagnose", "--model"])
@@ -77,7 +82,7 @@ fn diagnose_names_the_steering_offset_of_the_bundled_bag_and_writes_json_and_htm
 fn diagnose_rejects_a_bag_of_the_other_robot_with_a_clear_message() {
     let tmp = tempfile::tempdir().unwrap();
     let model = tmp.path().join("model");
-    nominal_car_model(&model);
+    nominal_model(&model, World::Car);
     let o = Command::new(env!("CARGO_BIN_EXE_dynlab"))
         .args(["diagnose", "--model"])
         .arg(&model)
@@ -90,20 +95,6 @@ fn diagnose_rejects_a_bag_of_the_other_robot_with_a_clear_message() {
     assert!(!o.status.success());
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(err.contains("/car/pose"), "{err}");
-}
-
-fn nominal_push_model(dir: &Path) {
-    let m = Model::new(
-        ModelKind::Physics,
-        World::Push,
-        2.0,
-        None,
-        None,
-        Some(PhysicsModel::pushing(&[]).unwrap()),
-        default_physics_solver(World::Push),
-    )
-    .unwrap();
-    save_model(&m, dir, None, serde_json::Map::new()).unwrap();
 }
 
 /// `dynlab diagnose` on `bag` with `--effects com_offset`: (terminal, diagnosis.json, html).
@@ -134,7 +125,7 @@ fn diagnose_push(model: &Path, bag: &Path, out: &Path) -> (String, serde_json::V
 fn pushes_that_all_start_at_one_pose_get_a_caution_that_place_and_heading_go_together() {
     let tmp = tempfile::tempdir().unwrap();
     let model = tmp.path().join("model");
-    nominal_push_model(&model);
+    nominal_model(&model, World::Push);
     // the bundled bag's world and explorer, every episode from the scenario's start
     let explore = tmp.path().join("explore.toml");
     std::fs::write(&explore, "start_jitter = [0.0, 0.0, 0.0]\n").unwrap();
