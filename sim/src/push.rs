@@ -158,6 +158,14 @@ pub struct PusherParams {
     pub location_margin: f64,
     /// Time the block is left to settle after the pusher is lifted \[s\]. Default 0.2.
     pub settle_time: f64,
+    /// Half the width of a flat pusher \[m\]: a pad `2·radius` thick and this wide on each
+    /// side, held at the world yaw `pad_yaw` whatever the block's heading, as a gripper kept at
+    /// one orientation pushes (Tu & Lin's Panda). Turned against the pushed face, it touches
+    /// with a corner, off the commanded point, and the block turns until face and pad align.
+    /// Not in the diagnosis library. Default 0: the disc of `radius`.
+    pub pad_half_width: f64,
+    /// World yaw of the flat pusher's face normal \[rad\] (with `pad_half_width > 0`). Default 0.
+    pub pad_yaw: f64,
 }
 
 impl Default for PusherParams {
@@ -170,6 +178,8 @@ impl Default for PusherParams {
             push_scale: 0.1,
             location_margin: 0.95,
             settle_time: 0.2,
+            pad_half_width: 0.0,
+            pad_yaw: 0.0,
         }
     }
 }
@@ -557,6 +567,8 @@ impl PushScenario {
         positive("pusher.push_scale", p.push_scale)?;
         in_range("pusher.location_margin", p.location_margin, 0.0, 1.0)?;
         non_negative("pusher.settle_time", p.settle_time)?;
+        non_negative("pusher.pad_half_width", p.pad_half_width)?;
+        finite("pusher.pad_yaw", p.pad_yaw)?;
         positive("sim.dt", self.sim.dt)?;
         if self.sim.dt > 0.02 {
             return Err(SimError::invalid(
@@ -846,12 +858,15 @@ impl PushWorld {
         let pusher_body = RigidBodyBuilder::kinematic_position_based()
             .translation(Vector::new(-10.0, -10.0))
             .build();
-        let pusher_collider = ColliderBuilder::ball(s.pusher.radius as f32)
-            .friction(pusher_mu as f32)
-            .friction_combine_rule(CoefficientCombineRule::Min)
-            .restitution(0.0)
-            .enabled(false)
-            .build();
+        let pusher_collider = match s.pusher.pad_half_width > 0.0 {
+            true => ColliderBuilder::cuboid(s.pusher.radius as f32, s.pusher.pad_half_width as f32),
+            false => ColliderBuilder::ball(s.pusher.radius as f32),
+        }
+        .friction(pusher_mu as f32)
+        .friction_combine_rule(CoefficientCombineRule::Min)
+        .restitution(0.0)
+        .enabled(false)
+        .build();
         let pusher = world.bodies.insert(pusher_body);
         let pusher_collider =
             world
@@ -982,9 +997,16 @@ impl PushWorld {
         let s = &self.scenario;
         let pose = self.block_pose();
         let [a, b] = s.block.size;
+        // how far the pusher reaches towards the face ahead of its centre: a flat pusher turned
+        // against the face by β reaches with a corner
+        let beta = s.pusher.pad_yaw - pose.theta;
         let r = s.pusher.radius;
+        let reach = match s.pusher.pad_half_width > 0.0 {
+            true => r * beta.cos().abs() + s.pusher.pad_half_width * beta.sin().abs(),
+            false => r,
+        };
         let lateral = action.location * 0.5 * b * s.pusher.location_margin;
-        let touch = [-0.5 * a - r, lateral];
+        let touch = [-0.5 * a - reach, lateral];
         let start = [touch[0] - s.pusher.approach_gap, lateral];
         let push_len = action.length * s.pusher.push_scale;
         let end = [
@@ -1006,9 +1028,12 @@ impl PushWorld {
         let settle_steps = (s.pusher.settle_time / dt).ceil() as u64;
         {
             let pusher = &mut self.world.bodies[self.pusher];
-            let p0 = Vector::new(path[0][0] as f32, path[0][1] as f32);
-            pusher.set_translation(p0, true);
-            pusher.set_next_kinematic_translation(p0);
+            let p0 = Pose::new(
+                Vector::new(path[0][0] as f32, path[0][1] as f32),
+                s.pusher.pad_yaw as f32,
+            );
+            pusher.set_position(p0, true);
+            pusher.set_next_kinematic_position(p0);
         }
         if let Some(c) = self.world.colliders.get_mut(self.pusher_collider) {
             c.set_enabled(true);

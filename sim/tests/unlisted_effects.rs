@@ -673,4 +673,51 @@ fn bundled_scenarios_of_the_new_effects_load_with_the_documented_values() {
     let p = PushScenario::from_file(scenarios().join("push_anisotropic.toml")).unwrap();
     assert_eq!(p.effects.active(), ["anisotropic_friction"]);
     assert_eq!(p.effects.anisotropic_friction.unwrap().ratio, 2.0);
+    let p = PushScenario::from_file(scenarios().join("push_flat_pusher.toml")).unwrap();
+    assert!(p.effects.active().is_empty());
+    assert_eq!((p.pusher.pad_half_width, p.pusher.pad_yaw), (0.012, 0.0));
+}
+
+fn flat_pusher(half_width: f64, yaw: f64) -> PushScenario {
+    let mut s = PushScenario::free();
+    s.pusher.pad_half_width = half_width;
+    s.pusher.pad_yaw = yaw;
+    s
+}
+
+#[test]
+fn a_flat_pusher_at_one_world_yaw_turns_the_block_towards_its_face() {
+    // A centred straight push: the disc pushes the block straight on; a pad held at world yaw 0
+    // touches a block turned by ±0.5 rad with one corner, off the face's middle, and the block
+    // turns back towards the pad's yaw.
+    let a = PushAction::new(0.0, 0.0, 1.0);
+    for theta in [0.5, -0.5] {
+        let start = Pose2::new(0.4, 0.0, theta);
+        let disc = push(&PushScenario::free(), start, a);
+        assert!(disc.contact_made);
+        assert!(
+            (disc.final_pose.theta - theta).abs() < 0.01,
+            "disc: {disc:?}"
+        );
+        let pad = push(&flat_pusher(0.015, 0.0), start, a);
+        assert!(pad.contact_made && !pad.lost_contact, "{pad:?}");
+        let turned = pad.final_pose.theta - theta;
+        assert!(
+            turned * theta.signum() < -0.05,
+            "θ {theta}: the pad turned the block by {turned}"
+        );
+        assert!(pad.final_pose.distance(start) > 0.05, "{pad:?}");
+    }
+    // aligned with the face, the pad pushes the block straight on like the disc
+    let start = Pose2::new(0.4, 0.0, 0.3);
+    let pad = push(&flat_pusher(0.015, 0.3), start, a);
+    assert!((pad.final_pose.theta - 0.3).abs() < 0.01, "{pad:?}");
+    // bad values name the key
+    for (w, yaw, key) in [
+        (-0.01, 0.0, "pusher.pad_half_width"),
+        (0.01, f64::NAN, "pusher.pad_yaw"),
+    ] {
+        let e = PushWorld::new(&flat_pusher(w, yaw)).expect_err("refused");
+        assert!(e.to_string().contains(key), "{e}");
+    }
 }
