@@ -567,10 +567,10 @@ impl OneStart {
             .filter(|t| t.dim_s >= 3 && t.s.len() >= 3)
             .map(|t| &t.s[..3])
             .collect();
-        let first = starts.first()?;
         if starts.len() < 3 {
             return None;
         }
+        let first = starts[0];
         let (mut d, mut a) = (0.0f64, 0.0f64);
         for p in &starts {
             d = d.max((p[0] - first[0]).hypot(p[1] - first[1]));
@@ -583,7 +583,15 @@ impl OneStart {
         })
     }
 
-    /// The caution, in words.
+    /// The caution at the end of a diagnosis's summary.
+    pub fn caution(&self) -> String {
+        format!(
+            "all {} trajectories start at one pose, so an effect of the place on the table and one of the block's heading look alike (record pushes from other starts to tell them apart)",
+            self.trajectories
+        )
+    }
+
+    /// The caution in full, with the start and the spread.
     pub fn text(&self) -> String {
         format!(
             "every one of the {} trajectories starts at ({}, {}, {} rad) (within {} m, {} rad): where the block is and how it is turned go together in these data, so an effect of the place on the table (friction_patch, table_tilt) and one of the block's heading (a grain of the table, a flat pusher held at one world yaw) look alike; record pushes from other start poses to tell them apart",
@@ -2400,10 +2408,7 @@ pub fn diagnose(
     };
     let found_term = discovery.as_ref().is_some_and(|x| x.effect.is_some());
     if let Some(o) = one_start.as_ref().filter(|_| joint.is_some() || found_term) {
-        summary.push_str(&format!(
-            "; caution: all {} trajectories start at one pose, so an effect of the place on the table and one of the block's heading look alike (record pushes from other starts to tell them apart)",
-            o.trajectories
-        ));
+        summary.push_str(&format!("; caution: {}", o.caution()));
     }
     Ok(Diagnosis {
         verdict,
@@ -3301,34 +3306,29 @@ mod tests {
             o.text()
                 .contains("every one of the 3 trajectories starts at (0.4000, 0, 0.6300 rad)")
         );
-        // a heading across ±π is one heading
-        assert!(
-            OneStart::of(&starts(&[
-                [0.0, 0.0, pi - 0.01],
-                [0.0, 0.0, -pi + 0.01],
-                [0.0, 0.0, pi]
-            ]))
-            .is_some()
-        );
-        // a start 2 cm away, or turned by 0.1 rad, is another start
-        assert!(
-            OneStart::of(&starts(&[
-                [0.4, 0.0, 0.6],
-                [0.4, 0.02, 0.6],
-                [0.4, 0.0, 0.6]
-            ]))
-            .is_none()
-        );
-        assert!(
-            OneStart::of(&starts(&[
-                [0.4, 0.0, 0.6],
-                [0.4, 0.0, 0.7],
-                [0.4, 0.0, 0.6]
-            ]))
-            .is_none()
-        );
-        // two trajectories say nothing about how the data were started
-        assert!(OneStart::of(&starts(&[[0.4, 0.0, 0.6], [0.4, 0.0, 0.6]])).is_none());
+        // a heading across ±π is one heading; a start 2 cm away, or turned by 0.1 rad, is
+        // another start; two trajectories say nothing about how the data were started
+        for (poses, one) in [
+            (
+                vec![
+                    [0.0, 0.0, pi - 0.01],
+                    [0.0, 0.0, -pi + 0.01],
+                    [0.0, 0.0, pi],
+                ],
+                true,
+            ),
+            (
+                vec![[0.4, 0.0, 0.6], [0.4, 0.02, 0.6], [0.4, 0.0, 0.6]],
+                false,
+            ),
+            (
+                vec![[0.4, 0.0, 0.6], [0.4, 0.0, 0.7], [0.4, 0.0, 0.6]],
+                false,
+            ),
+            (vec![[0.4, 0.0, 0.6], [0.4, 0.0, 0.6]], false),
+        ] {
+            assert_eq!(OneStart::of(&starts(&poses)).is_some(), one, "{poses:?}");
+        }
         assert!(OneStart::of(&[]).is_none());
     }
 
