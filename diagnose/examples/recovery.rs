@@ -168,6 +168,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     Effect::TableTilt => "gx",
                     Effect::FrictionPatch => "k",
                     Effect::PusherFriction => "mu",
+                    Effect::FlatPusher => "half_width",
                 };
                 if let Some(v) = c.params.get(key) {
                     par.push(*v);

@@ -539,7 +539,7 @@ pub struct Correlation {
 /// place and [`ONE_START_RAD`] of its heading (Tu & Lin's data set starts all 100 at
 /// (0.4, 0, 0.2π)). A block's place on the table and its heading then go together, step by step
 /// from that start, so an effect of the place (a `friction_patch`, a `table_tilt`) and one of
-/// the heading (a grain of the table, a flat pusher held at one world yaw) explain the same
+/// the heading (a `flat_pusher` held at one world yaw, a grain of the table) explain the same
 /// residual; only data from other starts tell them apart.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct OneStart {
@@ -594,7 +594,7 @@ impl OneStart {
     /// The caution in full, with the start and the spread.
     pub fn text(&self) -> String {
         format!(
-            "every one of the {} trajectories starts at ({}, {}, {} rad) (within {} m, {} rad): where the block is and how it is turned go together in these data, so an effect of the place on the table (friction_patch, table_tilt) and one of the block's heading (a grain of the table, a flat pusher held at one world yaw) look alike; record pushes from other start poses to tell them apart",
+            "every one of the {} trajectories starts at ({}, {}, {} rad) (within {} m, {} rad): where the block is and how it is turned go together in these data, so an effect of the place on the table (friction_patch, table_tilt) and one of the block's heading (flat_pusher, a grain of the table) look alike; record pushes from other start poses to tell them apart",
             self.trajectories,
             g4(self.pose[0]),
             g4(self.pose[1]),
@@ -1407,9 +1407,18 @@ impl<'a> Ctx<'a> {
             _ => false,
         };
         let free = if hold { held_free } else { free };
-        let Some((_, theta, std)) = (if hold { held } else { freed }) else {
+        let Some((_, mut theta, mut std)) = (if hold { held } else { freed }) else {
             return Ok(None);
         };
+        // the effects' canonical forms (the same model)
+        let (mut full, mut full_std) = (p0.clone(), vec![0.0; p0.len()]);
+        for (k, &i) in idx.iter().enumerate() {
+            (full[i], full_std[i]) = (theta[k], std[k]);
+        }
+        with.canonical(&mut full, &mut full_std);
+        for (k, &i) in idx.iter().enumerate() {
+            (theta[k], std[k]) = (full[i], full_std[i]);
+        }
         let Some(test) = cost_of(&theta, &self.test_w, None) else {
             return Ok(None);
         };
@@ -2720,15 +2729,17 @@ fn acts_on(e: Effect) -> &'static [Target] {
         Effect::SteeringOffset | Effect::SteeringLag => &[Target::Delta],
         Effect::CommandDelay => &[Target::Delta, Target::Vx],
         Effect::GripPatch => &[Target::Grip, Target::Vy, Target::Omega],
-        Effect::ComOffset | Effect::TableTilt | Effect::FrictionPatch | Effect::PusherFriction => {
-            &[
-                Target::X,
-                Target::Y,
-                Target::Theta,
-                Target::BlockX,
-                Target::BlockY,
-            ]
-        }
+        Effect::ComOffset
+        | Effect::TableTilt
+        | Effect::FrictionPatch
+        | Effect::PusherFriction
+        | Effect::FlatPusher => &[
+            Target::X,
+            Target::Y,
+            Target::Theta,
+            Target::BlockX,
+            Target::BlockY,
+        ],
     }
 }
 

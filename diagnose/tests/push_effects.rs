@@ -32,6 +32,12 @@ fn truth(e: Effect) -> Vec<(&'static str, f64)> {
             ("friction_patch.k", 5.0),
         ],
         Effect::PusherFriction => vec![("pusher_friction.mu", 0.5)],
+        // a pad 2.4 cm wide and 2 cm thick whose face looks along world x
+        Effect::FlatPusher => vec![
+            ("flat_pusher.yaw", 0.0),
+            ("flat_pusher.half_width", 0.012),
+            ("flat_pusher.half_thickness", 0.01),
+        ],
         _ => vec![],
     }
 }
@@ -145,6 +151,9 @@ fn effect_term_matches_simulator(e: Effect, seed: u64) {
             let neg = match e {
                 Effect::FrictionPatch => 1.0 / v,
                 Effect::PusherFriction => 0.0,
+                // the pad half a radian off: the block turned towards the wrong yaw
+                Effect::FlatPusher if name.ends_with(".yaw") => 0.5,
+                Effect::FlatPusher => v,
                 _ => -v,
             };
             flipped.set_param(name, neg).unwrap();
@@ -172,6 +181,11 @@ fn friction_patch_term_matches_the_simulator() {
 #[test]
 fn pusher_friction_term_matches_the_simulator() {
     effect_term_matches_simulator(Effect::PusherFriction, 24);
+}
+
+#[test]
+fn flat_pusher_term_matches_the_simulator() {
+    effect_term_matches_simulator(Effect::FlatPusher, 25);
 }
 
 /// A pushing physics model with the default solver.
@@ -258,6 +272,16 @@ fn push_friction_patch_is_found() {
 fn push_pusher_friction_is_found_and_recovered() {
     let d = run(Some(Effect::PusherFriction), 5);
     assert_found(&d, Effect::PusherFriction, "mu", 0.5, 0.05);
+}
+
+#[test]
+fn push_flat_pusher_is_found_with_its_yaw_and_width() {
+    let d = run(Some(Effect::FlatPusher), 6);
+    assert_found(&d, Effect::FlatPusher, "half_width", 0.012, 0.003);
+    // the canonical form: the yaw within a quarter turn of 0, the width the larger side
+    let p = &d.candidates[0].params;
+    assert!(p["yaw"].abs() < 0.06, "{}", d.table());
+    assert!((p["half_thickness"] - 0.01).abs() < 0.003, "{}", d.table());
 }
 
 #[test]

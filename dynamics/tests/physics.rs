@@ -47,6 +47,15 @@ fn push_all(mu: f64) -> PhysicsModel {
     m
 }
 
+/// A pushing model with a flat pusher `[yaw, half width, half thickness]`.
+fn flat(pad: [f64; 3]) -> PhysicsModel {
+    let mut m = PhysicsModel::pushing(&[Effect::FlatPusher]).unwrap();
+    for (name, v) in ["yaw", "half_width", "half_thickness"].iter().zip(pad) {
+        m.set_param(&format!("flat_pusher.{name}"), v).unwrap();
+    }
+    m
+}
+
 // a cornering car: 1.2 m/s, some slip, inside the grip patch edge, filtered throttle ≠ command
 const CAR_S: [f64; 7] = [0.9, 0.1, 0.4, 1.2, 0.15, 2.0, 0.3];
 const CAR_U: [f64; 2] = [0.2, 0.5];
@@ -391,6 +400,59 @@ fn table_tilt_deflects_a_push_downhill_and_holds_a_block_at_rest() {
 }
 
 #[test]
+fn a_flat_pusher_is_the_same_pad_turned_by_pi_or_a_quarter_with_its_sides_swapped() {
+    let solver = Solver::Rk4 { substeps: 4 };
+    let step = |m: &PhysicsModel, s: &[f64], u: &[f64]| {
+        let mut o = [0.0; 3];
+        m.integrate_step(&solver, 1, s, u, 1.0, &mut o);
+        o
+    };
+    let pad = [-0.2, 0.015, 0.008];
+    let (pi, half) = (std::f64::consts::PI, std::f64::consts::FRAC_PI_2);
+    let same = [
+        flat([pad[0] + pi, pad[1], pad[2]]),
+        flat([pad[0] - half, pad[2], pad[1]]),
+        flat([pad[0] + half, pad[2], pad[1]]),
+    ];
+    let disc = PhysicsModel::pushing(&[]).unwrap();
+    let mut turned = 0.0f64;
+    // on both sides of alignment (θ = −0.2) too
+    for th in [-0.6, -0.21, -0.19, 0.1, 0.5, 1.2] {
+        for u in [[0.0, 0.0, 0.8], [0.6, 0.3, 0.5], [-0.7, -0.4, 1.0]] {
+            let s = [0.4, 0.02, th];
+            let want = step(&flat(pad), &s, &u);
+            for m in &same {
+                let got = step(m, &s, &u);
+                for k in 0..3 {
+                    assert!(
+                        (got[k] - want[k]).abs() < 1e-9,
+                        "θ {th}, u {u:?}: {got:?} vs {want:?}"
+                    );
+                }
+            }
+            turned = turned.max((want[2] - step(&disc, &s, &u)[2]).abs());
+        }
+    }
+    // and not the disc: the corner turns the block
+    assert!(
+        turned > 0.02,
+        "largest heading difference to the disc {turned}"
+    );
+    // the canonical form: the larger side is the width, the yaw in (−π/2, π/2]
+    let (mut v, mut sd) = ([pad[0] - half + 2.0 * pi, pad[2], pad[1]], [0.1, 0.2, 0.3]);
+    Effect::FlatPusher.canonical(&mut v, &mut sd);
+    assert!((v[0] - pad[0]).abs() < 1e-12 && v[1..] == pad[1..], "{v:?}");
+    assert_eq!(sd, [0.1, 0.3, 0.2]);
+    let mut m = flat([pad[0] + pi, pad[2], pad[1]]);
+    let mut p = m.params().to_vec();
+    m.canonical(&mut p, &mut []);
+    m.set_params(&p).unwrap();
+    let get = |name: &str| m.params()[m.param_index(name).unwrap()];
+    assert!((get("flat_pusher.yaw") - (pad[0] + half)).abs() < 1e-12);
+    assert_eq!(get("flat_pusher.half_width"), pad[1]);
+}
+
+#[test]
 fn push_step_derivatives_match_finite_differences() {
     use dynlab_dynamics::physics::StepTape;
     let solver = Solver::Rk4 { substeps: 2 };
@@ -400,6 +462,8 @@ fn push_step_derivatives_match_finite_differences() {
         push_all(1.5),
         support_points(push_all(0.2)),
         support_points(push_all(1.5)),
+        // the pad turned 0.3 rad against the face
+        flat([0.3, 0.015, 0.01]),
     ] {
         let np = m.params().len();
         let step = |m: &PhysicsModel, s: &[f64], u: &[f64]| {

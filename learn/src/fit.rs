@@ -834,6 +834,7 @@ pub(crate) fn fit_physics(
             res.std = cs;
         }
     }
+    p.canonical(&mut res.theta, &mut res.std);
     p.set_params(&res.theta)?;
     p.set_std_errors(Some(res.std))?;
     Ok(PhysicsFit {

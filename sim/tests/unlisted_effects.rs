@@ -1,5 +1,7 @@
 //! Effects the diagnosis library does not model (`steering_gain_speed`, `steering_rate_limit`,
-//! non-disc grip regions, `anisotropic_friction`) and the perturbed-parameter helpers: each
+//! non-disc grip regions, `anisotropic_friction`), the flat pusher (a rigid pad, which the
+//! library's `flat_pusher` approximates by a point contact at its leading corner) and the
+//! perturbed-parameter helpers: each
 //! effect changes the trajectory in its documented direction, runs are deterministic, and bad
 //! values are rejected naming the key.
 

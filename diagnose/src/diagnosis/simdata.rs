@@ -224,6 +224,12 @@ pub fn push_scenario(effect: Option<Effect>, noise: f64) -> PushScenario {
             })
         }
         Some(Effect::PusherFriction) => s.effects.pusher_friction = Some(PusherFriction::default()),
+        // a pad 2.4 cm wide whose face looks along world x, as launch_scripts/scenarios/
+        // push_flat_pusher.toml
+        Some(Effect::FlatPusher) => {
+            s.pusher.pad_half_width = 0.012;
+            s.pusher.pad_yaw = 0.0;
+        }
         _ => {}
     }
     s

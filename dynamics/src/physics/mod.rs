@@ -136,6 +136,11 @@ pub enum Effect {
     /// Pushing: Coulomb friction `μ_p` between pusher and block (the nominal pusher is
     /// frictionless): sticking inside the motion cone, sliding on its edge.
     PusherFriction,
+    /// Pushing: a flat pusher, a pad of half width `w` held at the world yaw `ψ_f` whatever the
+    /// block's heading (a gripper kept at one orientation): turned against the face, it
+    /// touches with its leading corner, off the commanded point, and the block turns towards
+    /// the pad's yaw.
+    FlatPusher,
 }
 
 static AERO_DRAG: [ParamSpec; 1] = [ps(
@@ -314,6 +319,36 @@ static FRICTION_PATCH: [ParamSpec; 5] = [
         "block–table friction inside the patch over the table's, μ_patch/μ (1: no change)",
     ),
 ];
+static FLAT_PUSHER: [ParamSpec; 3] = [
+    ps(
+        "yaw",
+        "ψ_f",
+        "rad",
+        -std::f64::consts::PI,
+        std::f64::consts::PI,
+        0.0,
+        "world yaw of the pad's face normal (a pad turned by π is the same pad)",
+    ),
+    ps(
+        "half_width",
+        "w",
+        "m",
+        0.0,
+        0.1,
+        0.02,
+        "half width of the pad along its face",
+    ),
+    ps(
+        "half_thickness",
+        "t",
+        "m",
+        0.0,
+        0.1,
+        push::PUSHER_RADIUS_M,
+        "half thickness of the pad, along its face normal (a pad turned a quarter with width and \
+         thickness swapped is the same pad)",
+    ),
+];
 static PUSHER_FRICTION: [ParamSpec; 1] = [ps(
     "mu",
     "μ_p",
@@ -357,7 +392,7 @@ fn discs(
 
 impl Effect {
     /// Every effect in the library.
-    pub const ALL: [Effect; 10] = [
+    pub const ALL: [Effect; 11] = [
         Effect::AeroDrag,
         Effect::MotorLag,
         Effect::SteeringOffset,
@@ -368,6 +403,7 @@ impl Effect {
         Effect::TableTilt,
         Effect::FrictionPatch,
         Effect::PusherFriction,
+        Effect::FlatPusher,
     ];
 
     /// The nominal parameters fitted wherever the effect is fitted (training and diagnosis): a
@@ -401,6 +437,7 @@ impl Effect {
             Effect::TableTilt => "table_tilt",
             Effect::FrictionPatch => "friction_patch",
             Effect::PusherFriction => "pusher_friction",
+            Effect::FlatPusher => "flat_pusher",
         }
     }
 
@@ -439,6 +476,9 @@ impl Effect {
             Effect::TableTilt => "tilted table: downhill drift while sliding",
             Effect::FrictionPatch => "table patch with different friction",
             Effect::PusherFriction => "friction at the pusher contact (sticking/sliding)",
+            Effect::FlatPusher => {
+                "flat pusher held at one world yaw: touches with a corner and turns the block towards its face"
+            }
         }
     }
 
@@ -455,6 +495,7 @@ impl Effect {
             Effect::TableTilt => &TABLE_TILT,
             Effect::FrictionPatch => &FRICTION_PATCH,
             Effect::PusherFriction => &PUSHER_FRICTION,
+            Effect::FlatPusher => &FLAT_PUSHER,
         }
     }
 
@@ -483,6 +524,11 @@ impl Effect {
             Effect::TableTilt => vec![vec![("gx", 0.0), ("gy", 0.0)]],
             Effect::FrictionPatch => discs(lo, hi, 3, 0.25 * extent.max(0.02), 0.01, [0.3, 3.0]),
             Effect::PusherFriction => one("mu", &[0.1, 0.4, 1.0]),
+            // the pad is the same turned by π: yaws over half a turn, a narrow and a wide pad
+            Effect::FlatPusher => [-1.2, -0.6, 0.0, 0.6, 1.2]
+                .into_iter()
+                .flat_map(|y| [0.012, 0.025].map(|w| vec![("yaw", y), ("half_width", w)]))
+                .collect(),
         }
     }
 
@@ -497,6 +543,25 @@ impl Effect {
             Effect::FrictionPatch => discs(lo, hi, 5, 0.125 * extent.max(0.02), 0.01, [0.3, 3.0]),
             _ => Vec::new(),
         }
+    }
+
+    /// Writes the effect's parameters `v` (and their standard errors `std`, same length or
+    /// empty) in one form of the ones that give the same model: a flat pusher is the same pad
+    /// turned by π, and with width and thickness swapped turned a quarter, so its half width
+    /// is the larger and its yaw lies in (−π/2, π/2]. Every other effect has one form.
+    pub fn canonical(self, v: &mut [f64], std: &mut [f64]) {
+        if self != Effect::FlatPusher || v.len() != 3 {
+            return;
+        }
+        if v[2] > v[1] {
+            v.swap(1, 2);
+            if std.len() == 3 {
+                std.swap(1, 2);
+            }
+            v[0] += std::f64::consts::FRAC_PI_2;
+        }
+        let pi = std::f64::consts::PI;
+        v[0] -= pi * ((v[0] - 0.5 * pi) / pi).ceil();
     }
 
     /// Whether the contribution is linear in the effect's parameters (for all states and

@@ -533,6 +533,21 @@ impl PhysicsModel {
         Ok(())
     }
 
+    /// Writes a full parameter vector `p` and its standard errors `std` (same length, or
+    /// empty) of this model in each effect's canonical form ([`Effect::canonical`]): the same
+    /// model, told one way.
+    pub fn canonical(&self, p: &mut [f64], std: &mut [f64]) {
+        for sl in &self.slots {
+            let r = sl.p_off..sl.p_off + sl.effect.params().len();
+            let mut none = [];
+            let s = match std.len() == p.len() {
+                true => &mut std[r.clone()],
+                false => &mut none[..],
+            };
+            sl.effect.canonical(&mut p[r], s);
+        }
+    }
+
     /// The standard errors, if set.
     pub fn std_errors(&self) -> Option<&[f64]> {
         self.std_errors.as_deref()
@@ -1081,6 +1096,14 @@ impl PhysicsModel {
                         o,
                         "  centre of friction = load centroid at (o_x, o_y) (block frame){}",
                         tag(Effect::ComOffset)
+                    );
+                }
+                if has(Effect::FlatPusher).is_some() {
+                    let _ = writeln!(
+                        o,
+                        "  flat pusher at world yaw ψ_f ({}), half width w, half thickness t: β = ψ_f − θ, r_p → t·|cos β| + w·|sin β|, p_y += t·sin β·sgn(cos β) − w·cos β·sgn(sin β){}",
+                        num(pv(Effect::FlatPusher, 0)),
+                        tag(Effect::FlatPusher)
                     );
                 }
                 if has(Effect::FrictionPatch).is_some() {

@@ -51,6 +51,12 @@
 //!   the patch has its centre of friction moved towards the patch, which turns it. A block fully
 //!   on or off the patch moves the same (quasi-static: friction scale does not change motion).
 //! * `pusher_friction`: sticking inside the motion cone, sliding on its edge (see above).
+//! * `flat_pusher`: the pusher is a flat pad `2·t` thick and `2·w` wide held at the world yaw
+//!   `ψ_f` whatever the block's heading (a gripper kept at one orientation). Turned against the
+//!   face by `β = ψ_f − θ`, it touches with its leading corner, about `w·cos β` off its
+//!   centre's line on the side it leads on (clamped to the face: past its end the block's
+//!   corner is on the pad), so a push turns the block until face and pad align; the corner's
+//!   side switches smoothly through alignment (see [`FLAT_SWITCH`]).
 //!
 //! Approximation, documented: `c = 0.383 a` (uniform pressure on a square) by default; the
 //! support grid of `com_offset` and `friction_patch` spans the `a × b` footprint.
@@ -166,12 +172,70 @@ pub const PUSHER_RADIUS_M: f64 = 0.01;
 /// Support grid of the `friction_patch` term: `N × N` points over the footprint.
 const PATCH_GRID: usize = 5;
 
+/// How sharply the flat pusher's touching corner switches sides as its turn against the face
+/// passes zero: `sgn(sin β) ≈ tanh(sin β / FLAT_SWITCH)`. Around alignment the pad touches
+/// along its whole face, where the contact's centre of pressure lies anywhere on the pad; the
+/// smooth switch puts it where the block keeps its heading, which is what a flat contact does.
+const FLAT_SWITCH: f64 = 0.02;
+
+/// Over how much of its last overlap with the face \[m\] a flat pusher's push fades out as it
+/// slides off the face's end.
+const FLAT_RELEASE_M: f64 = 0.002;
+
+/// The share of a flat pusher's motion that reaches the block with `margin` of overlap left:
+/// 1 down to [`FLAT_RELEASE_M`], then a smoothstep to 0. A contact dropped at once made the
+/// model's step jump with the pad's yaw at the pushes that slide off the face, and one such
+/// push held nearly all of a fit's information on the yaw (its σ ±42 rad on Tu & Lin's data).
+fn smooth_release<R: Real>(margin: R) -> R {
+    if margin.value() >= FLAT_RELEASE_M {
+        return R::cst(1.0);
+    }
+    let s = margin / FLAT_RELEASE_M;
+    s * s * (s * -2.0 + 3.0)
+}
+
+/// The flat pusher's `[yaw, half width, half thickness]` if `flat_pusher` is on.
+pub(crate) fn flat_pusher<R: Real>(
+    p: &[R],
+    model: &PhysicsModel,
+    active: &[bool],
+) -> Option<[R; 3]> {
+    model
+        .slots()
+        .iter()
+        .zip(active)
+        .find(|(sl, on)| **on && sl.effect == Effect::FlatPusher)
+        .map(|(sl, _)| [0, 1, 2].map(|k| p[sl.p_off + k]))
+}
+
+/// Where a pusher turned by `β` against the face touches it, relative to its centre (block
+/// frame): how far it reaches ahead and the touching point's lateral offset. A disc reaches
+/// `r_p` straight ahead; a flat pusher (a pad of half width `w` and half thickness `t`)
+/// reaches with its leading corner, `t·|cos β| + w·|sin β|` ahead and
+/// `t·sin β·sgn(cos β) − w·cos β·sgn(sin β)` to the side.
+fn reach<R: Real>(flat: Option<[R; 3]>, th: R) -> (R, R) {
+    match flat {
+        None => (R::cst(PUSHER_RADIUS_M), R::cst(0.0)),
+        Some([yaw, w, t]) => {
+            let beta = yaw - th;
+            let (sb, cb) = (beta.sin(), beta.cos());
+            let sgn_s = (sb / FLAT_SWITCH).tanh();
+            let sgn_c = (cb / FLAT_SWITCH).tanh();
+            (
+                cb * sgn_c * t + w * sb * sgn_s,
+                sb * sgn_c * t - w * cb * sgn_s,
+            )
+        }
+    }
+}
+
 /// The step constants `(ψ, q_x, q_y)` of a push from pose `s` under action `u`: the world push
-/// direction and the pusher centre's start point (world frame).
-pub(crate) fn start_constants<R: Real>(p: &[R], s: &[R], u: &[R]) -> [R; 3] {
+/// direction and the pusher centre's start point (world frame), the pusher touching the face
+/// (`flat`: the flat pusher, see [`flat_pusher`]).
+pub(crate) fn start_constants<R: Real>(p: &[R], flat: Option<[R; 3]>, s: &[R], u: &[R]) -> [R; 3] {
     let (a, kappa, b) = (p[0], p[3], p[4]);
     let (x, y, th) = (s[0], s[1], s[2]);
-    let bx = a * -0.5 - PUSHER_RADIUS_M;
+    let bx = a * -0.5 - reach(flat, th).0;
     let by = kappa * u[0] * b * 0.5;
     let (st, ct) = (th.sin(), th.cos());
     [th + u[1], x + ct * bx - st * by, y + st * bx + ct * by]
@@ -186,7 +250,7 @@ pub(crate) fn rhs<R: Real>(
     u: &[R],
     out: &mut [R],
 ) {
-    let line = start_constants(p, s, u);
+    let line = start_constants(p, flat_pusher(p, model, active), s, u);
     rhs_line(p, model, active, s, line, u[2], out);
 }
 
@@ -212,6 +276,7 @@ pub(crate) fn rhs_line<R: Real>(
     let mut patch: Option<&[R]> = None;
     let mut mu: Option<R> = None;
     let mut tilt: Option<(R, R)> = None;
+    let mut flat: Option<[R; 3]> = None;
     for (sl, &on) in model.slots().iter().zip(active) {
         if !on {
             continue;
@@ -222,6 +287,7 @@ pub(crate) fn rhs_line<R: Real>(
             Effect::PusherFriction => mu = Some(q[0]),
             Effect::TableTilt => tilt = Some((q[0], q[1])),
             Effect::FrictionPatch => patch = Some(q),
+            Effect::FlatPusher => flat = Some([q[0], q[1], q[2]]),
             _ => {}
         }
     }
@@ -246,16 +312,42 @@ pub(crate) fn rhs_line<R: Real>(
     let (rx, ry) = (qx - x, qy - y);
     let n_rel = ct * rx + st * ry;
     let t_rel = ct * ry - st * rx;
-    let sigma = (a * -0.5 - PUSHER_RADIUS_M - n_rel) / nd;
-    let lat = t_rel + sigma * td;
-    if lat.value().abs() > 0.5 * b.value() {
-        return;
-    }
+    let (ahead, side) = reach(flat, th);
+    let sigma = (a * -0.5 - ahead - n_rel) / nd;
+    let centre = t_rel + sigma * td;
+    let half = b * 0.5;
+    // the contact point and how much of the pusher's motion reaches the block
+    let (lat, fade) = match flat {
+        None if centre.value().abs() > half.value() => return,
+        None => (centre, R::cst(1.0)),
+        Some([yaw, w, t]) => {
+            // the pad overlaps the face as long as its centre is within its lateral half
+            // extent of it; a corner past the face's end leaves the block's corner on the pad
+            let beta = yaw - th;
+            let extent = w * beta.cos().abs() + t * beta.sin().abs();
+            let off = if centre.value() < 0.0 {
+                -centre
+            } else {
+                centre
+            };
+            let margin = half + extent - off;
+            if margin.value() <= 0.0 {
+                return;
+            }
+            let lat = centre + side;
+            let lat = match lat.value() {
+                v if v > half.value() => half,
+                v if v < -half.value() => -half,
+                _ => lat,
+            };
+            (lat, smooth_release(margin))
+        }
+    };
     // contact point relative to the centre of friction, block frame
     let px = a * -0.5 - ox;
     let py = lat - oy;
-    let vpx = ell * len * nd;
-    let vpy = ell * len * td;
+    let vpx = ell * len * nd * fade;
+    let vpy = ell * len * td * fade;
     if vpx.value() <= 0.0 {
         return;
     }
