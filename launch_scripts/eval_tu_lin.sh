@@ -3,7 +3,7 @@
 # to our topic contract), on their split (80/20 overlapping windows, seed 42, their loss) and on a
 # split by whole trajectories, and prints our validation losses beside their published table.
 #
-#   launch_scripts/eval_tu_lin.sh [BAG] [--full] [--epochs N] [--batch B] [--lr LR] [--threads T] [--kinds a,b] [--json OUT]
+#   launch_scripts/eval_tu_lin.sh [BAG] [--full] [--epochs N] [--batch B] [--lr LR] [--threads T] [--kinds a,b] [--effects a,b] [--json OUT]
 #
 # BAG defaults to ../shared/data/tu_lin_pushing.mcap (relative to the repository). The default
 # budget (250 epochs at lr 1e-3, hybrid 60, batch 100: 2000 Adam steps) takes ≈ 20 min on 2 cores;

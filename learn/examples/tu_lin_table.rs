@@ -1,11 +1,13 @@
 //! Trains every model kind for k = 1 … 5 on the Tu & Lin pushing bag, on their split (80/20
 //! overlapping windows, seed 42) and on a split by whole trajectories, and prints our best
 //! validation losses (their loss: MSE(x) + MSE(y) + 0.0408·MSE(θ), discounted by 0.9 over the k
-//! steps) beside their published table. Run by `launch_scripts/eval_tu_lin.sh`.
+//! steps) beside their published table. Run by `launch_scripts/eval_tu_lin.sh`. `--effects a,b`
+//! gives the physics and hybrid models those library effects (`dynlab train --effects`).
 //!
 //! ```text
 //! cargo run --release -p dynlab-learn --example tu_lin_table -- BAG [--full] [--epochs N]
-//!     [--hybrid-epochs N] [--lr LR] [--batch B] [--threads T] [--kinds residual,node-rk4,…] [--json OUT]
+//!     [--hybrid-epochs N] [--lr LR] [--batch B] [--threads T] [--kinds residual,node-rk4,…]
+//!     [--effects a,b] [--json OUT]
 //! ```
 
 use std::path::PathBuf;
@@ -42,6 +44,7 @@ fn run() -> Result<(), Box<dyn std::error::Error>> {
     let mut batch: Option<usize> = None;
     let mut json: Option<PathBuf> = None;
     let mut kinds: Vec<ModelKind> = ModelKind::ALL.to_vec();
+    let mut effects: Vec<String> = Vec::new();
     while let Some(a) = args.next() {
         let mut val = || args.next().ok_or(format!("{a} needs a value"));
         match a.as_str() {
@@ -52,6 +55,7 @@ fn run() -> Result<(), Box<dyn std::error::Error>> {
             "--threads" => threads = val()?.parse()?,
             "--batch" => batch = Some(val()?.parse()?),
             "--json" => json = Some(val()?.into()),
+            "--effects" => effects = val()?.split(',').map(String::from).collect(),
             "--kinds" => {
                 kinds = val()?
                     .split(',')
@@ -109,6 +113,10 @@ fn run() -> Result<(), Box<dyn std::error::Error>> {
                     seed: 42,
                     split,
                     threads,
+                    effects: match kind {
+                        ModelKind::Physics | ModelKind::Hybrid => effects.clone(),
+                        _ => Vec::new(),
+                    },
                     ..Default::default()
                 };
                 let out = train(&data, &cfg, &mut |_| {})?;
@@ -160,9 +168,13 @@ fn run() -> Result<(), Box<dyn std::error::Error>> {
         } else {
             "ours: by trajectory 80/20"
         };
+        let with = match effects.is_empty() {
+            true => String::new(),
+            false => format!(" with {}", effects.join(", ")),
+        };
         let budget = match name.as_str() {
-            "physics" => "Levenberg–Marquardt fit".to_string(),
-            "hybrid" => format!("LM fit + {hybrid_epochs} epochs, batch {batch}"),
+            "physics" => format!("Levenberg–Marquardt fit{with}"),
+            "hybrid" => format!("LM fit{with} + {hybrid_epochs} epochs, batch {batch}"),
             _ => format!("{epochs} epochs, batch {batch}"),
         };
         println!("| {name} (dynlab, {budget}) | {split} | {} |", fmt(l));

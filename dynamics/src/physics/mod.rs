@@ -342,11 +342,12 @@ static FLAT_PUSHER: [ParamSpec; 3] = [
         "half_thickness",
         "t",
         "m",
-        0.0,
+        0.001,
         0.1,
         push::PUSHER_RADIUS_M,
         "half thickness of the pad, along its face normal (a pad turned a quarter with width and \
-         thickness swapped is the same pad)",
+         thickness swapped is the same pad; ≥ 1 mm: a fit that wants no thickness at all is not \
+         a pad, as on a table with a grain, which it otherwise took for one)",
     ),
 ];
 static PUSHER_FRICTION: [ParamSpec; 1] = [ps(
