@@ -136,10 +136,10 @@ pub enum Effect {
     /// Pushing: Coulomb friction `μ_p` between pusher and block (the nominal pusher is
     /// frictionless): sticking inside the motion cone, sliding on its edge.
     PusherFriction,
-    /// Pushing: a flat pusher, a pad of half width `w` held at the world yaw `ψ_f` whatever the
-    /// block's heading (a gripper kept at one orientation): turned against the face, it
-    /// touches with its leading corner, off the commanded point, and the block turns towards
-    /// the pad's yaw.
+    /// Pushing: a flat pusher, a pad of half width `w` and half thickness `t` held at the world
+    /// yaw `ψ_f` whatever the block's heading (a gripper kept at one orientation): turned
+    /// against the face, it touches with its leading corner, off the commanded point, and the
+    /// block turns towards the pad's yaw.
     FlatPusher,
 }
 
