@@ -45,7 +45,12 @@ fn a_network_model_is_diagnosed_on_pushing_data() {
         assert_eq!(d.model_kind, kind.name());
         // the nominal parameters of a network are not refitted; every candidate is scored
         assert!(d.nominal_refit.is_empty());
-        assert_eq!(d.candidates.len(), 4, "{}", d.table());
+        // every pushing effect of the library
+        let push_effects = dynlab_learn::dynamics::physics::PhysicsModel::available_effects(
+            dynlab_learn::dynamics::physics::Robot::Pushing,
+        );
+        assert_eq!(d.candidates.len(), push_effects.len(), "{}", d.table());
+        assert!(push_effects.contains(&"flat_pusher"));
         assert!(d.baseline_error.is_finite() && d.baseline_error > 0.0);
         assert!(d.candidates.iter().all(|c| c.error_after.is_finite()));
     }
