@@ -194,37 +194,42 @@ fn smooth_release<R: Real>(margin: R) -> R {
     s * s * (s * -2.0 + 3.0)
 }
 
-/// The flat pusher's `[yaw, half width, half thickness]` if `flat_pusher` is on.
+/// The flat pusher's `[yaw, half width, half thickness]` if `flat_pusher` is on (`active`:
+/// the effects' flags, `None` for all on).
 pub(crate) fn flat_pusher<R: Real>(
     p: &[R],
     model: &PhysicsModel,
-    active: &[bool],
+    active: Option<&[bool]>,
 ) -> Option<[R; 3]> {
     model
         .slots()
         .iter()
-        .zip(active)
-        .find(|(sl, on)| **on && sl.effect == Effect::FlatPusher)
-        .map(|(sl, _)| [0, 1, 2].map(|k| p[sl.p_off + k]))
+        .enumerate()
+        .find(|(i, sl)| {
+            sl.effect == Effect::FlatPusher && active.is_none_or(|a| a.get(*i) == Some(&true))
+        })
+        .map(|(_, sl)| [0, 1, 2].map(|k| p[sl.p_off + k]))
 }
 
 /// Where a pusher turned by `β` against the face touches it, relative to its centre (block
-/// frame): how far it reaches ahead and the touching point's lateral offset. A disc reaches
-/// `r_p` straight ahead; a flat pusher (a pad of half width `w` and half thickness `t`)
-/// reaches with its leading corner, `t·|cos β| + w·|sin β|` ahead and
-/// `t·sin β·sgn(cos β) − w·cos β·sgn(sin β)` to the side.
-fn reach<R: Real>(flat: Option<[R; 3]>, th: R) -> (R, R) {
+/// frame): how far it reaches ahead, the touching point's lateral offset and the pusher's
+/// lateral half extent. A disc reaches `r_p` straight ahead; a flat pusher (a pad of half
+/// width `w` and half thickness `t`) reaches with its leading corner, `t·|cos β| + w·|sin β|`
+/// ahead and `t·sin β·sgn(cos β) − w·cos β·sgn(sin β)` to the side, and spans
+/// `w·|cos β| + t·|sin β|` to each side.
+fn reach<R: Real>(flat: Option<[R; 3]>, th: R) -> [R; 3] {
     match flat {
-        None => (R::cst(PUSHER_RADIUS_M), R::cst(0.0)),
+        None => [R::cst(PUSHER_RADIUS_M), R::cst(0.0), R::cst(0.0)],
         Some([yaw, w, t]) => {
             let beta = yaw - th;
             let (sb, cb) = (beta.sin(), beta.cos());
             let sgn_s = (sb / FLAT_SWITCH).tanh();
             let sgn_c = (cb / FLAT_SWITCH).tanh();
-            (
+            [
                 cb * sgn_c * t + w * sb * sgn_s,
                 sb * sgn_c * t - w * cb * sgn_s,
-            )
+                w * cb.abs() + t * sb.abs(),
+            ]
         }
     }
 }
@@ -235,7 +240,7 @@ fn reach<R: Real>(flat: Option<[R; 3]>, th: R) -> (R, R) {
 pub(crate) fn start_constants<R: Real>(p: &[R], flat: Option<[R; 3]>, s: &[R], u: &[R]) -> [R; 3] {
     let (a, kappa, b) = (p[0], p[3], p[4]);
     let (x, y, th) = (s[0], s[1], s[2]);
-    let bx = a * -0.5 - reach(flat, th).0;
+    let bx = a * -0.5 - reach(flat, th)[0];
     let by = kappa * u[0] * b * 0.5;
     let (st, ct) = (th.sin(), th.cos());
     [th + u[1], x + ct * bx - st * by, y + st * bx + ct * by]
@@ -250,7 +255,7 @@ pub(crate) fn rhs<R: Real>(
     u: &[R],
     out: &mut [R],
 ) {
-    let line = start_constants(p, flat_pusher(p, model, active), s, u);
+    let line = start_constants(p, flat_pusher(p, model, Some(active)), s, u);
     rhs_line(p, model, active, s, line, u[2], out);
 }
 
@@ -312,7 +317,7 @@ pub(crate) fn rhs_line<R: Real>(
     let (rx, ry) = (qx - x, qy - y);
     let n_rel = ct * rx + st * ry;
     let t_rel = ct * ry - st * rx;
-    let (ahead, side) = reach(flat, th);
+    let [ahead, side, extent] = reach(flat, th);
     let sigma = (a * -0.5 - ahead - n_rel) / nd;
     let centre = t_rel + sigma * td;
     let half = b * 0.5;
@@ -320,11 +325,9 @@ pub(crate) fn rhs_line<R: Real>(
     let (lat, fade) = match flat {
         None if centre.value().abs() > half.value() => return,
         None => (centre, R::cst(1.0)),
-        Some([yaw, w, t]) => {
+        Some(_) => {
             // the pad overlaps the face as long as its centre is within its lateral half
             // extent of it; a corner past the face's end leaves the block's corner on the pad
-            let beta = yaw - th;
-            let extent = w * beta.cos().abs() + t * beta.sin().abs();
             let off = if centre.value() < 0.0 {
                 -centre
             } else {

@@ -168,7 +168,6 @@ impl VectorField<f64> for PushLine<'_> {
 /// The step constants of one sample and their Jacobians wrt `s₀` (`3 × 3`), `u` (`3 × 3`) and
 /// the parameters (`3 × n_params`), row-major.
 fn constants_jac(model: &PhysicsModel, s: &[f64], u: &[f64]) -> ([f64; NC], Vec<f64>) {
-    let act = vec![true; model.slots().len()];
     let params = model.params();
     let np = params.len();
     let nz = DS + DU + np;
@@ -182,7 +181,7 @@ fn constants_jac(model: &PhysicsModel, s: &[f64], u: &[f64]) -> ([f64; NC], Vec<
         let pd: Vec<Dual<DIRS>> = (0..np)
             .map(|i| Dual::var(params[i], seed(DS + DU + i)))
             .collect();
-        let out = push::start_constants(&pd, push::flat_pusher(&pd, model, &act), &sd, &ud);
+        let out = push::start_constants(&pd, push::flat_pusher(&pd, model, None), &sd, &ud);
         super::scatter_duals(&out, base, nz, &mut c, &mut j);
         base += DIRS;
     }
@@ -190,18 +189,13 @@ fn constants_jac(model: &PhysicsModel, s: &[f64], u: &[f64]) -> ([f64; NC], Vec<
 }
 
 fn augment(model: &PhysicsModel, n: usize, s0: &[f64], u: &[f64]) -> Vec<f64> {
-    let act = vec![true; model.slots().len()];
+    let p = model.params();
+    let flat = push::flat_pusher(p, model, None);
     let dz = DS + NC;
     let mut z = vec![0.0; n * dz];
     for i in 0..n {
         let s = &s0[i * DS..(i + 1) * DS];
-        let p = model.params();
-        let c = push::start_constants(
-            p,
-            push::flat_pusher(p, model, &act),
-            s,
-            &u[i * DU..(i + 1) * DU],
-        );
+        let c = push::start_constants(p, flat, s, &u[i * DU..(i + 1) * DU]);
         z[i * dz..i * dz + DS].copy_from_slice(s);
         z[i * dz + DS..(i + 1) * dz].copy_from_slice(&c);
     }
