@@ -2,7 +2,7 @@
 //! with only that effect on (plus nominal data), several seeds; does the diagnosis name the
 //! effect first and significant (and nothing on nominal data)?
 //!
-//! `cargo run --release -p dynlab-diagnose --example recovery -- [--seeds N] [--noise X]
+//! `cargo run --release -p dynlab-diagnose --example recovery -- [--seeds N] [--first-seed S] [--noise X]
 //! [--car-episodes N] [--car-duration S] [--push-episodes N] [--only NAME] [--world car|push]
 //! [--steps K] [--fit-baseline] [--no-refit] [--no-bonferroni] [--refit a,c,kappa]`
 //!
@@ -34,6 +34,7 @@ fn arg<T: std::str::FromStr>(name: &str, default: T) -> T {
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let seeds: u64 = arg("--seeds", 5);
+    let first_seed: u64 = arg("--first-seed", 0);
     let noise: f64 = arg("--noise", 2.0);
     let car_eps: u64 = arg("--car-episodes", 4);
     let car_dur: f64 = arg("--car-duration", 15.0);
@@ -78,7 +79,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let mut ok = 0;
         let mut red = 0.0;
         let mut par = Vec::new();
-        for seed in 0..seeds {
+        for seed in first_seed..first_seed + seeds {
             let data = match world {
                 World::Car => car_dataset(
                     &car_scenario(effect, noise),

@@ -737,8 +737,16 @@ impl Fitted {
         }
         let (lo, hi, v) = (self.lower[i], self.upper[i], self.theta[i]);
         // the range alone is not enough where it is wide: `C_m2` (0 … 100) fitted at 0.094
-        // was reported on its bound 0
-        let near = |b: f64| (v - b).abs() <= (1e-3 * (hi - lo)).min(0.01 * v.abs().max(b.abs()));
+        // was reported on its bound 0; the value's own scale is not enough at a bound 0, which
+        // no fitted value but 0 itself is within 1 % of (a pusher's μ_p = 5.6·10⁻⁹ on nominal
+        // pushes, the effect switched off, was counted): there 10⁻⁶ of the range is
+        let near = |b: f64| {
+            let span = hi - lo;
+            (v - b).abs()
+                <= (1e-3 * span)
+                    .min(0.01 * v.abs().max(b.abs()))
+                    .max(1e-6 * span)
+        };
         if near(lo) {
             Some(("lower", lo))
         } else if near(hi) {
@@ -1569,7 +1577,10 @@ impl<'a> Ctx<'a> {
     /// one of five seeds before this check), and the term search finds the gain. A
     /// `steering_lag` against a term on the lagged steering's rate: a transport delay. An
     /// `aero_drag` or a `motor_lag` against the throttle beyond a level: a drive force capped by
-    /// traction. (Without the
+    /// traction. A pushing `friction_patch` against any term on the block's sideways rate
+    /// `ẏ_b`: on a table with a grain the block drifts across the push by its heading, and a
+    /// disc of low friction over part of the data took up 16 % of that (named beside the term
+    /// on one of five grain seeds before this check). (Without the
     /// margin a Gaussian bump of grip that removed 85.7 % refused a right-fitted disc's 85.1 %.)
     /// A disc's rivals include the strip through it fitted on the k-step error
     /// ([`strip_through`]): a band the data cross in two places, of which the disc covers one.
@@ -2714,6 +2725,12 @@ fn rival(e: Effect) -> Option<Rival> {
             term: "a drive-limit",
             meaning: "the drive force is capped (the tyres' traction, the motor's current limit), not lagged",
         }),
+        Effect::FrictionPatch => Some(Rival {
+            target: Target::BlockY,
+            among: |_| true,
+            term: "a sideways-drift",
+            meaning: "the block drifts across the push by another law than a region of other table friction (a table whose friction depends on the direction of sliding)",
+        }),
         _ => None,
     }
 }
@@ -3482,6 +3499,12 @@ mod tests {
         assert_eq!(drag(0.0009), None);
         assert_eq!(drag(0.5), None);
         assert_eq!(drag(0.9995), Some(("upper", 1.0)));
+        // a fit that ends a hair inside a bound 0 is on it: a pusher's friction 5.6·10⁻⁹ (an
+        // effect switched off) was counted on nominal pushes
+        let mu = |m: f64| fitted_effect(Effect::PusherFriction, &[m]);
+        assert_eq!(mu(5.6e-9).bound_side(0), Some(("lower", 0.0)));
+        assert!(mu(5.6e-9).effect_on_bound(Effect::PusherFriction).is_some());
+        assert_eq!(mu(0.05).bound_side(0), None);
         // a patch's radius within 0.01 … 100 m: 0.1 m is a small patch, not the bound
         let r = Effect::GripPatch
             .params()

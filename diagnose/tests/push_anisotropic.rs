@@ -21,7 +21,9 @@ use dynlab_sim::push::AnisotropicFriction;
 /// Over seeds 0–9 of this set-up (measured once, printed by the test with `--nocapture`): a
 /// significant grain term in 10/10, first on `ℓ·cos φ·cos 2θ`, the `sin 2θ` one second in 8,
 /// every sign the truth's, 43–78 % of the held-out 3-step error removed; the library named
-/// `friction_patch` (a disc of higher friction) beside it in 1/10 (seed 3). The test runs two.
+/// `friction_patch` (a disc of higher friction) beside it in 1/10 (seed 3) until a patch had to
+/// remove more than the best sideways-drift term (the grain's). The test runs three, seed 3
+/// among them.
 const GRAIN: [&str; 2] = ["l*cos_phi*sin_2theta", "l*cos_phi*cos_2theta"];
 
 fn data(grain: Option<f64>, seed: u64) -> Dataset {
@@ -54,7 +56,7 @@ fn diagnosed(data: &Dataset, seed: u64) -> Diagnosis {
 #[test]
 fn anisotropic_friction_is_found_beyond_the_library() {
     let gamma = 30f64.to_radians();
-    for seed in [1u64, 2] {
+    for seed in [1u64, 2, 3] {
         let d = diagnosed(&data(Some(gamma), seed), seed);
         let table = d.table();
         println!("seed {seed}\n{table}");
