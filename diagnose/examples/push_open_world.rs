@@ -16,8 +16,12 @@
 //! the term is worth having: the physics model trained on the same anisotropic data with the discovered
 //! custom effect (`TrainConfig::custom_effects`, the `dynlab train --effects-file` path) against
 //! without, both evaluated on fresh held-out episodes of that world (3-step loss and position
-//! and heading RMSE). Then the nominal case: data of the fitted world without any effect,
-//! diagnosed: nothing named, no significant term.
+//! and heading RMSE). Then the library's own effects in the same perturbed worlds (`--only
+//! library`; `--cases a,b+c`, default every pushing effect alone and in pairs): each hidden at
+//! the recovery's strength (`simdata::add_push_effect`), diagnosed with the model fitted on the
+//! world's nominal pushes; per seed what was named (✗: not exactly the hidden set), the held-out
+//! error the selection removes and the strengths against the truth. Then the nominal case: data
+//! of the fitted world without any effect, diagnosed: nothing named, no significant term.
 //!
 //! The expected signature: a frictionless pusher presses along the pushed face's normal, the
 //! block heading `θ`, and advances along it by `ℓ·L·cos φ`; on the anisotropic table the block's
@@ -37,7 +41,8 @@
 //!
 //! `cargo run --release -p dynlab-diagnose --example push_open_world -- [--seeds N]
 //! [--first-seed N] [--nominal-seeds N] [--perturb F] [--episodes N] [--noise X] [--ratio R]
-//! [--angle-deg G | --random-angle] [--jitter-deg D] [--no-library] [--only aniso|nominal]
+//! [--angle-deg G | --random-angle] [--jitter-deg D] [--no-library] [--only aniso|library|nominal]
+//! [--cases a,b+c]
 //! [--refit a,c,kappa] [--pusher-speed V] [--pusher-acceleration A]
 //! [--limit-surface support_points]` (`--refit`: the nominal parameters the fit of the world's
 //! model frees and the diagnosis refits, default `c`, `kappa`; `--limit-surface`: the pushing
@@ -51,10 +56,10 @@
 
 use std::time::Instant;
 
-use dynlab_diagnose::diagnosis::simdata::{push_dataset_with, push_scenario};
+use dynlab_diagnose::diagnosis::simdata::{add_push_effect, push_dataset_with, push_scenario};
 use dynlab_diagnose::diagnosis::{DiagnoseConfig, Diagnosis, diagnose, push_level_dataset};
 use dynlab_learn::dynamics::data::SplitMix64;
-use dynlab_learn::dynamics::physics::{LimitSurface, Target};
+use dynlab_learn::dynamics::physics::{Effect, LimitSurface, Robot, Target};
 use dynlab_learn::eval::evaluate;
 use dynlab_learn::train::{TrainConfig, train};
 use dynlab_learn::{Dataset, Model, ModelKind};
@@ -119,6 +124,119 @@ fn terms_of(d: &Diagnosis) -> Vec<(String, String, f64, f64, f64)> {
                 .collect()
         })
         .unwrap_or_default()
+}
+
+/// The fitted strength of effect `e` against the truth the simulator hides it with
+/// ([`add_push_effect`]) in world `s`: (parameter, fitted, truth). A tilt and a patch are
+/// fitted relative to the table's friction, which the perturbation scales.
+fn strength(e: Effect, s: &PushScenario, d: &Diagnosis) -> Option<(String, f64, f64)> {
+    let mu = s.block.table_friction;
+    let (key, truth) = match e {
+        Effect::ComOffset => ("ox", 0.02),
+        Effect::TableTilt => ("gx", 0.02_f64.tan() / mu),
+        Effect::FrictionPatch => ("k", 0.5 / mu),
+        Effect::PusherFriction => ("mu", 0.5),
+        Effect::FlatPusher => ("half_width", 0.012),
+        _ => return None,
+    };
+    let name = format!("{}.{key}", e.name());
+    let v = *d.joint.as_ref()?.params.get(&name)?;
+    Some((name, v, truth))
+}
+
+/// Every library case (one pushing effect or several) in the perturbed worlds of the seeds:
+/// the world's model fitted on its nominal pushes, data with the case's effects hidden,
+/// diagnosed; per seed what was named, the held-out error the selection removes and the
+/// strengths against the truth; per case how often the named set is exactly the hidden one.
+#[allow(clippy::type_complexity)]
+fn library_cases(
+    first_seed: u64,
+    seeds: u64,
+    cases: &[Vec<Effect>],
+    world: &dyn Fn(u64) -> Result<(PushScenario, Model), Box<dyn std::error::Error>>,
+    pushes: &dyn Fn(&PushScenario, u64) -> Result<Dataset, Box<dyn std::error::Error>>,
+    diag_cfg: &dyn Fn(u64) -> DiagnoseConfig,
+) -> Result<(), Box<dyn std::error::Error>> {
+    let verbose = std::env::var("VERBOSE").is_ok();
+    println!(
+        "\n{:<34} {:<5} {:<34} {:>8} {:<60} {:>6}",
+        "hidden (library)", "seed", "named", "removed", "fitted (truth)", "time/s"
+    );
+    let mut summary = Vec::new();
+    let worlds: Vec<(PushScenario, Model)> = (first_seed..first_seed + seeds)
+        .map(world)
+        .collect::<Result<_, _>>()?;
+    for case in cases {
+        let label = case
+            .iter()
+            .map(|e| e.name())
+            .collect::<Vec<_>>()
+            .join(" + ");
+        let (mut exact, mut removed) = (0, Vec::new());
+        for (seed, (scenario, model)) in (first_seed..).zip(&worlds) {
+            let t0 = Instant::now();
+            let mut hidden = scenario.clone();
+            for &e in case {
+                add_push_effect(&mut hidden, e);
+            }
+            let data = pushes(&hidden, 8000 + seed)?;
+            let d = diagnose(model, &data, &diag_cfg(seed))?;
+            if verbose {
+                let b = &scenario.block;
+                println!(
+                    "--- {label}, seed {seed} (block {:.1} × {:.1} mm, {:.3} kg, table μ {:.4}, pusher radius {:.2} mm)\n{}",
+                    1e3 * b.size[0],
+                    1e3 * b.size[1],
+                    b.mass,
+                    b.table_friction,
+                    1e3 * scenario.pusher.radius,
+                    d.table()
+                );
+            }
+            let mut named: Vec<&str> = d.effects.iter().map(String::as_str).collect();
+            named.sort_unstable();
+            let mut truth: Vec<&str> = case.iter().map(|e| e.name()).collect();
+            truth.sort_unstable();
+            let hit = named == truth;
+            exact += usize::from(hit);
+            let red = d.joint.as_ref().map_or(0.0, |j| j.error_reduction);
+            removed.push(red);
+            let fitted: Vec<String> = case
+                .iter()
+                .filter_map(|&e| strength(e, scenario, &d))
+                .map(|(n, v, t)| format!("{n} {v:.4} ({t:.4})"))
+                .collect();
+            println!(
+                "{:<34} {:<5} {:<34} {:>7.1}% {:<60} {:>6.1}",
+                label,
+                seed,
+                if named.is_empty() {
+                    "—".to_string()
+                } else {
+                    d.effects.join(", ")
+                } + if hit { "" } else { " ✗" },
+                100.0 * red,
+                fitted.join(", "),
+                t0.elapsed().as_secs_f64()
+            );
+        }
+        summary.push((label, exact, removed));
+    }
+    println!(
+        "\nlibrary cases in perturbed worlds over {seeds} seeds: exactly the hidden set named; the held-out error the selection removes, min / mean / max"
+    );
+    for (label, exact, removed) in summary {
+        let lo = removed.iter().copied().fold(f64::INFINITY, f64::min);
+        let hi = removed.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        let m = removed.iter().sum::<f64>() / removed.len().max(1) as f64;
+        println!(
+            "{label:<34} {exact}/{seeds}   {:.0} / {:.0} / {:.0} %",
+            100.0 * lo,
+            100.0 * m,
+            100.0 * hi
+        );
+    }
+    Ok(())
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -192,6 +310,34 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         Ok((s, train(&nominal, &tc, &mut |_| {})?.model))
     };
     let name = |t: &str| Target::from_name(t).map_or(t.to_string(), |x| x.symbol().to_string());
+    // the library's cases: `--cases a+b,c` (default every pushing effect alone and in pairs)
+    let cases: Vec<Vec<Effect>> = match opt::<String>("--cases") {
+        Some(list) => list
+            .split(',')
+            .map(|case| {
+                case.split('+')
+                    .map(|n| {
+                        Effect::from_name(n.trim())
+                            .filter(|e| e.robot() == Robot::Pushing)
+                            .ok_or_else(|| {
+                                format!("--cases: '{n}' is not a pushing effect of the library")
+                            })
+                    })
+                    .collect::<Result<Vec<_>, _>>()
+            })
+            .collect::<Result<_, _>>()?,
+        None => {
+            let push: Vec<Effect> = Effect::ALL
+                .into_iter()
+                .filter(|e| e.robot() == Robot::Pushing)
+                .collect();
+            let mut cases: Vec<Vec<Effect>> = push.iter().map(|&e| vec![e]).collect();
+            for (i, &a) in push.iter().enumerate() {
+                cases.extend(push[i + 1..].iter().map(|&b| vec![a, b]));
+            }
+            cases
+        }
+    };
 
     if only.is_empty() || only == "aniso" {
         println!(
@@ -328,6 +474,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             span(&removed),
             span(&gains)
         );
+    }
+
+    if only.is_empty() || only == "library" {
+        library_cases(first_seed, seeds, &cases, &world, &pushes, &diag_cfg)?;
     }
 
     if only.is_empty() || only == "nominal" {

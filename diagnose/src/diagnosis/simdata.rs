@@ -199,19 +199,28 @@ pub fn over_low_grip_band(feature: &str) -> bool {
 
 /// The pushing world with only `effect` on (see [`car_scenario`]).
 pub fn push_scenario(effect: Option<Effect>, noise: f64) -> PushScenario {
-    use dynlab_sim::push::{ComOffset, FrictionPatch, PusherFriction, TableTilt};
     let mut s = PushScenario::default();
     s.noise.position_std = 0.0005 * noise;
     s.noise.yaw_std = 0.002 * noise;
+    if let Some(e) = effect {
+        add_push_effect(&mut s, e);
+    }
+    s
+}
+
+/// Turns pushing `effect` on in world `s` at the strength the recovery hides it with (a car
+/// effect changes nothing).
+pub fn add_push_effect(s: &mut PushScenario, effect: Effect) {
+    use dynlab_sim::push::{ComOffset, FrictionPatch, PusherFriction, TableTilt};
     match effect {
-        Some(Effect::ComOffset) => {
+        Effect::ComOffset => {
             s.effects.com_offset = Some(ComOffset {
                 enabled: true,
                 offset: [0.02, 0.01],
             })
         }
-        Some(Effect::TableTilt) => s.effects.table_tilt = Some(TableTilt::default()),
-        Some(Effect::FrictionPatch) => {
+        Effect::TableTilt => s.effects.table_tilt = Some(TableTilt::default()),
+        Effect::FrictionPatch => {
             s.effects.friction_patch = Some(FrictionPatch {
                 enabled: true,
                 mu: 0.5,
@@ -223,14 +232,13 @@ pub fn push_scenario(effect: Option<Effect>, noise: f64) -> PushScenario {
                 },
             })
         }
-        Some(Effect::PusherFriction) => s.effects.pusher_friction = Some(PusherFriction::default()),
+        Effect::PusherFriction => s.effects.pusher_friction = Some(PusherFriction::default()),
         // a pad 2.4 cm wide whose face looks along world x, as launch_scripts/scenarios/
         // push_flat_pusher.toml
-        Some(Effect::FlatPusher) => {
+        Effect::FlatPusher => {
             s.pusher.pad_half_width = 0.012;
             s.pusher.pad_yaw = 0.0;
         }
         _ => {}
     }
-    s
 }
