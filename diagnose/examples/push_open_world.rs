@@ -126,6 +126,8 @@ fn terms_of(d: &Diagnosis) -> Vec<(String, String, f64, f64, f64)> {
         .unwrap_or_default()
 }
 
+type Res<T> = Result<T, Box<dyn std::error::Error>>;
+
 /// The fitted strength of effect `e` against the truth the simulator hides it with
 /// ([`add_push_effect`]) in world `s`: (parameter, fitted, truth). A tilt and a patch are
 /// fitted relative to the table's friction, which the perturbation scales.
@@ -148,15 +150,14 @@ fn strength(e: Effect, s: &PushScenario, d: &Diagnosis) -> Option<(String, f64, 
 /// the world's model fitted on its nominal pushes, data with the case's effects hidden,
 /// diagnosed; per seed what was named, the held-out error the selection removes and the
 /// strengths against the truth; per case how often the named set is exactly the hidden one.
-#[allow(clippy::type_complexity)]
 fn library_cases(
     first_seed: u64,
     seeds: u64,
     cases: &[Vec<Effect>],
-    world: &dyn Fn(u64) -> Result<(PushScenario, Model), Box<dyn std::error::Error>>,
-    pushes: &dyn Fn(&PushScenario, u64) -> Result<Dataset, Box<dyn std::error::Error>>,
+    world: &dyn Fn(u64) -> Res<(PushScenario, Model)>,
+    pushes: &dyn Fn(&PushScenario, u64) -> Res<Dataset>,
     diag_cfg: &dyn Fn(u64) -> DiagnoseConfig,
-) -> Result<(), Box<dyn std::error::Error>> {
+) -> Res<()> {
     let verbose = std::env::var("VERBOSE").is_ok();
     println!(
         "\n{:<34} {:<5} {:<34} {:>8} {:<60} {:>6}",
