@@ -1545,7 +1545,7 @@ impl<'a> Ctx<'a> {
             );
             if w.max(t) < 0.5 * PUSHER_RADIUS_M {
                 return Some(format!(
-                    "the pad ({} × {} m half width × half thickness) lies within half the pusher's radius ({} m) both ways: its reach turns with the block by under {} m, and it mainly moves the contact by the radius it lacks, a pusher of another size or a block of another depth, not a pad",
+                    "the pad ({} × {} m half width × half thickness) lies within half the pusher's radius ({} m) both ways: its reach turns with the block by at most {} m, and it mainly moves the contact by the radius it lacks, a pusher of another size or a block of another depth, not a pad",
                     g4(w),
                     g4(t),
                     g4(PUSHER_RADIUS_M),
