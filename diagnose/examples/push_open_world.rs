@@ -227,17 +227,17 @@ fn library_cases(
         "\nlibrary cases in perturbed worlds over {seeds} seeds: exactly the hidden set named; the held-out error the selection removes, min / mean / max"
     );
     for (label, exact, removed) in summary {
-        let lo = removed.iter().copied().fold(f64::INFINITY, f64::min);
-        let hi = removed.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-        let m = removed.iter().sum::<f64>() / removed.len().max(1) as f64;
-        println!(
-            "{label:<34} {exact}/{seeds}   {:.0} / {:.0} / {:.0} %",
-            100.0 * lo,
-            100.0 * m,
-            100.0 * hi
-        );
+        println!("{label:<34} {exact}/{seeds}   {}", span(&removed));
     }
     Ok(())
+}
+
+/// Min / mean / max of fractions `v`, in per cent.
+fn span(v: &[f64]) -> String {
+    let lo = v.iter().copied().fold(f64::INFINITY, f64::min);
+    let hi = v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let m = v.iter().sum::<f64>() / v.len().max(1) as f64;
+    format!("{:.0} / {:.0} / {:.0} %", 100.0 * lo, 100.0 * m, 100.0 * hi)
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -464,12 +464,6 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 t0.elapsed().as_secs_f64()
             );
         }
-        let span = |v: &[f64]| {
-            let lo = v.iter().copied().fold(f64::INFINITY, f64::min);
-            let hi = v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-            let m = v.iter().sum::<f64>() / v.len().max(1) as f64;
-            format!("{:.0} / {:.0} / {:.0} %", 100.0 * lo, 100.0 * m, 100.0 * hi)
-        };
         println!(
             "anisotropic friction over {seeds} seeds: a library effect named in {named}/{seeds}; a term beyond the library in {found}/{seeds} (on ẏ_b with ℓ·cos φ·sin 2θ or ℓ·cos φ·cos 2θ in {on_grain}, with the truth's sign in {right_sign}), held-out error removed min/mean/max {}; training with it lowered the held-out loss in {better}/{found} (by {})",
             span(&removed),

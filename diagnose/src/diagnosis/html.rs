@@ -242,6 +242,13 @@ fn candidate_table(cands: &[Candidate], added: Option<&str>, d: &Diagnosis) -> S
                 esc(n)
             );
         }
+        if let Some(n) = &c.paired {
+            let _ = writeln!(
+                o,
+                "<tr><td></td><td colspan=5 style=\"color:#1a7f37\">added {}</td></tr>",
+                esc(n)
+            );
+        }
     }
     let _ = writeln!(o, "</table>");
     o
