@@ -1897,16 +1897,16 @@ impl<'a> Ctx<'a> {
             && Effect::from_name(&c.effect).is_some_and(|e| f.effect_on_bound(e).is_some())
     }
 
-    /// The partner of candidate `e` (fitted `f` against the step's model) when the data push `e` onto a
-    /// bound of its range: another effect that takes up part of the same error, so that `e`
-    /// alone is pushed past what it can give. In a perturbed pushing world (the block 9.5 %
-    /// deeper than its datasheet) with a shifted centre of mass and a flat pusher, the offset
-    /// alone removed 70 % with `ox` on its bound 0.05 m and the pad alone nothing (fitted
-    /// without the offset, it turned a quarter); on top of the offset the pad removes 38 %
-    /// (bound 26 %), and the two refitted jointly 83 %, `ox` at 0.040 m. The pair counts when
-    /// the partner is significant against `e` as fitted, neither is on a bound or otherwise
-    /// implausible in their joint refit, and the joint model removes a significant part of the
-    /// partner's error (refitted alone): `e` with its parameters off their bound counts.
+    /// The partner of candidate `e` (fitted `f` against the step's model) when the data push `e`
+    /// onto a bound of its range: another effect that takes up part of the same error, so that `e`
+    /// alone is pushed past what it can give. In a perturbed pushing world (the block 9.5 % deeper
+    /// than its datasheet) with a shifted centre of mass and a flat pusher, the offset alone
+    /// removed 70 % with `ox` on its bound 0.05 m and the pad alone nothing (fitted without the
+    /// offset, it turned a quarter); on top of the offset the pad removes 38 % (bound 26 %), and
+    /// the two refitted jointly 83 %, `ox` at 0.040 m. The pair counts when the partner is
+    /// significant against `e` as fitted, neither is on a bound or otherwise implausible in their
+    /// joint refit, and the joint model removes a significant part of the partner's error (refitted
+    /// alone): `e` with its parameters off their bound counts.
     fn partner(
         &self,
         e: Effect,
@@ -2320,8 +2320,7 @@ pub fn diagnose(
             scored.iter().position(|(c, f)| ctx.refused_on_bound(c, f)),
         ) {
             (None, Some(i)) if selection.len() + 2 <= cfg.max_effects => {
-                let e = Effect::from_name(&scored[i].0.effect);
-                match e {
+                match Effect::from_name(&scored[i].0.effect) {
                     Some(e) => ctx.partner(e, &scored[i].1, &lib)?.map(|p| (i, e, p)),
                     None => None,
                 }
