@@ -637,3 +637,30 @@ fn an_offset_within_the_blocks_tolerance_both_ways_is_not_named_a_third_effect()
         "{table}"
     );
 }
+
+/// A perturbed world (`push_open_world`'s seed 4: the block 7 % deeper, table friction +6 %)
+/// with a patch of 4.7 times the table's friction and a flat pusher. The patch's starts ranked
+/// by their cost put the true disc's basin 5th or lower, and the two refined ended on a large
+/// disc of a fifth of the table's friction elsewhere (37 % removed with the pad). Each start
+/// fitted a few iterations first, the best two then refined, the patch is the small
+/// high-friction disc, and the two remove most of the error.
+#[test]
+fn a_friction_patch_is_fitted_from_its_starts_probed_not_ranked_where_they_begin() {
+    let d = perturbed_world_diagnosis(4, &[Effect::FrictionPatch, Effect::FlatPusher]);
+    let table = d.table();
+    let mut named = d.effects.clone();
+    named.sort();
+    assert_eq!(named, vec!["flat_pusher", "friction_patch"], "{table}");
+    let step_patch = d.selection[0]
+        .candidates
+        .iter()
+        .find(|c| c.effect == "friction_patch")
+        .unwrap();
+    // more friction on a disc about the block's size, where the ranked starts found less on a
+    // disc twice as large
+    assert!(step_patch.params["k"] > 2.0, "{table}");
+    assert!(step_patch.params["r"] < 0.15, "{table}");
+    let j = d.joint.as_ref().unwrap();
+    assert!(j.error_reduction >= 0.6 && j.ci_lower > 0.0, "{table}");
+    assert!(j.params["friction_patch.k"] > 2.0, "{table}");
+}
