@@ -961,6 +961,10 @@ const COUPLED_MIN_GAIN: f64 = 0.02;
 /// (after 3 not always: a patch fitted after a pusher's friction ended on another disc).
 const PROBE_ITERATIONS: usize = 5;
 
+/// A probe fits on every `PROBE_STRIDE`th window of the fit half (neighbouring windows of a
+/// segment overlap and tell much the same).
+const PROBE_STRIDE: usize = 3;
+
 /// The physics part of an augmented model at one selection step: the model's physics with the
 /// effects added so far (nominal parameters as refitted), with its per-window errors.
 #[derive(Clone)]
@@ -1362,7 +1366,6 @@ impl<'a> Ctx<'a> {
             None => Vec::new(),
         };
         let fit_w = fit_w.as_slice();
-        let nr = (fit_w.len() * k * ds) as f64;
         // the baseline and the joint refits start further from their optimum, and a candidate
         // must not be credited with iterations its baseline did not get
         let iterations = if cand.is_none() {
@@ -1370,14 +1373,16 @@ impl<'a> Ctx<'a> {
         } else {
             self.cfg.iterations
         };
-        let resid_of = |th: &[f64]| -> Vec<f64> {
-            let mut r = Vec::new();
-            match cost_of(th, fit_w, Some(&mut r)) {
-                Some(_) => r.iter().map(|x| x / nr.sqrt()).collect(),
-                None => vec![f64::INFINITY],
-            }
-        };
-        let eval_with = |free: &[bool], th: &[f64], with_j: bool| -> (Vec<f64>, Vec<f64>) {
+        // residuals (normalised by their count), with the Jacobian in the free parameters
+        let eval_with = |ws: &[Window], free: &[bool], th: &[f64], with_j: bool| {
+            let nr = (ws.len() * k * ds) as f64;
+            let resid_of = |th: &[f64]| -> Vec<f64> {
+                let mut r = Vec::new();
+                match cost_of(th, ws, Some(&mut r)) {
+                    Some(_) => r.iter().map(|x| x / nr.sqrt()).collect(),
+                    None => vec![f64::INFINITY],
+                }
+            };
             let r = resid_of(th);
             if !with_j {
                 return (r, Vec::new());
@@ -1386,20 +1391,22 @@ impl<'a> Ctx<'a> {
             let jac = forward_jacobian(th, &r, &step, &resid_of);
             (r, jac)
         };
-        let lsq = |th0: &[f64], free: &[bool], iterations: usize| {
+        let lsq = |ws: &[Window], th0: &[f64], free: &[bool], iterations: usize| {
             bounded_least_squares(th0, &lower, &upper, free, iterations, &mut |th, j| {
-                eval_with(free, th, j)
+                eval_with(ws, free, th, j)
             })
         };
-        // a probed patch: each start fitted alone, the nominal parameters held, and the best
-        // two refitted with them (see `PROBE_ITERATIONS`)
+        // a probed patch: each start fitted alone, the nominal parameters held, on every
+        // `PROBE_STRIDE`th window, and the best two refitted with them on all (see
+        // `PROBE_ITERATIONS`)
         let mut probes: Vec<(f64, Vec<f64>)> = Vec::new();
         if let Some(e) = probed {
             let own: Vec<bool> = (0..free.len())
                 .map(|c| free[c] && owners[c] == Some(e))
                 .collect();
+            let some: Vec<Window> = fit_w.iter().step_by(PROBE_STRIDE).cloned().collect();
             for st in e.starts(lo, hi) {
-                let res = lsq(&start_theta(&st), &own, PROBE_ITERATIONS);
+                let res = lsq(&some, &start_theta(&st), &own, PROBE_ITERATIONS);
                 probes.push((res.cost, res.theta));
             }
         }
@@ -1410,12 +1417,12 @@ impl<'a> Ctx<'a> {
         let mut best: [Option<Run>; 2] = [None, None];
         for (th0, held) in runs {
             let free = if held { &held_free } else { &free };
-            let mut res = lsq(&th0, free, iterations);
+            let mut res = lsq(fit_w, &th0, free, iterations);
             // standard errors clustered by segment (overlapping windows are correlated), by
             // the jackknife: the sandwich gave a disc's centre ± 5·10⁻⁵ m, and the joint fit on
             // the same data put it 18 mm away; residual rows are step-major: (step j, window i,
             // dimension c)
-            let (r, jac) = eval_with(free, &res.theta, true);
+            let (r, jac) = eval_with(fit_w, free, &res.theta, true);
             let cluster: Vec<usize> = (0..k)
                 .flat_map(|_| {
                     fit_w
