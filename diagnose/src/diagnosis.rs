@@ -21,7 +21,8 @@
 //! The effect's parameters `θ_e` are fitted within their bounds (bounded Levenberg–Marquardt with a
 //! clarabel QP step, several starts: for the patch effects over the data's extent, for the servo at
 //! several rate limits; a `grip_patch` also from the discs that best explain the one-step residual,
-//! `discovery::grip_discs`) on the k-step open-loop error of the fit half, and the candidate is
+//! `discovery::grip_discs`; a `friction_patch`'s starts each fitted a few iterations first, the
+//! best two of those refined) on the k-step open-loop error of the fit half, and the candidate is
 //! scored on the held-out half: `error_reduction = 1 − E_after/E_before` of the k-step error `E`
 //! (the squared error of every state dimension over k steps, each dimension divided by the RMS
 //! k-step change of that dimension in the data, so the scale is the error of the "nothing moves"
