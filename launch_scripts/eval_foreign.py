@@ -48,6 +48,9 @@ CASES = {
     "steer_stop*": ("steer_stop", None),
     "traction_limit*": ("traction_limit", None),
     "battery_sag*": ("battery_sag", None),
+    "aero_drag + motor_lag": ("aero_drag,motor_lag", ("aero_drag", "motor_lag")),
+    "motor_lag + steering_offset": ("motor_lag,steering_offset", ("motor_lag", "steering_offset")),
+    "aero_drag + grip_patch": ("aero_drag,grip_patch", ("aero_drag", "grip_patch")),
 }
 TRUTH = {"aero_drag.c": 0.01, "steering_offset.delta0": 0.03, "motor_lag.tau": 0.2,
          "steering_lag.tau": 0.025, "steering_lag.rate": 2.5,

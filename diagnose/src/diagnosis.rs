@@ -44,7 +44,12 @@
 //! removes at least `min_reduction` more: the region is not a disc; nor a `steering_offset` when
 //! the term search's best steering term with `δ` as a factor (`δ·vₓ`, `δ`, …) does: the steering
 //! error is not a constant; nor a `steering_lag` when its best term on the lagged steering's rate
-//! (`δ̇_τ`) does: the command reaches the wheels late, a delay rather than a servo's lag.
+//! (`δ̇_τ`) does: the command reaches the wheels late, a delay rather than a servo's lag; nor an
+//! `aero_drag` or `motor_lag` when the throttle beyond a level (`d_{>l}`) does: a capped drive.
+//! Where no candidate is significant and the best one would count but for its bound or such a
+//! rival term, the other candidates are fitted on top of it, and a partner that shares the error
+//! is added with it (the pair step, `Ctx::partner`; against a rival term the pair must remove
+//! as much as the term).
 //! The verdict is the best significant candidate, or none:
 //! then the report says so and lists what the residual correlates with (state and input features,
 //! and inputs at lags).
@@ -428,10 +433,15 @@ pub struct Candidate {
     /// ([`CrossFit`]); `None` where it was not needed.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub cross_fit: Option<CrossFit>,
-    /// How a candidate refused alone for a parameter on its bound was added with a partner
-    /// that shares the error with it (the selection's pair step); `None` otherwise.
+    /// How a candidate refused alone for a parameter on its bound or for a rival term was added
+    /// with a partner that shares the error with it (the selection's pair step); `None`
+    /// otherwise.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub paired: Option<String>,
+    /// The held-out error the term search's rival term removes where it refused the candidate
+    /// (`note`; [`Ctx::rival_term_note`]); `None` otherwise.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rival_reduction: Option<f64>,
 }
 
 /// A candidate's second look: the step's model and the candidate refitted on the held-out half
@@ -1660,7 +1670,7 @@ impl<'a> Ctx<'a> {
         e: Effect,
         f: &Fitted,
         reduction: f64,
-    ) -> Result<Option<String>, DiagnosisError> {
+    ) -> Result<Option<(String, f64)>, DiagnosisError> {
         let Some(Rival {
             target,
             among,
@@ -1730,13 +1740,16 @@ impl<'a> Ctx<'a> {
         }
         let best = best.filter(|t| t.error_reduction >= reduction + self.cfg.min_reduction);
         Ok(best.map(|t| {
+            (
                 format!(
                     "{term} term, {}, removes more of the held-out error ({:.1} % against {:.1} %): {meaning} (see the term search)",
                     t.equation,
                     100.0 * t.error_reduction,
                     100.0 * reduction
-                )
-            }))
+                ),
+                t.error_reduction,
+            )
+        }))
     }
 
     /// Fits and scores candidate `e` against the augmented model `cur`; `tested`: the number of
@@ -1778,8 +1791,9 @@ impl<'a> Ctx<'a> {
         } else {
             None
         };
+        let mut rival_reduction = None;
         if counts && note.is_none() && self.pure_physics {
-            note = self.rival_term_note(cur, e, &f, raw)?;
+            (note, rival_reduction) = self.rival_term_note(cur, e, &f, raw)?.unzip();
         }
         let significant = counts && note.is_none();
         let mine: Vec<usize> = (0..f.names.len())
@@ -1819,6 +1833,7 @@ impl<'a> Ctx<'a> {
             note,
             cross_fit,
             paired: None,
+            rival_reduction,
         };
         Ok(Some((candidate, f)))
     }
@@ -1921,16 +1936,25 @@ impl<'a> Ctx<'a> {
         Ok(out)
     }
 
-    /// Whether candidate `c` (fitted `f`) would count but for a parameter of its own on a bound
-    /// of its range: the data ask for more than the effect can give.
-    fn refused_on_bound(&self, c: &Candidate, f: &Fitted) -> bool {
+    /// Why candidate `c` (fitted `f`), whose numbers would count, was refused alone where
+    /// another effect may share the error with it: a parameter of its own on a bound of its
+    /// range (the data ask for more than it can give), or a rival term that removes more
+    /// ([`Ctx::rival_term_note`]; two effects may each follow a part of the error that one term
+    /// of another shape follows as a whole). `None` for a candidate refused otherwise or not at all.
+    fn refused_alone(&self, c: &Candidate, f: &Fitted) -> Option<Refusal> {
         let counts = c.ci_lower > 0.0
             || c.cross_fit
                 .as_ref()
                 .is_some_and(|x| x.counts(self.cfg.min_reduction));
-        c.raw_reduction >= self.cfg.min_reduction
-            && counts
-            && Effect::from_name(&c.effect).is_some_and(|e| f.effect_on_bound(e).is_some())
+        if c.raw_reduction < self.cfg.min_reduction || !counts {
+            return None;
+        }
+        let e = Effect::from_name(&c.effect)?;
+        if f.effect_on_bound(e).is_some() {
+            Some(Refusal::Bound)
+        } else {
+            c.rival_reduction.map(Refusal::Rival)
+        }
     }
 
     /// The partner of candidate `e` (fitted `f` against the step's model) when the data push `e`
@@ -1943,9 +1967,18 @@ impl<'a> Ctx<'a> {
     /// significant against `e` as fitted, neither is on a bound or otherwise implausible in their
     /// joint refit, and the joint model removes a significant part of the partner's error (refitted
     /// alone): `e` with its parameters off their bound counts.
+    ///
+    /// Likewise where a rival term refused `e` ([`Refusal::Rival`]): on the independent
+    /// generator's car with a drag and a slow motor, the drag alone removed 23 % and the lag
+    /// 4 %, and the throttle beyond a level (38 %) refused the drag; the two fitted together
+    /// leave no term. There the pair must also remove at least as much of the step's held-out
+    /// error (from `cur`) as the rival term did, which two effects against one term is no
+    /// margin in their favour: on a car whose drive force is capped the term stays.
     fn partner(
         &self,
+        cur: &Current,
         e: Effect,
+        refusal: Refusal,
         f: &Fitted,
         lib: &[Effect],
     ) -> Result<Option<Partner>, DiagnosisError> {
@@ -1978,21 +2011,39 @@ impl<'a> Ctx<'a> {
         let alpha = 1.0 - self.cfg.confidence_for(lib.len());
         let seed = self.cfg.seed ^ (e as u64 + 1).wrapping_mul(0xA24B_AED4_963E_E407);
         let ci_lower = bootstrap_lower(&ws, &before, &after, self.cfg.bootstrap, alpha, seed);
+        let rival = match refusal {
+            Refusal::Bound => None,
+            Refusal::Rival(r) => {
+                let (_, before, after) = self.calm_scores(cur, &next.test, &next.calm);
+                Some([reduction(mean(&before), mean(&after)), r])
+            }
+        };
+        let beats_rival = rival.is_none_or(|[pair, r]| pair >= r);
         Ok(
-            (raw >= self.cfg.min_reduction && ci_lower > 0.0).then_some(Partner {
+            (raw >= self.cfg.min_reduction && ci_lower > 0.0 && beats_rival).then_some(Partner {
                 first,
                 scored,
                 at,
                 next,
                 joint,
                 check: [raw, ci_lower],
+                rival,
             }),
         )
     }
 }
 
-/// A candidate refused alone for a parameter on its bound, and the partner it shares the
-/// error with ([`Ctx::partner`]).
+/// Why a candidate whose numbers count was refused alone ([`Ctx::refused_alone`]).
+#[derive(Clone, Copy, Debug)]
+enum Refusal {
+    /// A parameter of its own on a bound of its range.
+    Bound,
+    /// A rival term that removes this much of the held-out error.
+    Rival(f64),
+}
+
+/// A candidate refused alone ([`Refusal`]), and the partner it shares the error with
+/// ([`Ctx::partner`]).
 struct Partner {
     /// The step's model with the first effect as fitted alone (on its bound).
     first: Current,
@@ -2007,6 +2058,9 @@ struct Partner {
     /// The held-out error the joint model removes from the partner alone (refitted), and its
     /// bootstrap lower bound: what the first effect adds with its parameters off their bound.
     check: [f64; 2],
+    /// Where a rival term refused the first effect: the held-out error the pair removes from
+    /// the step's model, and the rival term's.
+    rival: Option<[f64; 2]>,
 }
 
 /// One selection step's second looks ([`CrossFit`]): the context with the halves' roles
@@ -2350,14 +2404,20 @@ pub fn diagnose(
         let error_before = mean(&cur.test);
         let best = scored.iter().position(|(c, _)| c.significant);
         let mut candidates: Vec<Candidate> = scored.iter().map(|(c, _)| c.clone()).collect();
-        // none counts, but the best refused for its bound may share the error with another
+        // none counts, but the best refused alone (for its bound, or for a rival term) may
+        // share the error with another
         let paired = match (
             best,
-            scored.iter().position(|(c, f)| ctx.refused_on_bound(c, f)),
+            scored
+                .iter()
+                .enumerate()
+                .find_map(|(i, (c, f))| Some((i, ctx.refused_alone(c, f)?))),
         ) {
-            (None, Some(i)) if selection.len() + 2 <= cfg.max_effects => {
+            (None, Some((i, refusal))) if selection.len() + 2 <= cfg.max_effects => {
                 match Effect::from_name(&scored[i].0.effect) {
-                    Some(e) => ctx.partner(e, &scored[i].1, &lib)?.map(|p| (i, e, p)),
+                    Some(e) => ctx
+                        .partner(&cur, e, refusal, &scored[i].1, &lib)?
+                        .map(|p| (i, e, p)),
                     None => None,
                 }
             }
@@ -2369,8 +2429,16 @@ pub fn diagnose(
                 .filter(|&j| p.joint.owners[j] == Some(e))
                 .map(|j| format!("{} = {}", p.joint.names[j], g4(p.joint.theta[j])))
                 .collect();
+            let why = match p.rival {
+                None => "off its bound".to_string(),
+                Some([pair, r]) => format!(
+                    "the pair removes {:.1} % of the step's held-out error against the rival term's {:.1} %",
+                    100.0 * pair,
+                    100.0 * r
+                ),
+            };
             candidates[i].paired = Some(format!(
-                "with {} (which then removes {:.1} % more, bound {:.1} %) refitted jointly: {}, off its bound; the pair removes {:.1} % of what {} leaves refitted alone (bound {:.1} %): the two share the error",
+                "with {} (which then removes {:.1} % more, bound {:.1} %) refitted jointly: {}, {why}; the pair removes {:.1} % of what {} leaves refitted alone (bound {:.1} %): the two share the error",
                 pc.effect,
                 100.0 * pc.raw_reduction,
                 100.0 * pc.ci_lower,
@@ -2619,12 +2687,15 @@ pub fn diagnose(
         .unwrap_or_default();
     let verdict = added.first().map(|e| e.name().to_string());
     let correlations = residual_correlations(model, &ctx.d, &ctx.fit_w, &ctx.test_w);
-    // the effects added with a partner, off their bound only with it (the pair step)
-    let paired: Vec<&str> = selection
+    // the effects added with a partner, counted only with it (the pair step)
+    let paired: Vec<String> = selection
         .iter()
         .flat_map(|s| &s.candidates)
         .filter(|c| c.paired.is_some())
-        .map(|c| c.effect.as_str())
+        .map(|c| match c.rival_reduction {
+            Some(_) => format!("{} refused alone for a rival term", c.effect),
+            None => format!("{} on its bound alone", c.effect),
+        })
         .collect();
     let mut summary = match &joint {
         Some(j) if j.effects.len() > 1 => format!(
@@ -2633,10 +2704,7 @@ pub fn diagnose(
             100.0 * j.error_reduction.max(0.0),
             match paired.is_empty() {
                 true => String::new(),
-                false => format!(
-                    "; {} on its bound alone, added with its partner",
-                    paired.join(", ")
-                ),
+                false => format!("; {}, added with its partner", paired.join(", ")),
             }
         ),
         Some(j) => format!(

@@ -6,6 +6,7 @@ bag of the same car, its parameters 10 % off the datasheet, with aero drag and a
 with their strengths, nothing beyond the library, and the applied model predicts the bag better.
 Bags with an effect outside the library (a yaw damper, a sloping floor, a drive force capped by
 traction) get no library name and the term that models it.
+A drag and a slow motor, which a drive-limit term refuses one at a time, are named as a pair.
 """
 import json
 import subprocess
@@ -228,6 +229,42 @@ def test_a_drive_force_capped_by_traction_is_a_throttle_limit_term_not_a_drag(fo
     before, after = (json.loads(run("dynlab", "eval-model", "--model", m, "--bag", other, *TOPICS, "--json",
                                     timeout=300).stdout)["tve"]["tve"] for m in (model, out / "model"))
     assert after < 0.5 * before, (before, after)
+
+
+def test_a_drag_and_a_slow_motor_refused_alone_for_a_drive_limit_term_are_named_as_a_pair(tmp_path):
+    """Car seed 0 of `eval_foreign.py`'s `aero_drag + motor_lag` case (4 × 15 s drives). Both
+    make the car slower to follow the throttle: alone the drag removes about a quarter of the
+    held-out error and the lag little, and the term search's throttle beyond a level removes more
+    than the drag and refuses it (the build before named nothing here). The pair step fits the lag
+    on top of the drag; together they remove more than that term did and are named, at their
+    strengths, and nothing is left for the term search."""
+    def bag(out, seed, effects):
+        subprocess.run([sys.executable, str(REPO / "launch_scripts" / "foreign_car.py"), str(out),
+                        "--car-seed", "0", "--seed", str(seed), "--effects", effects],
+                       check=True, capture_output=True, timeout=300)
+        return out
+
+    model = tmp_path / "model"
+    run("dynlab", "train", "--world", "car", "--kind", "physics", "--bag", bag(tmp_path / "nominal", 1, ""),
+        "--out", model, *TOPICS, timeout=600)
+    out = tmp_path / "diagnosis"
+    # (the two hidden effects alone among the candidates, for time)
+    proc = run("dynlab", "diagnose", "--model", model, "--bag", bag(tmp_path / "drag_lag", 18, "aero_drag,motor_lag"),
+               "--out", out, "--effects", "aero_drag,motor_lag", *TOPICS, timeout=900)
+    j = json.loads((out / "diagnosis.json").read_text())
+    assert set(j["effects"]) == {"aero_drag", "motor_lag"}, proc.stdout
+    first = j["selection"][0]
+    refused = [c for c in first["candidates"] if c.get("paired")]
+    assert len(refused) == 1 and not refused[0]["significant"], proc.stdout
+    rival = refused[0]["rival_reduction"]
+    assert rival is not None and rival >= refused[0]["error_reduction"] + 0.1, refused[0]
+    assert "refused alone for a rival term" in j["summary"], j["summary"]
+    params = j["joint"]["params"]
+    assert abs(params["aero_drag.c"] - 0.01) < 0.003, params
+    assert abs(params["motor_lag.tau"] - 0.2) < 0.05, params
+    # the pair removes more of the held-out error than the drive-limit term did
+    assert j["joint"]["error_reduction"] > rival, (j["joint"], rival)
+    assert not any(t["significant"] for t in j["discovery"]["terms"]), j["discovery"]["summary"]
 
 
 def test_a_battery_running_down_is_a_drift_of_the_drive_force_not_an_effect(foreign):
