@@ -2045,7 +2045,8 @@ enum Refusal {
 /// A candidate refused alone ([`Refusal`]), and the partner it shares the error with
 /// ([`Ctx::partner`]).
 struct Partner {
-    /// The step's model with the first effect as fitted alone (on its bound).
+    /// The step's model with the first effect as fitted alone (on its bound, or refused for a
+    /// rival term).
     first: Current,
     /// Every other candidate against `first`, best first …
     scored: Vec<(Candidate, Fitted)>,
