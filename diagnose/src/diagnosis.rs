@@ -84,7 +84,7 @@ use dynlab_learn::dynamics::physics::{
 };
 use dynlab_learn::fit::{
     SENSITIVITY_LIMIT, bounded_least_squares, calm_windows, cluster_jackknife_std,
-    forward_jacobian, initial_states_after,
+    forward_jacobian, in_n_blocks, initial_states_after,
 };
 use dynlab_learn::train::{segment, segment_origins};
 use dynlab_learn::{Dataset, LearnError, Model, World};
@@ -846,9 +846,24 @@ struct Augmented<'a> {
 
 impl Augmented<'_> {
     /// Per-window normalised squared error over k steps, capped at `d.cap` (`n_windows × k × ds`
-    /// uncapped residuals when
-    /// `resid` is given).
-    fn errors(&self, d: &Data, ws: &[Window], mut resid: Option<&mut Vec<f64>>) -> Vec<f64> {
+    /// uncapped residuals, step-major, appended to `resid` when it is given). A physics model's
+    /// windows are rolled out in blocks on parallel threads ([`in_blocks`]); each window's
+    /// arithmetic is its own, so the numbers do not depend on the number of cores.
+    fn errors(&self, d: &Data, ws: &[Window], resid: Option<&mut Vec<f64>>) -> Vec<f64> {
+        if !self.pure_physics {
+            // a network's step runs on its own worker threads
+            return self.errors_of_block(d, ws, resid);
+        }
+        errors_in_blocks(ws, [d.k, d.ds], resid, |b, r| self.errors_of_block(d, b, r))
+    }
+
+    /// [`Augmented::errors`] on one thread.
+    fn errors_of_block(
+        &self,
+        d: &Data,
+        ws: &[Window],
+        mut resid: Option<&mut Vec<f64>>,
+    ) -> Vec<f64> {
         let (ds, du, k) = (d.ds, d.du, d.k);
         let n = ws.len();
         let mut s = vec![0.0; n * ds];
@@ -945,6 +960,46 @@ impl Augmented<'_> {
         }
         err
     }
+}
+
+/// `rollout(ws, resid)`'s per-window errors and residuals (step-major: `k` steps of `row`
+/// values per window), computed in blocks of windows on parallel threads ([`in_blocks`]) and put
+/// back in the order one call over all of `ws` gives. For a rollout whose every window's
+/// arithmetic is its own, the numbers do not depend on the number of cores.
+pub(crate) fn errors_in_blocks(
+    ws: &[Window],
+    k_row: [usize; 2],
+    resid: Option<&mut Vec<f64>>,
+    rollout: impl Fn(&[Window], Option<&mut Vec<f64>>) -> Vec<f64> + Sync,
+) -> Vec<f64> {
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    errors_in_n_blocks(ws, k_row, cores, resid, rollout)
+}
+
+/// [`errors_in_blocks`] in at most `parts` blocks.
+fn errors_in_n_blocks(
+    ws: &[Window],
+    [k, row]: [usize; 2],
+    parts: usize,
+    resid: Option<&mut Vec<f64>>,
+    rollout: impl Fn(&[Window], Option<&mut Vec<f64>>) -> Vec<f64> + Sync,
+) -> Vec<f64> {
+    let want = resid.is_some();
+    let blocks = in_n_blocks(ws, parts, |b| {
+        let mut r = Vec::new();
+        let e = rollout(b, want.then_some(&mut r));
+        (b.len() * row, e, r)
+    });
+    if let Some(resid) = resid {
+        resid.reserve(ws.len() * k * row);
+        // each block's rows are step-major over its own windows: interleave them by step
+        for j in 0..k {
+            for (len, _, r) in &blocks {
+                resid.extend_from_slice(&r[j * len..(j + 1) * len]);
+            }
+        }
+    }
+    blocks.into_iter().flat_map(|(_, e, _)| e).collect()
 }
 
 /// Commands before a segment that its effect states are rebuilt from \[s\]: 15 time constants
@@ -3730,6 +3785,47 @@ mod tests {
 
     /// Held-out windows of 30 segments, two per segment, with the error before (1 each) and
     /// after: a reduction of `r(i)` in segment `i`.
+    #[test]
+    fn windows_rolled_out_in_blocks_give_the_errors_and_step_major_residuals_of_one_call() {
+        // a rollout whose residual at step j, window (trajectory t, start a), row c is unique
+        let (k, row) = (4, 3);
+        let rollout = |ws: &[Window], mut resid: Option<&mut Vec<f64>>| -> Vec<f64> {
+            let mut err = vec![0.0; ws.len()];
+            for j in 0..k {
+                for (i, w) in ws.iter().enumerate() {
+                    for c in 0..row {
+                        let z = (w.trajectory * 1000 + w.start * 10 + j) as f64 + c as f64 / 10.0;
+                        err[i] += z;
+                        if let Some(r) = resid.as_deref_mut() {
+                            r.push(z);
+                        }
+                    }
+                }
+            }
+            err
+        };
+        let ws: Vec<Window> = (0..7)
+            .map(|i| Window {
+                trajectory: i % 2,
+                start: i,
+            })
+            .collect();
+        let mut want = Vec::new();
+        let errs = rollout(&ws, Some(&mut want));
+        for parts in 1..=9 {
+            let mut got = vec![-1.0];
+            let e = errors_in_n_blocks(&ws, [k, row], parts, Some(&mut got), rollout);
+            assert_eq!(e, errs, "{parts} blocks");
+            assert_eq!(got[0], -1.0, "appended, not replaced");
+            assert_eq!(got[1..], want[..], "{parts} blocks");
+            assert_eq!(
+                errors_in_n_blocks(&ws, [k, row], parts, None, rollout),
+                errs
+            );
+        }
+        assert!(errors_in_n_blocks(&[], [k, row], 3, None, rollout).is_empty());
+    }
+
     fn windows_with(r: impl Fn(usize) -> f64) -> (Vec<Window>, Vec<f64>, Vec<f64>) {
         let ws: Vec<Window> = (0..60)
             .map(|i| Window {

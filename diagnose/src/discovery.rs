@@ -86,7 +86,8 @@ use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
 use crate::diagnosis::{
-    CrossFit, SplitFailure, WindowSplit, bootstrap_lower, robust_windows, split_windows,
+    CrossFit, SplitFailure, WindowSplit, bootstrap_lower, errors_in_blocks, robust_windows,
+    split_windows,
 };
 use crate::report::{Chart, LineChart, Series, escape};
 
@@ -444,7 +445,14 @@ impl<'a> Ctx<'a> {
 
     /// Per-window normalised k-step squared error of `p` (residuals step-major
     /// `(step, window, dimension)` into `resid` when given).
-    fn errors(
+    fn errors(&self, p: &PhysicsModel, ws: &[Window], resid: Option<&mut Vec<f64>>) -> Vec<f64> {
+        errors_in_blocks(ws, [self.k, self.ds], resid, |b, r| {
+            self.errors_of_block(p, b, r)
+        })
+    }
+
+    /// [`Ctx::errors`] on one thread.
+    fn errors_of_block(
         &self,
         p: &PhysicsModel,
         ws: &[Window],

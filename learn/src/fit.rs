@@ -691,11 +691,13 @@ pub(crate) fn fit_physics(
     let upper: Vec<f64> = specs.iter().map(|(_, s)| s.upper).collect();
     let base = p.clone();
     let lens: Vec<usize> = trajs.iter().map(StateTrajectory::len).collect();
-    let eval_on = |ws: &[Window], theta: &[f64], with_j: bool| -> (Vec<f64>, Vec<f64>) {
-        let mut p = base.clone();
-        if p.set_params(theta).is_err() {
-            return (vec![f64::INFINITY], Vec::new());
-        }
+    // the residuals (and Jacobian rows) of a block of windows, in window order
+    let eval_block = |p: &PhysicsModel,
+                      ws: &[Window],
+                      extra: &[Vec<f64>],
+                      extra_sens: &[Vec<f64>],
+                      with_j: bool|
+     -> (Vec<f64>, Vec<f64>) {
         let mut r = Vec::new();
         let mut jac = Vec::new();
         let mut tape = StepTape::default();
@@ -708,13 +710,6 @@ pub(crate) fn fit_physics(
         let du = world.action_dim();
         let mut ubar = vec![0.0; du];
         let mut pbar = vec![0.0; np];
-        // initial effect states of every window from the commands before it, with ∂/∂θ
-        let (extra, extra_sens) = if with_j {
-            effect_states_with_sens(&p, history, t_phys, &lens)
-        } else {
-            let e = history.effect_states(&p, t_phys, &lens);
-            (e, vec![Vec::new(); lens.len()])
-        };
         let ne = dp - ds;
         for w in ws {
             let t = &trajs[w.trajectory];
@@ -782,6 +777,27 @@ pub(crate) fn fit_physics(
         }
         (r, jac)
     };
+    let eval_on = |ws: &[Window], theta: &[f64], with_j: bool| -> (Vec<f64>, Vec<f64>) {
+        let mut p = base.clone();
+        if p.set_params(theta).is_err() {
+            return (vec![f64::INFINITY], Vec::new());
+        }
+        // initial effect states of every window from the commands before it, with ∂/∂θ
+        let (extra, extra_sens) = if with_j {
+            effect_states_with_sens(&p, history, t_phys, &lens)
+        } else {
+            let e = history.effect_states(&p, t_phys, &lens);
+            (e, vec![Vec::new(); lens.len()])
+        };
+        let (p, extra, extra_sens) = (&p, &extra[..], &extra_sens[..]);
+        let mut r = Vec::new();
+        let mut jac = Vec::new();
+        for (rb, jb) in in_blocks(ws, |b| eval_block(p, b, extra, extra_sens, with_j)) {
+            r.extend(rb);
+            jac.extend(jb);
+        }
+        (r, jac)
+    };
     let started = screen_starts(p, cfg, trajs, &|theta: &[f64]| {
         eval_on(&ws, theta, false).0.iter().map(|r| r * r).sum()
     })?;
@@ -843,6 +859,42 @@ pub(crate) fn fit_physics(
         iterations: res.iterations,
         residuals: res.residuals,
         started,
+    })
+}
+
+/// `f` of contiguous blocks of `items`, one block per available core ([`in_n_blocks`]).
+pub fn in_blocks<I: Sync, T: Send>(items: &[I], f: impl Fn(&[I]) -> T + Sync) -> Vec<T> {
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    in_n_blocks(items, cores, f)
+}
+
+/// `f` of at most `parts` contiguous blocks of `items` (none empty but a lone one for no
+/// items), run on scoped threads (the first on the calling thread) and returned in block order:
+/// for an `f` that treats its items independently, the concatenated results do not depend on
+/// `parts`.
+pub fn in_n_blocks<I: Sync, T: Send>(
+    items: &[I],
+    parts: usize,
+    f: impl Fn(&[I]) -> T + Sync,
+) -> Vec<T> {
+    let blocks = dynlab_nn::parallel::row_blocks(items.len(), parts.min(items.len()).max(1));
+    let f = &f;
+    std::thread::scope(|scope| {
+        let mut blocks = blocks.into_iter();
+        let first = blocks.next().map(|b| &items[b]);
+        let handles: Vec<_> = blocks
+            .map(|b| {
+                let part = &items[b];
+                scope.spawn(move || f(part))
+            })
+            .collect();
+        let mut out = Vec::with_capacity(handles.len() + 1);
+        out.extend(first.map(f));
+        for h in handles {
+            // a panic in `f` is a bug, not a data error: re-raise it on this thread
+            out.push(h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)));
+        }
+        out
     })
 }
 

@@ -56,3 +56,13 @@ def stop(proc: subprocess.Popen, sig=signal.SIGINT, timeout=20.0, check=True) ->
     if check:
         assert proc.returncode == 0, f"exit {proc.returncode}:\n{err}"
     return err
+
+
+@pytest.fixture(scope="session")
+def car_nominal_model(tmp_path_factory) -> pathlib.Path:
+    """The physics model `dynlab train` fits with its defaults on the bundled nominal car bag,
+    trained once for every test that reads it (none writes to it)."""
+    out = tmp_path_factory.mktemp("model") / "car_physics"
+    run("dynlab", "train", "--bag", REPO / "bags" / "car_nominal", "--kind", "physics", "--out", out,
+        timeout=300)
+    return out

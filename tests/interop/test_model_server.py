@@ -17,7 +17,6 @@ import uuid
 from dataclasses import dataclass, field
 
 import cyclonedds.idl.annotations as annotate
-import pytest
 from cyclonedds.idl import IdlStruct
 from cyclonedds.idl.types import array, float64, sequence
 from rosbags.rosbag2 import Reader as Rosbag2Reader
@@ -102,17 +101,10 @@ def bag_messages(seconds: float) -> list[tuple[int, int, object]]:
     return out
 
 
-@pytest.fixture(scope="module")
-def car_model(tmp_path_factory):
-    out = tmp_path_factory.mktemp("model") / "car_physics"
-    run("dynlab", "train", "--bag", BAG, "--kind", "physics", "--out", out, timeout=300)
-    return out
-
-
-def test_model_server_predictions_equal_the_offline_library(car_model, tmp_path):
+def test_model_server_predictions_equal_the_offline_library(car_nominal_model, tmp_path):
     # the reference: the same predictor replayed offline by the CLI
     online = tmp_path / "online.jsonl"
-    run("dynlab", "compare", "--model", car_model, "--bag", BAG, "--out", tmp_path / "report",
+    run("dynlab", "compare", "--model", car_nominal_model, "--bag", BAG, "--out", tmp_path / "report",
         "--online", online, "--online-steps", "5", timeout=120)
     ref = {}
     for line in online.read_text().splitlines():
@@ -123,7 +115,7 @@ def test_model_server_predictions_equal_the_offline_library(car_model, tmp_path)
 
     domain = 40 + uuid.uuid4().int % 100
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain))
-    proc = subprocess.Popen([str(binary("model_server")), "--ros-args", "-p", f"model:={car_model}",
+    proc = subprocess.Popen([str(binary("model_server")), "--ros-args", "-p", f"model:={car_nominal_model}",
                              "-p", "steps:=5", "-p", "pose_qos:=reliable"],
                             env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:

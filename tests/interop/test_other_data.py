@@ -8,14 +8,11 @@ import json
 import math
 
 import numpy as np
-import pytest
 from rosbags.rosbag2 import StoragePlugin
 from rosbags.rosbag2 import Writer as Rosbag2Writer
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
-from conftest import REPO, run
-
-BAG = REPO / "bags" / "car_nominal"
+from conftest import run
 
 # the ROS 2 definitions of ackermann_msgs (not in rosbags' Jazzy store), from the ROS package
 ACKERMANN_DRIVE = """float32 steering_angle
@@ -89,18 +86,11 @@ def write_mocap_bag(path, with_cmd=True):
     return path
 
 
-@pytest.fixture(scope="module")
-def car_model(tmp_path_factory):
-    out = tmp_path_factory.mktemp("model") / "car_physics"
-    run("dynlab", "train", "--bag", BAG, "--kind", "physics", "--out", out, timeout=300)
-    return out
-
-
-def test_compare_and_eval_on_a_foreign_mocap_bag(car_model, tmp_path):
+def test_compare_and_eval_on_a_foreign_mocap_bag(car_nominal_model, tmp_path):
     bag = write_mocap_bag(tmp_path / "robot")
     topics = ["--pose-topic", "/mocap/rc_car/pose", "--cmd-topic", "/rc_car/ackermann_cmd"]
     out = tmp_path / "report"
-    proc = run("dynlab", "compare", "--model", car_model, "--bag", bag, "--out", out, *topics, timeout=120)
+    proc = run("dynlab", "compare", "--model", car_nominal_model, "--bag", bag, "--out", out, *topics, timeout=120)
     text = proc.stdout
     assert "resampled to the model's step" in text, text
     assert "1 gap(s)" in text, text
@@ -119,17 +109,17 @@ def test_compare_and_eval_on_a_foreign_mocap_bag(car_model, tmp_path):
     assert worst and all(0 <= w["start_s"] <= 12.5 for w in worst)
     assert (out / "index.html").read_text().count("<svg") >= 5
     # eval-model reads it as well (at the bag's own rate: it says nothing about resampling)
-    ev2 = json.loads(run("dynlab", "eval-model", "--model", car_model, "--bag", bag, *topics, "--json").stdout)
+    ev2 = json.loads(run("dynlab", "eval-model", "--model", car_nominal_model, "--bag", bag, *topics, "--json").stdout)
     assert ev2["windows"] > 0
 
 
-def test_missing_topics_are_named(car_model, tmp_path):
+def test_missing_topics_are_named(car_nominal_model, tmp_path):
     bag = write_mocap_bag(tmp_path / "no_cmd", with_cmd=False)
-    proc = run("dynlab", "compare", "--model", car_model, "--bag", bag, "--out", tmp_path / "r",
+    proc = run("dynlab", "compare", "--model", car_nominal_model, "--bag", bag, "--out", tmp_path / "r",
                "--pose-topic", "/mocap/rc_car/pose", check=False)
     assert proc.returncode != 0
     assert "/car/cmd" in proc.stderr and "/mocap/rc_car/pose" in proc.stderr, proc.stderr
     # the default pose topic is not there either: the message names it and lists what is
-    proc = run("dynlab", "compare", "--model", car_model, "--bag", bag, "--out", tmp_path / "r", check=False)
+    proc = run("dynlab", "compare", "--model", car_nominal_model, "--bag", bag, "--out", tmp_path / "r", check=False)
     assert proc.returncode != 0
     assert "/car/pose" in proc.stderr and "/mocap/rc_car/pose" in proc.stderr, proc.stderr
