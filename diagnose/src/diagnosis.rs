@@ -84,10 +84,11 @@ use dynlab_learn::dynamics::physics::{
 };
 use dynlab_learn::fit::{
     SENSITIVITY_LIMIT, bounded_least_squares, calm_windows, cluster_jackknife_std,
-    forward_jacobian, in_n_blocks, initial_states_after,
+    forward_jacobian, initial_states_after,
 };
 use dynlab_learn::train::{segment, segment_origins};
 use dynlab_learn::{Dataset, LearnError, Model, World};
+use dynlab_nn::parallel::in_n_blocks;
 
 use crate::discovery::{
     Discovery, DiscoveryConfig, DiscoveryError, area_of, discover_terms_split, grip_discs,
@@ -847,7 +848,7 @@ struct Augmented<'a> {
 impl Augmented<'_> {
     /// Per-window normalised squared error over k steps, capped at `d.cap` (`n_windows × k × ds`
     /// uncapped residuals, step-major, appended to `resid` when it is given). A physics model's
-    /// windows are rolled out in blocks on parallel threads ([`in_blocks`]); each window's
+    /// windows are rolled out in blocks on parallel threads ([`in_blocks`](dynlab_nn::parallel::in_blocks)); each window's
     /// arithmetic is its own, so the numbers do not depend on the number of cores.
     fn errors(&self, d: &Data, ws: &[Window], resid: Option<&mut Vec<f64>>) -> Vec<f64> {
         if !self.pure_physics {
@@ -963,7 +964,7 @@ impl Augmented<'_> {
 }
 
 /// `rollout(ws, resid)`'s per-window errors and residuals (step-major: `k` steps of `row`
-/// values per window), computed in blocks of windows on parallel threads ([`in_blocks`]) and put
+/// values per window), computed in blocks of windows on parallel threads ([`in_blocks`](dynlab_nn::parallel::in_blocks)) and put
 /// back in the order one call over all of `ws` gives. For a rollout whose every window's
 /// arithmetic is its own, the numbers do not depend on the number of cores.
 pub(crate) fn errors_in_blocks(

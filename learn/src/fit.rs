@@ -18,6 +18,7 @@ use dynlab_dynamics::data::{SplitMix64, StateTrajectory, Window};
 use dynlab_dynamics::ode::{OdeStatus, Solver};
 use dynlab_dynamics::physics::{PhysicsModel, StepTape};
 use dynlab_dynamics::real::Dual;
+use dynlab_nn::parallel::in_blocks;
 
 use crate::train::{CommandHistory, Loss, PhysicsFit, TrainConfig};
 use crate::{LearnError, World};
@@ -859,42 +860,6 @@ pub(crate) fn fit_physics(
         iterations: res.iterations,
         residuals: res.residuals,
         started,
-    })
-}
-
-/// `f` of contiguous blocks of `items`, one block per available core ([`in_n_blocks`]).
-pub fn in_blocks<I: Sync, T: Send>(items: &[I], f: impl Fn(&[I]) -> T + Sync) -> Vec<T> {
-    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-    in_n_blocks(items, cores, f)
-}
-
-/// `f` of at most `parts` contiguous blocks of `items` (none empty but a lone one for no
-/// items), run on scoped threads (the first on the calling thread) and returned in block order:
-/// for an `f` that treats its items independently, the concatenated results do not depend on
-/// `parts`.
-pub fn in_n_blocks<I: Sync, T: Send>(
-    items: &[I],
-    parts: usize,
-    f: impl Fn(&[I]) -> T + Sync,
-) -> Vec<T> {
-    let blocks = dynlab_nn::parallel::row_blocks(items.len(), parts.min(items.len()).max(1));
-    let f = &f;
-    std::thread::scope(|scope| {
-        let mut blocks = blocks.into_iter();
-        let first = blocks.next().map(|b| &items[b]);
-        let handles: Vec<_> = blocks
-            .map(|b| {
-                let part = &items[b];
-                scope.spawn(move || f(part))
-            })
-            .collect();
-        let mut out = Vec::with_capacity(handles.len() + 1);
-        out.extend(first.map(f));
-        for h in handles {
-            // a panic in `f` is a bug, not a data error: re-raise it on this thread
-            out.push(h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)));
-        }
-        out
     })
 }
 

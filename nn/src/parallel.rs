@@ -1,5 +1,5 @@
 //! Splitting a batch across threads with results independent of the thread count, on threads
-//! spawned per call ([`for_each_row_block`]) or on a persistent [`Workers`] pool.
+//! spawned per call ([`for_each_row_block`], [`in_blocks`]) or on a persistent [`Workers`] pool.
 
 use std::any::Any;
 use std::cell::UnsafeCell;
@@ -26,6 +26,42 @@ pub fn row_blocks(n_rows: usize, parts: usize) -> Vec<Range<usize>> {
             r
         })
         .collect()
+}
+
+/// `f` of contiguous blocks of `items`, one block per available core ([`in_n_blocks`]).
+pub fn in_blocks<I: Sync, T: Send>(items: &[I], f: impl Fn(&[I]) -> T + Sync) -> Vec<T> {
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    in_n_blocks(items, cores, f)
+}
+
+/// `f` of at most `parts` contiguous blocks of `items` (none empty but a lone one for no
+/// items), run on scoped threads (the first on the calling thread) and returned in block order:
+/// for an `f` that treats its items independently, the concatenated results do not depend on
+/// `parts`.
+pub fn in_n_blocks<I: Sync, T: Send>(
+    items: &[I],
+    parts: usize,
+    f: impl Fn(&[I]) -> T + Sync,
+) -> Vec<T> {
+    let blocks = row_blocks(items.len(), parts.min(items.len()).max(1));
+    let f = &f;
+    std::thread::scope(|scope| {
+        let mut blocks = blocks.into_iter();
+        let first = blocks.next().map(|b| &items[b]);
+        let handles: Vec<_> = blocks
+            .map(|b| {
+                let part = &items[b];
+                scope.spawn(move || f(part))
+            })
+            .collect();
+        let mut out = Vec::with_capacity(handles.len() + 1);
+        out.extend(first.map(f));
+        for h in handles {
+            // a panic in `f` is a bug, not a data error: re-raise it on this thread
+            out.push(h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)));
+        }
+        out
+    })
 }
 
 /// Runs `f(rows, out_rows, state)` on one thread per element of `states`, each with a disjoint

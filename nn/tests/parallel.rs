@@ -4,7 +4,7 @@
 mod common;
 
 use common::data;
-use dynlab_nn::parallel::{Workers, for_each_row_block, row_blocks};
+use dynlab_nn::parallel::{Workers, for_each_row_block, in_n_blocks, row_blocks};
 use dynlab_nn::{Activation, Init, Mlp, MlpSpec, NnError};
 
 #[test]
@@ -193,4 +193,23 @@ fn worker_pool_reports_errors_and_re_raises_panics() {
         hits.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
     });
     assert_eq!(hits.into_inner(), 3);
+}
+
+#[test]
+fn blocks_cover_the_items_in_order_for_any_number_of_parts() {
+    let items: Vec<u32> = (0..11).collect();
+    let squares: Vec<u32> = items.iter().map(|x| x * x).collect();
+    for parts in 0..=13 {
+        let blocks = in_n_blocks(&items, parts, |b| {
+            b.iter().map(|x| x * x).collect::<Vec<_>>()
+        });
+        assert!(blocks.len() <= parts.max(1), "{parts} parts: {blocks:?}");
+        assert!(
+            blocks.iter().all(|b| !b.is_empty()),
+            "{parts} parts: {blocks:?}"
+        );
+        assert_eq!(blocks.concat(), squares, "{parts} parts");
+    }
+    let none: Vec<Vec<u32>> = in_n_blocks(&[], 4, |b: &[u32]| b.to_vec());
+    assert_eq!(none, [Vec::<u32>::new()]);
 }
