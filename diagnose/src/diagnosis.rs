@@ -848,8 +848,8 @@ struct Augmented<'a> {
 impl Augmented<'_> {
     /// Per-window normalised squared error over k steps, capped at `d.cap` (`n_windows × k × ds`
     /// uncapped residuals, step-major, appended to `resid` when it is given). A physics model's
-    /// windows are rolled out in blocks on parallel threads ([`in_blocks`](dynlab_nn::parallel::in_blocks)); each window's
-    /// arithmetic is its own, so the numbers do not depend on the number of cores.
+    /// windows are rolled out in blocks on parallel threads ([`errors_in_blocks`]); each
+    /// window's arithmetic is its own, so the numbers do not depend on the number of cores.
     fn errors(&self, d: &Data, ws: &[Window], resid: Option<&mut Vec<f64>>) -> Vec<f64> {
         if !self.pure_physics {
             // a network's step runs on its own worker threads
@@ -964,9 +964,10 @@ impl Augmented<'_> {
 }
 
 /// `rollout(ws, resid)`'s per-window errors and residuals (step-major: `k` steps of `row`
-/// values per window), computed in blocks of windows on parallel threads ([`in_blocks`](dynlab_nn::parallel::in_blocks)) and put
-/// back in the order one call over all of `ws` gives. For a rollout whose every window's
-/// arithmetic is its own, the numbers do not depend on the number of cores.
+/// values per window), computed in blocks of windows on parallel threads
+/// ([`in_blocks`](dynlab_nn::parallel::in_blocks)) and put back in the order one call over all
+/// of `ws` gives. For a rollout whose every window's arithmetic is its own, the numbers do not
+/// depend on the number of cores.
 pub(crate) fn errors_in_blocks(
     ws: &[Window],
     k_row: [usize; 2],
@@ -3784,8 +3785,6 @@ mod tests {
         assert_eq!(kept, (0..70).collect::<Vec<_>>());
     }
 
-    /// Held-out windows of 30 segments, two per segment, with the error before (1 each) and
-    /// after: a reduction of `r(i)` in segment `i`.
     #[test]
     fn windows_rolled_out_in_blocks_give_the_errors_and_step_major_residuals_of_one_call() {
         // a rollout whose residual at step j, window (trajectory t, start a), row c is unique
@@ -3827,6 +3826,8 @@ mod tests {
         assert!(errors_in_n_blocks(&[], [k, row], 3, None, rollout).is_empty());
     }
 
+    /// Held-out windows of 30 segments, two per segment, with the error before (1 each) and
+    /// after: a reduction of `r(i)` in segment `i`.
     fn windows_with(r: impl Fn(usize) -> f64) -> (Vec<Window>, Vec<f64>, Vec<f64>) {
         let ws: Vec<Window> = (0..60)
             .map(|i| Window {
