@@ -434,6 +434,12 @@ pub struct Candidate {
     /// ([`CrossFit`]); `None` where it was not needed.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub cross_fit: Option<CrossFit>,
+    /// The folds' look, where the second look's pooled reduction is large enough but its
+    /// bound is not above 0: the segments in [`FOLDS`] folds, each scored with the step's
+    /// model and the candidate fitted on the others ([`CrossFit`], at a quarter of the
+    /// candidate's error probability); `None` where it was not needed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fold_fit: Option<CrossFit>,
     /// How a candidate refused alone for a parameter on its bound or for a rival term was added
     /// with a partner that shares the error with it (the selection's pair step); `None`
     /// otherwise.
@@ -461,8 +467,17 @@ pub struct CrossFit {
     pub ci_lower: f64,
     /// Segments scored (both halves).
     pub segments: usize,
-    /// The effect's parameters fitted on the held-out half.
+    /// The effect's parameters fitted on the held-out half (the folds' look: their mean over
+    /// the folds).
     pub params: BTreeMap<String, f64>,
+    /// Fits scored: 2 for the halves (the first look and the second), [`FOLDS`] for the folds'
+    /// look, where `other_reduction` is `reduction`.
+    #[serde(default = "two")]
+    pub folds: usize,
+}
+
+fn two() -> usize {
+    2
 }
 
 impl CrossFit {
@@ -1090,6 +1105,8 @@ struct Ctx<'a> {
     /// Grip strips that removed more than a disc set against them ([`Ctx::rival_term_note`]),
     /// tried again by the term search after the selection.
     strips: Mutex<Vec<(Feature, f64)>>,
+    /// The fold look's folds ([`WindowSplit::folds`]); empty in a look's own context.
+    folds: Vec<Fold>,
 }
 
 fn mean(v: &[f64]) -> f64 {
@@ -1816,7 +1833,7 @@ impl<'a> Ctx<'a> {
         cur: &Current,
         e: Effect,
         tested: usize,
-        second: &SecondLook,
+        looks: &Looks,
     ) -> Result<Option<(Candidate, Fitted)>, DiagnosisError> {
         let Some(mut f) = self.fit(cur, Some(e), false)? else {
             return Ok(None);
@@ -1833,16 +1850,31 @@ impl<'a> Ctx<'a> {
         let large = raw >= self.cfg.min_reduction && self.test_segments >= 2;
         // a large reduction the held-out half cannot bound: both halves scored
         let cross_fit = if large && ci_lower <= 0.0 && !self.swap[0].is_empty() {
-            second.cross_fit(cur, e, (&ws, &before, &after), alpha, seed)?
+            looks
+                .halves
+                .cross_fit(cur, e, (&ws, &before, &after), 0.5 * alpha, seed)?
         } else {
             None
+        };
+        // both halves' fits remove enough, but the halves' segments still do not bound it: a
+        // region one half's data hardly locate (a patch crossed in a few segments, fitted in
+        // the wrong place on that half), each fold's fit on three quarters of them
+        let fold_fit = match &cross_fit {
+            Some(c)
+                if c.reduction >= self.cfg.min_reduction && !c.counts(self.cfg.min_reduction) =>
+            {
+                looks
+                    .folds
+                    .cross_fit(cur, e, (&[], &[], &[]), 0.25 * alpha, seed ^ 0x5A17)?
+            }
+            _ => None,
         };
         // a reason against it matters only where the numbers alone would count it
         let counts = large
             && (ci_lower > 0.0
-                || cross_fit
-                    .as_ref()
-                    .is_some_and(|c| c.counts(self.cfg.min_reduction)));
+                || [&cross_fit, &fold_fit]
+                    .iter()
+                    .any(|x| x.as_ref().is_some_and(|c| c.counts(self.cfg.min_reduction))));
         let mut note = if counts {
             self.implausible(e, &f)
         } else {
@@ -1889,6 +1921,7 @@ impl<'a> Ctx<'a> {
             description: e.description().to_string(),
             note,
             cross_fit,
+            fold_fit,
             paired: None,
             rival_reduction,
         };
@@ -1941,6 +1974,21 @@ impl<'a> Ctx<'a> {
             swap: [Vec::new(), Vec::new()],
             held_trajs: Vec::new(),
             strips: Mutex::default(),
+            folds: Vec::new(),
+        }
+    }
+
+    /// This context for fold `j` of the fold look: fitted on the other folds' segments, scored
+    /// on fold `j`'s.
+    fn fold(&self, j: usize) -> Ctx<'a> {
+        let f = &self.folds[j];
+        Ctx {
+            fit_w: f.fit.clone(),
+            test_w: f.score.clone(),
+            test_segments: f.segments,
+            fit_trajs: f.fit_trajs.clone(),
+            segments: [f.fit_trajs.len(), f.segments],
+            ..self.swapped()
         }
     }
 
@@ -1966,16 +2014,13 @@ impl<'a> Ctx<'a> {
         lib: &[Effect],
     ) -> Result<Vec<(Candidate, Fitted)>, DiagnosisError> {
         let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
-        let second = &SecondLook {
-            ctx: self.swapped(),
-            model: Mutex::new(None),
-        };
+        let looks = &Looks::of(self);
         let mut out = Vec::new();
         for chunk in lib.chunks(threads.max(1)) {
             let part: Vec<_> = std::thread::scope(|sc| {
                 let hs: Vec<_> = chunk
                     .iter()
-                    .map(|&e| sc.spawn(move || self.candidate(cur, e, lib.len(), second)))
+                    .map(|&e| sc.spawn(move || self.candidate(cur, e, lib.len(), looks)))
                     .collect();
                 hs.into_iter()
                     .map(|h| h.join().unwrap_or(Ok(None)))
@@ -2000,9 +2045,9 @@ impl<'a> Ctx<'a> {
     /// of another shape follows as a whole). `None` for a candidate refused otherwise or not at all.
     fn refused_alone(&self, c: &Candidate, f: &Fitted) -> Option<Refusal> {
         let counts = c.ci_lower > 0.0
-            || c.cross_fit
-                .as_ref()
-                .is_some_and(|x| x.counts(self.cfg.min_reduction));
+            || [&c.cross_fit, &c.fold_fit]
+                .iter()
+                .any(|x| x.as_ref().is_some_and(|x| x.counts(self.cfg.min_reduction)));
         if c.raw_reduction < self.cfg.min_reduction || !counts {
             return None;
         }
@@ -2121,20 +2166,58 @@ struct Partner {
     rival: Option<[f64; 2]>,
 }
 
-/// One selection step's second looks ([`CrossFit`]): the context with the halves' roles
-/// swapped and the step's model refitted on the held-out half, fitted once, by the first
+/// One selection step's second looks ([`CrossFit`]) or fold looks: the contexts with other
+/// roles of the segments (the halves swapped: fitted on the held-out half; or each fold scored
+/// and the others fitted on), and the step's model refitted in each, fitted once, by the first
 /// candidate that needs it, and shared by the others.
 struct SecondLook<'a> {
-    ctx: Ctx<'a>,
-    model: Mutex<Option<Current>>,
+    looks: Vec<(Ctx<'a>, Mutex<Option<Current>>)>,
 }
 
-impl SecondLook<'_> {
-    /// Candidate `e`'s second look ([`CrossFit`]): the step's model `cur` (its added effects
-    /// and refitted nominal parameters) and then `e` fitted on the held-out half, scored on the
-    /// fit half, and pooled with the first look's kept held-out windows and their errors
-    /// before and after (`first`). `alpha` is the candidate's error probability; `None` where
-    /// a fit fails.
+/// A selection step's second look (the halves swapped) and folds' look.
+struct Looks<'a> {
+    halves: SecondLook<'a>,
+    folds: SecondLook<'a>,
+}
+
+impl<'a> Looks<'a> {
+    fn of(ctx: &Ctx<'a>) -> Self {
+        Looks {
+            halves: SecondLook::swapped(ctx),
+            folds: SecondLook::folds(ctx),
+        }
+    }
+
+    /// Forgets the step's models the looks fitted (for another step's model).
+    fn forget_models(&self) {
+        for (_, slot) in self.halves.looks.iter().chain(&self.folds.looks) {
+            *slot.lock().unwrap_or_else(|p| p.into_inner()) = None;
+        }
+    }
+}
+
+impl<'a> SecondLook<'a> {
+    /// The halves' roles swapped ([`Ctx::swapped`]).
+    fn swapped(ctx: &Ctx<'a>) -> Self {
+        SecondLook {
+            looks: vec![(ctx.swapped(), Mutex::new(None))],
+        }
+    }
+
+    /// The folds' ([`Ctx::fold`]; none where the data have too few segments).
+    fn folds(ctx: &Ctx<'a>) -> Self {
+        SecondLook {
+            looks: (0..ctx.folds.len())
+                .map(|j| (ctx.fold(j), Mutex::new(None)))
+                .collect(),
+        }
+    }
+
+    /// Candidate `e`'s look ([`CrossFit`]): in every context the step's model `cur` (its added
+    /// effects and refitted nominal parameters) and then `e` fitted, scored on the context's
+    /// scored windows, and pooled with the first look's kept held-out windows and their errors
+    /// before and after (`first`, empty for the folds, which score every segment). `alpha` is
+    /// the look's error probability; `None` where a fit fails or there is no context.
     fn cross_fit(
         &self,
         cur: &Current,
@@ -2143,31 +2226,41 @@ impl SecondLook<'_> {
         alpha: f64,
         seed: u64,
     ) -> Result<Option<CrossFit>, DiagnosisError> {
-        let sw = &self.ctx;
-        let other = {
-            // the first candidate that needs it fits it; the step's others wait and share it
-            let mut slot = self.model.lock().unwrap_or_else(|p| p.into_inner());
-            match &*slot {
-                Some(m) => m.clone(),
-                None => {
-                    let m = sw.step_model(cur)?;
-                    *slot = Some(m.clone());
-                    m
-                }
-            }
-        };
-        let Some(f) = sw.fit(&other, Some(e), false)? else {
+        let Some(cfg) = self.looks.first().map(|l| l.0.cfg) else {
             return Ok(None);
         };
-        let keep = either_calm(&sw.calm(f.physics.clone()), &other.calm);
         let (mut ws, mut before, mut after) =
             (first.0.to_vec(), first.1.to_vec(), first.2.to_vec());
         let (mut b2, mut a2) = (Vec::new(), Vec::new());
-        for (i, w) in sw.test_w.iter().enumerate() {
-            if keep.get(i).copied().unwrap_or(true) {
-                ws.push(*w);
-                b2.push(other.test[i]);
-                a2.push(f.test[i]);
+        let mut params: BTreeMap<String, f64> = BTreeMap::new();
+        for (sw, slot) in &self.looks {
+            let other = {
+                // the first candidate that needs it fits it; the step's others wait and share it
+                let mut slot = slot.lock().unwrap_or_else(|p| p.into_inner());
+                match &*slot {
+                    Some(m) => m.clone(),
+                    None => {
+                        let m = sw.step_model(cur)?;
+                        *slot = Some(m.clone());
+                        m
+                    }
+                }
+            };
+            let Some(f) = sw.fit(&other, Some(e), false)? else {
+                return Ok(None);
+            };
+            let keep = either_calm(&sw.calm(f.physics.clone()), &other.calm);
+            for (i, w) in sw.test_w.iter().enumerate() {
+                if keep.get(i).copied().unwrap_or(true) {
+                    ws.push(*w);
+                    b2.push(other.test[i]);
+                    a2.push(f.test[i]);
+                }
+            }
+            // the parameters' mean over the contexts
+            for i in (0..f.names.len()).filter(|&i| f.owners[i] == Some(e)) {
+                *params.entry(f.names[i].clone()).or_default() +=
+                    f.theta[i] / self.looks.len() as f64;
             }
         }
         before.extend(&b2);
@@ -2182,15 +2275,13 @@ impl SecondLook<'_> {
                 &ws,
                 &before,
                 &after,
-                sw.cfg.bootstrap,
-                0.5 * alpha,
+                cfg.bootstrap,
+                alpha,
                 seed ^ 0x6C62_272E_07BB_0142,
             ),
             segments: segments.len(),
-            params: (0..f.names.len())
-                .filter(|&i| f.owners[i] == Some(e))
-                .map(|i| (f.names[i].clone(), f.theta[i]))
-                .collect(),
+            params,
+            folds: self.looks.len() + usize::from(!first.0.is_empty()),
         }))
     }
 }
@@ -2275,6 +2366,7 @@ pub fn diagnose(
         fit: fit_w,
         test: test_w,
         swapped,
+        folds,
     } = split_windows(
         &lengths,
         k,
@@ -2385,6 +2477,7 @@ pub fn diagnose(
         swap: swapped,
         held_trajs: split.validation.clone(),
         strips: Mutex::default(),
+        folds,
     };
     // the baseline: the model as given, or with its nominal parameters refitted on the fit half
     let given = Current::unscored(base.clone());
@@ -2602,10 +2695,7 @@ pub fn diagnose(
     let found = discovery.as_ref().and_then(|d| d.effect.clone());
     let dropped = match found {
         Some(terms) if cur.effects().len() > have.len() => {
-            let second = SecondLook {
-                ctx: ctx.swapped(),
-                model: Mutex::new(None),
-            };
+            let looks = Looks::of(&ctx);
             let mut dropped: Vec<Candidate> = Vec::new();
             for e in cur.effects()[have.len()..].to_vec() {
                 // the terms on what the effect changes itself refine it, not rival it, but for
@@ -2640,8 +2730,8 @@ pub fn diagnose(
                     CustomEffect::new(terms.name(), others).map_err(ModelError::from)?,
                 )?;
                 let rest = ctx.step_model(&Current::unscored(rest))?;
-                *second.model.lock().unwrap_or_else(|p| p.into_inner()) = None;
-                if let Some((mut c, _)) = ctx.candidate(&rest, e, 1, &second)?
+                looks.forget_models();
+                if let Some((mut c, _)) = ctx.candidate(&rest, e, 1, &looks)?
                     && !c.significant
                 {
                     c.note = Some(format!(
@@ -2884,6 +2974,24 @@ pub(crate) struct WindowSplit {
     /// `counts`) and fit-half segments' windows to score (at most the second), other
     /// subsamples of the same segments.
     pub(crate) swapped: [Vec<Window>; 2],
+    /// The segments in [`FOLDS`] folds, half of each from either half (none with fewer than
+    /// two segments a fold): the fold look's ([`Fold`]).
+    pub(crate) folds: Vec<Fold>,
+}
+
+/// How many folds the fold look ([`Fold`]) splits the segments into.
+pub(crate) const FOLDS: usize = 4;
+
+/// One fold of the fold look: every other fold's windows to fit (at most the fit half's
+/// count), its own windows to score (at most `2/FOLDS` of the held-out half's, so that the
+/// folds together score as many as the halves), and the segments it fits on.
+#[derive(Clone, Debug)]
+pub(crate) struct Fold {
+    pub(crate) fit: Vec<Window>,
+    pub(crate) score: Vec<Window>,
+    pub(crate) fit_trajs: Vec<usize>,
+    /// Segments scored.
+    pub(crate) segments: usize,
 }
 
 /// Why [`split_windows`] has no split.
@@ -2919,6 +3027,7 @@ pub(crate) fn split_windows(
         v.sort_by_key(|w| (w.trajectory, w.start));
     };
     let mut swapped = [test.clone(), fit.clone()];
+    let folds = folds_of(&split, &all, counts, seed, &subsample);
     subsample(&mut fit, counts[0], 0x243F_6A88_85A3_08D3);
     subsample(&mut test, counts[1], 0x1319_8A2E_0370_7344);
     subsample(&mut swapped[0], counts[0], 0xA409_3822_299F_31D0);
@@ -2932,7 +3041,55 @@ pub(crate) fn split_windows(
         fit,
         test,
         swapped,
+        folds,
     })
+}
+
+/// The fold look's folds ([`WindowSplit::folds`]): each half's segments shuffled (seeded) and
+/// dealt in turn, the fit half's first, so that every fold holds segments of both halves.
+fn folds_of(
+    split: &Split<usize>,
+    all: &[Window],
+    counts: [usize; 2],
+    seed: u64,
+    subsample: &dyn Fn(&mut Vec<Window>, usize, u64),
+) -> Vec<Fold> {
+    let n = split.train.len() + split.validation.len();
+    if n < 2 * FOLDS {
+        return Vec::new();
+    }
+    let mut fold_of = vec![0; n];
+    let mut dealt = 0;
+    for (half, salt) in [
+        (&split.train, 0x4528_21E6_38D0_1377),
+        (&split.validation, 0xBE54_66CF_34E9_0C6C),
+    ] {
+        let mut order = half.clone();
+        SplitMix64::new(seed ^ salt).shuffle(&mut order);
+        for i in order {
+            fold_of[i] = dealt % FOLDS;
+            dealt += 1;
+        }
+    }
+    (0..FOLDS)
+        .map(|j| {
+            let (mut score, mut fit): (Vec<Window>, Vec<Window>) =
+                all.iter().partition(|w| fold_of[w.trajectory] == j);
+            let salt = 0xC0AC_29B7_C97C_50DD_u64.wrapping_mul(j as u64 + 1);
+            subsample(&mut fit, counts[0], salt);
+            subsample(
+                &mut score,
+                (2 * counts[1]).div_ceil(FOLDS),
+                salt ^ 0x3F84_D5B5,
+            );
+            Fold {
+                fit,
+                score,
+                fit_trajs: (0..n).filter(|&i| fold_of[i] != j).collect(),
+                segments: fold_of.iter().filter(|&&f| f == j).count(),
+            }
+        })
+        .collect()
 }
 
 /// How many times the median window's sensitivity a window of an effect fit may have: 10⁴,
@@ -3627,7 +3784,7 @@ fn candidate_table(cands: &[Candidate], d: &Diagnosis) -> String {
         if let Some(t) = coupled_text(d, &c.nominal_params) {
             let _ = writeln!(o, "  {:<16} {t}", "");
         }
-        if let Some(x) = &c.cross_fit {
+        for x in [&c.cross_fit, &c.fold_fit].into_iter().flatten() {
             let _ = writeln!(o, "  {:<16} {}", "", cross_fit_text(x));
         }
         if let Some(n) = &c.note {
@@ -3647,6 +3804,16 @@ pub(crate) fn cross_fit_text(x: &CrossFit) -> String {
         .iter()
         .map(|(k, v)| format!("{k} {}", g4(*v)))
         .collect();
+    if x.folds != 2 {
+        return format!(
+            "{} folds: {:.1} % removed, CI low {:.1} % over {} segments (each fold scored with the fit on the others; mean {})",
+            x.folds,
+            100.0 * x.reduction,
+            100.0 * x.ci_lower.max(-9.99),
+            x.segments,
+            params.join(", ")
+        );
+    }
     format!(
         "both halves: {:.1} % removed, CI low {:.1} % over {} segments (fitted on the held-out half: {:.1} % of the fit half's error; {})",
         100.0 * x.reduction,
@@ -3750,6 +3917,45 @@ mod tests {
         );
         let in_half = |h: bool| sp.all.iter().filter(|w| held(w) == h).count();
         assert_eq!(score.len(), in_half(false).min(200));
+    }
+
+    /// The folds' look scores every segment in exactly one fold, fits each fold on the other
+    /// folds' segments alone, deals each half's segments over all folds, and does not change
+    /// with anything but the seed; with fewer than two segments a fold there are none.
+    #[test]
+    fn every_segment_is_scored_in_one_fold_and_fitted_on_in_the_others() {
+        let lengths = vec![40; 13];
+        let sp = split_windows(&lengths, 5, 0.5, 7, [30, 200]).ok().unwrap();
+        assert_eq!(sp.folds.len(), FOLDS);
+        let mut scored = vec![0; lengths.len()];
+        for f in &sp.folds {
+            let mut mine: Vec<usize> = f.score.iter().map(|w| w.trajectory).collect();
+            mine.dedup();
+            assert_eq!(mine.len(), f.segments, "every segment of the fold is scored");
+            for &t in &mine {
+                scored[t] += 1;
+                assert!(!f.fit_trajs.contains(&t), "segment {t} both fitted and scored");
+            }
+            assert_eq!(f.fit_trajs.len() + f.segments, lengths.len());
+            assert!(f.fit.iter().all(|w| f.fit_trajs.contains(&w.trajectory)));
+            assert_eq!(f.fit.len(), 30);
+            assert!(f.score.len() <= 100);
+            let held = mine
+                .iter()
+                .filter(|t| sp.split.validation.contains(t))
+                .count();
+            assert!(held >= 1 && held < mine.len(), "a fold of one half: {mine:?}");
+        }
+        assert!(scored.iter().all(|&n| n == 1), "{scored:?}");
+        let again = split_windows(&lengths, 5, 0.5, 7, [30, 200]).ok().unwrap();
+        let other = split_windows(&lengths, 5, 0.5, 8, [30, 200]).ok().unwrap();
+        let trajs = |sp: &WindowSplit| -> Vec<Vec<usize>> {
+            sp.folds.iter().map(|f| f.fit_trajs.clone()).collect()
+        };
+        assert_eq!(trajs(&sp), trajs(&again));
+        assert_ne!(trajs(&sp), trajs(&other));
+        let few = split_windows(&[40; 7], 5, 0.5, 7, [30, 200]).ok().unwrap();
+        assert!(few.folds.is_empty());
     }
 
     /// A region's effect (a patch): 70 windows it never reaches (sensitivity ~1e-20), 26 that

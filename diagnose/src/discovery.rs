@@ -1587,6 +1587,7 @@ pub fn discover_terms_split(
                         .into_iter()
                         .map(|c| ("coefficient".to_string(), c))
                         .collect(),
+                    folds: 2,
                 })
             } else {
                 None

@@ -493,6 +493,7 @@ impl Ctx<'_> {
                     ),
                     segments: segments.len(),
                     params: BTreeMap::from([("change".to_string(), other.line[1])]),
+                    folds: 2,
                 })
             }
             false => None,

@@ -228,7 +228,7 @@ fn candidate_table(cands: &[Candidate], added: Option<&str>, d: &Diagnosis) -> S
             c.chaotic_windows,
             params.join(", ")
         );
-        if let Some(x) = &c.cross_fit {
+        for x in [&c.cross_fit, &c.fold_fit].into_iter().flatten() {
             let _ = writeln!(
                 o,
                 "<tr><td></td><td colspan=5 style=\"color:#555\">{}</td></tr>",
