@@ -39,7 +39,11 @@
 //! a nominal data set passes stays at `1 − confidence`. A candidate whose reduction is large
 //! enough but whose bound is not above zero gets a second look ([`CrossFit`]): the step's model
 //! and the candidate fitted on the held-out half and scored on the fit half, both halves' scores
-//! pooled, the pooled bound at half the error probability. A car's `grip_patch` is not counted when
+//! pooled, the pooled bound at half the error probability; where the pooled reduction is large
+//! enough but still not bounded, the folds' look ([`Candidate::fold_fit`]): the segments in four
+//! folds, each scored with the step's model and the candidate fitted on the other three, at a
+//! quarter of the error probability (a region one half hardly locates, a patch crossed in a few
+//! segments, is fitted on three quarters of them). A car's `grip_patch` is not counted when
 //! the term search's best grip term on the position ([`crate::discovery`], `μ` on a bump or band)
 //! removes at least `min_reduction` more: the region is not a disc; nor a `steering_offset` when
 //! the term search's best steering term with `δ` as a factor (`δ·vₓ`, `δ`, …) does: the steering
