@@ -51,6 +51,8 @@ CASES = {
     "aero_drag + motor_lag": ("aero_drag,motor_lag", ("aero_drag", "motor_lag")),
     "motor_lag + steering_offset": ("motor_lag,steering_offset", ("motor_lag", "steering_offset")),
     "aero_drag + grip_patch": ("aero_drag,grip_patch", ("aero_drag", "grip_patch")),
+    "servo_rate + motor_lag": ("servo_rate,motor_lag", ("steering_lag", "motor_lag")),
+    "cmd_delay + steering_offset": ("cmd_delay,steering_offset", ("command_delay", "steering_offset")),
 }
 TRUTH = {"aero_drag.c": 0.01, "steering_offset.delta0": 0.03, "motor_lag.tau": 0.2,
          "steering_lag.tau": 0.025, "steering_lag.rate": 2.5,

@@ -1109,7 +1109,7 @@ struct Ctx<'a> {
     /// Grip strips that removed more than a disc set against them ([`Ctx::rival_term_note`]),
     /// tried again by the term search after the selection.
     strips: Mutex<Vec<(Feature, f64)>>,
-    /// The fold look's folds ([`WindowSplit::folds`]); empty in a look's own context.
+    /// The folds' look's folds ([`WindowSplit::folds`]); empty in a look's own context.
     folds: Vec<Fold>,
 }
 
@@ -1982,7 +1982,7 @@ impl<'a> Ctx<'a> {
         }
     }
 
-    /// This context for fold `j` of the fold look: fitted on the other folds' segments, scored
+    /// This context for fold `j` of the folds' look: fitted on the other folds' segments, scored
     /// on fold `j`'s.
     fn fold(&self, j: usize) -> Ctx<'a> {
         let f = &self.folds[j];
@@ -2170,25 +2170,25 @@ struct Partner {
     rival: Option<[f64; 2]>,
 }
 
-/// One selection step's second looks ([`CrossFit`]) or fold looks: the contexts with other
+/// One selection step's second looks ([`CrossFit`]) or folds' looks: the contexts with other
 /// roles of the segments (the halves swapped: fitted on the held-out half; or each fold scored
 /// and the others fitted on), and the step's model refitted in each, fitted once, by the first
 /// candidate that needs it, and shared by the others.
-struct SecondLook<'a> {
+struct CrossLook<'a> {
     looks: Vec<(Ctx<'a>, Mutex<Option<Current>>)>,
 }
 
 /// A selection step's second look (the halves swapped) and folds' look.
 struct Looks<'a> {
-    halves: SecondLook<'a>,
-    folds: SecondLook<'a>,
+    halves: CrossLook<'a>,
+    folds: CrossLook<'a>,
 }
 
 impl<'a> Looks<'a> {
     fn of(ctx: &Ctx<'a>) -> Self {
         Looks {
-            halves: SecondLook::swapped(ctx),
-            folds: SecondLook::folds(ctx),
+            halves: CrossLook::swapped(ctx),
+            folds: CrossLook::folds(ctx),
         }
     }
 
@@ -2200,17 +2200,17 @@ impl<'a> Looks<'a> {
     }
 }
 
-impl<'a> SecondLook<'a> {
+impl<'a> CrossLook<'a> {
     /// The halves' roles swapped ([`Ctx::swapped`]).
     fn swapped(ctx: &Ctx<'a>) -> Self {
-        SecondLook {
+        CrossLook {
             looks: vec![(ctx.swapped(), Mutex::new(None))],
         }
     }
 
     /// The folds' ([`Ctx::fold`]; none where the data have too few segments).
     fn folds(ctx: &Ctx<'a>) -> Self {
-        SecondLook {
+        CrossLook {
             looks: (0..ctx.folds.len())
                 .map(|j| (ctx.fold(j), Mutex::new(None)))
                 .collect(),
@@ -2979,14 +2979,14 @@ pub(crate) struct WindowSplit {
     /// subsamples of the same segments.
     pub(crate) swapped: [Vec<Window>; 2],
     /// The segments in [`FOLDS`] folds, half of each from either half (none with fewer than
-    /// two segments a fold): the fold look's ([`Fold`]).
+    /// two segments a fold): the folds' look's ([`Fold`]).
     pub(crate) folds: Vec<Fold>,
 }
 
-/// How many folds the fold look ([`Fold`]) splits the segments into.
+/// How many folds the folds' look ([`Fold`]) splits the segments into.
 pub(crate) const FOLDS: usize = 4;
 
-/// One fold of the fold look: every other fold's windows to fit (at most the fit half's
+/// One fold of the folds' look: every other fold's windows to fit (at most the fit half's
 /// count), its own windows to score (at most `2/FOLDS` of the held-out half's, so that the
 /// folds together score as many as the halves), and the segments it fits on.
 #[derive(Clone, Debug)]
@@ -3049,7 +3049,7 @@ pub(crate) fn split_windows(
     })
 }
 
-/// The fold look's folds ([`WindowSplit::folds`]): each half's segments shuffled (seeded) and
+/// The folds' look's folds ([`WindowSplit::folds`]): each half's segments shuffled (seeded) and
 /// dealt in turn, the fit half's first, so that every fold holds segments of both halves.
 fn folds_of(
     split: &Split<usize>,
@@ -3935,10 +3935,17 @@ mod tests {
         for f in &sp.folds {
             let mut mine: Vec<usize> = f.score.iter().map(|w| w.trajectory).collect();
             mine.dedup();
-            assert_eq!(mine.len(), f.segments, "every segment of the fold is scored");
+            assert_eq!(
+                mine.len(),
+                f.segments,
+                "every segment of the fold is scored"
+            );
             for &t in &mine {
                 scored[t] += 1;
-                assert!(!f.fit_trajs.contains(&t), "segment {t} both fitted and scored");
+                assert!(
+                    !f.fit_trajs.contains(&t),
+                    "segment {t} both fitted and scored"
+                );
             }
             assert_eq!(f.fit_trajs.len() + f.segments, lengths.len());
             assert!(f.fit.iter().all(|w| f.fit_trajs.contains(&w.trajectory)));
@@ -3948,7 +3955,10 @@ mod tests {
                 .iter()
                 .filter(|t| sp.split.validation.contains(t))
                 .count();
-            assert!(held >= 1 && held < mine.len(), "a fold of one half: {mine:?}");
+            assert!(
+                held >= 1 && held < mine.len(),
+                "a fold of one half: {mine:?}"
+            );
         }
         assert!(scored.iter().all(|&n| n == 1), "{scored:?}");
         let again = split_windows(&lengths, 5, 0.5, 7, [30, 200]).ok().unwrap();
