@@ -496,6 +496,58 @@ fn the_second_look_counts_an_effect_the_held_out_half_cannot_bound_and_not_a_nom
     assert_eq!(nominal.verdict, None, "{}", nominal.table());
 }
 
+#[test]
+fn the_folds_look_counts_a_tilt_neither_half_bounds_and_not_a_nominal_fit() {
+    // 8 episodes: the halves' 4 + 4 segments do not bound the tilt, the folds' fits on 6
+    // segments each do
+    let diag = |effect: Option<Effect>, episodes: u64, seed: u64| {
+        let d = push_dataset(&push_scenario(effect, 1.0), episodes, 10, 900 + seed, 2).unwrap();
+        let model = nominal_model(World::Push, d.pose_dt_s).unwrap();
+        let cfg = DiagnoseConfig {
+            seed,
+            discover: false,
+            ..DiagnoseConfig::default()
+        };
+        diagnose(&model, &d, &cfg).unwrap()
+    };
+    let tilted = diag(Some(Effect::TableTilt), 8, 5);
+    let tilt = tilted.selection[0]
+        .candidates
+        .iter()
+        .find(|c| c.effect == "table_tilt")
+        .unwrap();
+    let table = tilted.table();
+    assert!(
+        tilt.error_reduction >= 0.1 && tilt.ci_lower <= 0.0,
+        "{table}"
+    );
+    let halves = tilt.cross_fit.as_ref().expect("a second look");
+    assert!(
+        halves.reduction >= 0.1 && !halves.counts(0.1),
+        "the halves alone would count it: {table}"
+    );
+    let folds = tilt.fold_fit.as_ref().expect("a folds' look");
+    assert_eq!((folds.folds, folds.segments), (4, 8), "{table}");
+    assert!(folds.counts(0.1) && tilt.significant, "{table}");
+    assert_eq!(tilted.verdict.as_deref(), Some("table_tilt"), "{table}");
+    let truth = 0.02f64.tan() / 0.1;
+    assert!((folds.params["gx"] - truth).abs() < 0.05, "{table}");
+    // nominal data: candidates that remove enough on both halves without a bound gain
+    // nothing from the folds
+    for seed in [2, 7] {
+        let nominal = diag(None, 10, seed);
+        let looked: Vec<_> = nominal
+            .selection
+            .iter()
+            .flat_map(|s| &s.candidates)
+            .filter_map(|c| c.fold_fit.as_ref())
+            .collect();
+        assert!(!looked.is_empty(), "{}", nominal.table());
+        assert!(looked.iter().all(|f| !f.counts(0.1)), "{}", nominal.table());
+        assert_eq!(nominal.verdict, None, "{}", nominal.table());
+    }
+}
+
 /// A perturbed world of `push_open_world` (`world_seed`: the block, pusher and table each
 /// scaled by a seeded factor within ±10 %), its physics model fitted on its nominal pushes, and
 /// the diagnosis (no term search) of its pushes with the `hidden` effects.
