@@ -810,6 +810,31 @@ impl Fitted {
         }
     }
 
+    /// This fit with the effects' parameters of `held` that it does not fit itself, as `held`
+    /// has them: where a step keeps its candidate's own fit (the joint refit fitted the fit half
+    /// no better), the effects added before it were held at those values, and the step's fit
+    /// reports them too (the joint fit's parameters and `train`'s `--set` lost them before).
+    fn with_held(mut self, held: Option<&Fitted>) -> Fitted {
+        let Some(h) = held else {
+            return self;
+        };
+        for i in (0..h.names.len()).filter(|&i| h.owners[i].is_some()) {
+            let mine = |j: usize| self.owners[j] == h.owners[i] && self.names[j] == h.names[i];
+            if (0..self.names.len()).any(mine) {
+                continue;
+            }
+            self.names.push(h.names[i].clone());
+            self.units.push(h.units[i].clone());
+            self.owners.push(h.owners[i]);
+            self.lower.push(h.lower[i]);
+            self.upper.push(h.upper[i]);
+            self.free.push(h.free[i]);
+            self.theta.push(h.theta[i]);
+            self.std.push(h.std[i]);
+        }
+        self
+    }
+
     /// `name → "lower" | "upper"` of the parameters `idx` on a bound, named by `name(i)`.
     fn bounds_of(&self, idx: &[usize], name: impl Fn(usize) -> String) -> BTreeMap<String, String> {
         idx.iter()
@@ -2104,6 +2129,7 @@ impl<'a> Ctx<'a> {
         {
             joint = j;
         }
+        let joint = joint.with_held(Some(f));
         if [e, g]
             .iter()
             .any(|&x| self.implausible(x, &joint).is_some())
@@ -2626,7 +2652,7 @@ pub fn diagnose(
                 candidates: p.scored.into_iter().map(|(c, _)| c).collect(),
             });
             lib.retain(|x| *x != e && x.name() != g);
-            joint = Some(p.joint);
+            joint = Some(p.joint.with_held(joint.as_ref()));
             cur = next;
             continue;
         }
@@ -2654,6 +2680,7 @@ pub fn diagnose(
         {
             step_fit = j;
         }
+        let step_fit = step_fit.with_held(joint.as_ref());
         let next = ctx.current_of(&step_fit);
         selection.push(SelectionStep {
             step: selection.len() + 1,
@@ -4077,6 +4104,31 @@ mod tests {
             fit: Vec::new(),
             calm: Vec::new(),
         }
+    }
+
+    /// A step that keeps its candidate's own fit still reports the effects added before it, at
+    /// the values they were held at, and a parameter it fits itself is not doubled.
+    #[test]
+    fn a_kept_candidate_fit_reports_the_effects_held_before_it() {
+        let delay = fitted_effect(Effect::CommandDelay, &[0.0586]);
+        let offset = fitted_effect(Effect::SteeringOffset, &[0.0303]);
+        let step = offset.clone().with_held(Some(&delay));
+        let joint: BTreeMap<String, f64> = (0..step.names.len())
+            .map(|i| {
+                let owner = step.owners[i].map_or("", |e| e.name());
+                (format!("{owner}.{}", step.names[i]), step.theta[i])
+            })
+            .collect();
+        assert_eq!(
+            joint,
+            BTreeMap::from([
+                ("command_delay.delay".to_string(), 0.0586),
+                ("steering_offset.delta0".to_string(), 0.0303),
+            ])
+        );
+        assert_eq!(step.names.len(), step.std.len());
+        assert_eq!(step.clone().with_held(Some(&offset)).names, step.names);
+        assert_eq!(offset.clone().with_held(None).names, offset.names);
     }
 
     #[test]
