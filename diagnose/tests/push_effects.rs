@@ -431,20 +431,24 @@ fn a_block_depth_off_its_measure_is_refitted_not_named_a_com_offset() {
     );
 }
 
+/// The diagnosis (without the term search) of `episodes` × 10 pushes with `effect` hidden
+/// (noise ×1), split with `seed`.
+fn diagnose_pushes(effect: Option<Effect>, episodes: u64, seed: u64) -> Diagnosis {
+    let d = push_dataset(&push_scenario(effect, 1.0), episodes, 10, 900 + seed, 2).unwrap();
+    let model = nominal_model(World::Push, d.pose_dt_s).unwrap();
+    let cfg = DiagnoseConfig {
+        seed,
+        discover: false,
+        ..DiagnoseConfig::default()
+    };
+    diagnose(&model, &d, &cfg).unwrap()
+}
+
 #[test]
 fn the_second_look_counts_an_effect_the_held_out_half_cannot_bound_and_not_a_nominal_fit() {
     // 6 episodes: 3 held-out segments, too few for the held-out half alone to bound a
     // reduction; the second look fits on the held-out half and scores both
-    let diag = |effect: Option<Effect>, seed: u64| {
-        let d = push_dataset(&push_scenario(effect, 1.0), 6, 10, 900 + seed, 2).unwrap();
-        let model = nominal_model(World::Push, d.pose_dt_s).unwrap();
-        let cfg = DiagnoseConfig {
-            seed,
-            discover: false,
-            ..DiagnoseConfig::default()
-        };
-        diagnose(&model, &d, &cfg).unwrap()
-    };
+    let diag = |effect: Option<Effect>, seed: u64| diagnose_pushes(effect, 6, seed);
     let tilted = diag(Some(Effect::TableTilt), 4);
     let first = &tilted.selection[0].candidates;
     let tilt = first.iter().find(|c| c.effect == "table_tilt").unwrap();
@@ -500,17 +504,7 @@ fn the_second_look_counts_an_effect_the_held_out_half_cannot_bound_and_not_a_nom
 fn the_folds_look_counts_a_tilt_neither_half_bounds_and_not_a_nominal_fit() {
     // 8 episodes: the halves' 4 + 4 segments do not bound the tilt, the folds' fits on 6
     // segments each do
-    let diag = |effect: Option<Effect>, episodes: u64, seed: u64| {
-        let d = push_dataset(&push_scenario(effect, 1.0), episodes, 10, 900 + seed, 2).unwrap();
-        let model = nominal_model(World::Push, d.pose_dt_s).unwrap();
-        let cfg = DiagnoseConfig {
-            seed,
-            discover: false,
-            ..DiagnoseConfig::default()
-        };
-        diagnose(&model, &d, &cfg).unwrap()
-    };
-    let tilted = diag(Some(Effect::TableTilt), 8, 5);
+    let tilted = diagnose_pushes(Some(Effect::TableTilt), 8, 5);
     let tilt = tilted.selection[0]
         .candidates
         .iter()
@@ -535,7 +529,7 @@ fn the_folds_look_counts_a_tilt_neither_half_bounds_and_not_a_nominal_fit() {
     // nominal data: candidates that remove enough on both halves without a bound gain
     // nothing from the folds
     for seed in [2, 7] {
-        let nominal = diag(None, 10, seed);
+        let nominal = diagnose_pushes(None, 10, seed);
         let looked: Vec<_> = nominal
             .selection
             .iter()
