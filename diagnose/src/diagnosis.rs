@@ -484,6 +484,13 @@ fn two() -> usize {
     2
 }
 
+/// Whether the second look or the folds' look (where taken) counts.
+fn a_look_counts(looks: [&Option<CrossFit>; 2], min_reduction: f64) -> bool {
+    looks
+        .into_iter()
+        .any(|x| x.as_ref().is_some_and(|x| x.counts(min_reduction)))
+}
+
 impl CrossFit {
     /// Whether the pooled look counts: at least `min_reduction` removed, the bound above 0.
     pub fn counts(&self, min_reduction: f64) -> bool {
@@ -1900,10 +1907,7 @@ impl<'a> Ctx<'a> {
         };
         // a reason against it matters only where the numbers alone would count it
         let counts = large
-            && (ci_lower > 0.0
-                || [&cross_fit, &fold_fit]
-                    .iter()
-                    .any(|x| x.as_ref().is_some_and(|c| c.counts(self.cfg.min_reduction))));
+            && (ci_lower > 0.0 || a_look_counts([&cross_fit, &fold_fit], self.cfg.min_reduction));
         let mut note = if counts {
             self.implausible(e, &f)
         } else {
@@ -2073,10 +2077,8 @@ impl<'a> Ctx<'a> {
     /// ([`Ctx::rival_term_note`]; two effects may each follow a part of the error that one term
     /// of another shape follows as a whole). `None` for a candidate refused otherwise or not at all.
     fn refused_alone(&self, c: &Candidate, f: &Fitted) -> Option<Refusal> {
-        let counts = c.ci_lower > 0.0
-            || [&c.cross_fit, &c.fold_fit]
-                .iter()
-                .any(|x| x.as_ref().is_some_and(|x| x.counts(self.cfg.min_reduction)));
+        let counts =
+            c.ci_lower > 0.0 || a_look_counts([&c.cross_fit, &c.fold_fit], self.cfg.min_reduction);
         if c.raw_reduction < self.cfg.min_reduction || !counts {
             return None;
         }

@@ -9,7 +9,7 @@
 use dynlab_diagnose::diagnosis::simdata::{
     nominal_model, push_dataset, push_dataset_with, push_scenario,
 };
-use dynlab_diagnose::diagnosis::{DiagnoseConfig, Diagnosis, diagnose};
+use dynlab_diagnose::diagnosis::{Candidate, DiagnoseConfig, Diagnosis, diagnose};
 use dynlab_learn::dynamics::conventions::wrap_angle;
 use dynlab_learn::dynamics::ode;
 use dynlab_learn::dynamics::physics::{Effect, LimitSurface, PhysicsModel};
@@ -444,6 +444,11 @@ fn diagnose_pushes(effect: Option<Effect>, episodes: u64, seed: u64) -> Diagnosi
     diagnose(&model, &d, &cfg).unwrap()
 }
 
+/// Every step's candidates.
+fn candidates(d: &Diagnosis) -> impl Iterator<Item = &Candidate> {
+    d.selection.iter().flat_map(|s| &s.candidates)
+}
+
 #[test]
 fn the_second_look_counts_an_effect_the_held_out_half_cannot_bound_and_not_a_nominal_fit() {
     // 6 episodes: 3 held-out segments, too few for the held-out half alone to bound a
@@ -478,10 +483,7 @@ fn the_second_look_counts_an_effect_the_held_out_half_cannot_bound_and_not_a_nom
     // nominal data: a candidate that removes enough on the held-out half but is not bounded
     // there gains nothing from the other half
     let nominal = diag(None, 2);
-    let looked: Vec<_> = nominal
-        .selection
-        .iter()
-        .flat_map(|s| &s.candidates)
+    let looked: Vec<_> = candidates(&nominal)
         .filter(|c| c.cross_fit.is_some())
         .collect();
     assert!(!looked.is_empty(), "{}", nominal.table());
@@ -530,10 +532,7 @@ fn the_folds_look_counts_a_tilt_neither_half_bounds_and_not_a_nominal_fit() {
     // nothing from the folds
     for seed in [2, 7] {
         let nominal = diagnose_pushes(None, 10, seed);
-        let looked: Vec<_> = nominal
-            .selection
-            .iter()
-            .flat_map(|s| &s.candidates)
+        let looked: Vec<_> = candidates(&nominal)
             .filter_map(|c| c.fold_fit.as_ref())
             .collect();
         assert!(!looked.is_empty(), "{}", nominal.table());
@@ -592,10 +591,7 @@ fn a_pad_smaller_than_half_the_pusher_is_not_named_in_a_perturbed_world() {
     let table = d.table();
     assert_eq!(d.effects, vec!["pusher_friction".to_string()], "{table}");
     // the pad was fitted after the friction and is refused for its size
-    let pad = d
-        .selection
-        .iter()
-        .flat_map(|s| &s.candidates)
+    let pad = candidates(&d)
         .find(|c| c.effect == "flat_pusher" && c.error_reduction >= 0.1)
         .unwrap_or_else(|| panic!("the pad is fitted and removes 10 %\n{table}"));
     assert!(
