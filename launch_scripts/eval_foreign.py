@@ -13,7 +13,10 @@ of ours goes below on those held-out windows (pose noise, velocities from poses,
 open-loop rollouts), and the table gives the share of the error above it that the effects remove.
 
     eval_foreign.py [--seeds N] [--first-seed N] [--only CASE,CASE] [--jobs N] [--out DIR]
-                    [--friction-ellipse] [--floor]
+                    [--friction-ellipse] [--rate HZ] [--perturb F] [--floor]
+
+`--rate` and `--perturb` pass to the generator: its motion capture's frequency (default 120 Hz) and
+how far each car's parameters are from the datasheet (default ±10 %).
 """
 import argparse
 import json
@@ -67,7 +70,8 @@ def run(*cmd):
     return p.stdout
 
 
-GENERATOR = []  # extra options of foreign_car.py (--friction-ellipse)
+PERTURB = [0.1]  # --perturb: the true model's parameters (--floor) are the generator's
+GENERATOR = []  # extra options of foreign_car.py (--friction-ellipse, --rate, --perturb)
 
 
 def bag(out, car_seed, seed, effects):
@@ -89,7 +93,7 @@ def true_model(root, car_seed):
     m = root / f"car{car_seed}" / "true_model"
     if not m.exists():
         b = bag(root / f"car{car_seed}" / "nominal", car_seed, 1000 * car_seed + 1, "")
-        sets = [a for k, v in car_params(car_seed, 0.1).items() for a in ("--set", f"{k}={v}")]
+        sets = [a for k, v in car_params(car_seed, PERTURB[0]).items() for a in ("--set", f"{k}={v}")]
         sets += ["--set", f"ellipse={int('--friction-ellipse' in GENERATOR)}", "--set", "v_reg=0.02"]
         run(DYNLAB, "train", "--world", "car", "--kind", "physics", "--bag", b, "--out", m, "--free", "Cr0",
             *sets, *TOPICS)
@@ -140,11 +144,18 @@ def main():
     ap.add_argument("--out", default=str(REPO / "out" / "eval_foreign"))
     ap.add_argument("--friction-ellipse", action="store_true",
                     help="cars whose drive force takes the rear tire's lateral grip")
+    ap.add_argument("--rate", type=float, help="the generator's motion capture frequency, Hz (default 120)")
+    ap.add_argument("--perturb", type=float, default=0.1,
+                    help="each car's parameters within ±F of the datasheet (default 0.1)")
     ap.add_argument("--floor", action="store_true",
                     help="also diagnose with the generator's own car: the share of the removable error")
     a = ap.parse_args()
     if a.friction_ellipse:
         GENERATOR.append("--friction-ellipse")
+    if a.rate is not None:
+        GENERATOR.extend(["--rate", a.rate])
+    PERTURB[0] = a.perturb
+    GENERATOR.extend(["--perturb", a.perturb])
     cases = [c for c in CASES if not a.only or c in a.only.split(",")]
     if not cases:
         ap.error(f"no case in --only; cases: {', '.join(CASES)}")

@@ -5,8 +5,10 @@
 # with hidden effects and `dynlab diagnose`; prints what was named, the error removed, the fitted
 # strengths against the truth and the terms found beyond the library.
 # Usage: launch_scripts/eval_foreign.sh [--seeds N] [--first-seed N] [--only CASE,CASE] [--jobs N]
-#        [--out DIR] [--friction-ellipse] [--floor]   (defaults: 3 seeds from 0, every case, 2 jobs,
-#        out/eval_foreign; --friction-ellipse: cars whose drive force takes lateral grip; --floor:
+#        [--out DIR] [--friction-ellipse] [--rate HZ] [--perturb F] [--floor]   (defaults: 3 seeds
+#        from 0, every case, 2 jobs, out/eval_foreign; --friction-ellipse: cars whose drive force
+#        takes lateral grip; --rate: the motion capture's frequency, 120 Hz; --perturb: the cars'
+#        parameters within ±F of the datasheet, 0.1; --floor:
 #        each library case diagnosed with the generator's own car too, the error no model goes below)
 set -euo pipefail
 cd "$(dirname "$0")/.."

@@ -4,7 +4,7 @@ car (Pacejka lateral tyres, a DC drivetrain; by default no friction ellipse, so 
 never takes the rear tyres' lateral grip — `--friction-ellipse` caps the rear tyre's combined
 force at its peak instead), integrated with RK4 at 1 kHz in
 numpy, driven by a waypoint-chasing driver with sweeps and throttle steps, seen by a 120 Hz motion
-capture (jittered stamps, 1 mm / 0.004 rad noise, dropouts) and written by `rosbags` as a rosbag2
+capture (jittered stamps, 1 mm / 0.004 rad noise, dropouts; `--rate` sets its frequency) and written by `rosbags` as a rosbag2
 MCAP bag under other topic names than dynlab's (`/mocap/orca/pose`, PoseStamped; `/orca/cmd`,
 AckermannDriveStamped at 50 Hz: steering angle, duty as `acceleration`).
 
@@ -30,7 +30,7 @@ The car's parameters are the datasheet's scaled by seeded factors in [1 − f, 1
 effect bag of the same car differ only in the effect and the driving seed.
 
     foreign_car.py OUT_DIR --car-seed 3 --seed 7 [--effects aero_drag,steering_offset]
-                   [--episodes 4] [--duration 15] [--perturb 0.1] [--friction-ellipse]
+                   [--episodes 4] [--duration 15] [--perturb 0.1] [--rate 120] [--friction-ellipse]
 """
 import argparse
 import math
@@ -177,9 +177,12 @@ def main():
     ap.add_argument("--episodes", type=int, default=4)
     ap.add_argument("--duration", type=float, default=15.0)
     ap.add_argument("--perturb", type=float, default=0.1)
+    ap.add_argument("--rate", type=float, default=120.0, help="the motion capture's frequency, Hz")
     ap.add_argument("--friction-ellipse", action="store_true",
                     help="the drive force takes the rear tire's lateral grip (default: independent)")
     a = ap.parse_args()
+    if not 1.0 <= a.rate <= 1000.0:
+        ap.error(f"--rate {a.rate:g}: the motion capture runs at 1 to 1000 Hz (the car is integrated at 1 kHz)")
     effects = {e for e in a.effects.split(",") if e}
     unknown = effects - set(EFFECTS)
     if unknown:
@@ -210,10 +213,10 @@ def main():
             p["charge"] = 1.0 - (SAG * ep / max(a.episodes - 1, 1) if "battery_sag" in effects else 0.0)
             states, cmds = episode(p, effects, rng, a.duration)
             t0 = t_start + ep * int((a.duration + 5.0) * 1e9)
-            # 120 Hz poses with jitter, noise and dropouts
+            # poses at --rate with jitter, noise and dropouts
             dropouts = [(rng.uniform(0, a.duration), rng.uniform(0.05, 0.25)) for _ in range(2)]
-            for j in range(int(a.duration * 120)):
-                tm = j / 120.0 + rng.uniform(-0.1, 0.1) / 120.0
+            for j in range(int(a.duration * a.rate)):
+                tm = j / a.rate + rng.uniform(-0.1, 0.1) / a.rate
                 if tm < 0 or any(s0 <= tm < s0 + dl for s0, dl in dropouts):
                     continue
                 i = min(int(round(tm * 1000)), len(states) - 1)
