@@ -333,6 +333,10 @@ pub struct DiscoveredTerm {
     /// half).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub cross_fit: Option<CrossFit>,
+    /// Why the term cannot be physical, where it cannot (then not significant, and the search
+    /// tries the next term of its kind in the same round).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub implausible: Option<String>,
     /// `|θ|/σ` of the one-step regression that selected the term.
     pub one_step_t: f64,
     /// Share of the target's one-step residual (sum of squares) the term explains.
@@ -1498,8 +1502,11 @@ pub fn discover_terms_split(
             Ok(best.map(|b| b.1))
         };
         let mut added = false;
-        for positional in [false, true] {
+        let mut kinds = vec![false, true];
+        while !kinds.is_empty() {
+            let positional = kinds[0];
             let Some(pi) = best_pick(positional, &used, &accepted)? else {
+                kinds.remove(0);
                 continue;
             };
             used.push(pi);
@@ -1528,6 +1535,16 @@ pub fn discover_terms_split(
                         .wrapping_mul(0x9E37_79B9_7F4A_7C15),
             );
             let j = theta.len() - 1;
+            // a gain on the steering command, δ·g(state), is a gain, and turns no wheel the
+            // other way (a rate or a lagged command may: a delayed command does after it flips)
+            let gain = pick.target == Target::Delta && feature.factors().contains(&Atom::Delta);
+            let implausible = gain
+                .then(|| {
+                    reversed_steering(
+                        (0..n).map(|i| (u0[i * du], theta[j] * x[i * nf + pick.feature])),
+                    )
+                })
+                .flatten();
             let t_ok = (theta[j] / std[j]).abs() > z;
             // a large reduction the held-out half cannot bound: both halves scored
             let cross_fit = if reduction >= cfg.min_reduction && t_ok && lower <= 0.0 {
@@ -1592,7 +1609,8 @@ pub fn discover_terms_split(
             } else {
                 None
             };
-            let significant = reduction >= cfg.min_reduction
+            let significant = implausible.is_none()
+                && reduction >= cfg.min_reduction
                 && t_ok
                 && (lower > 0.0
                     || cross_fit
@@ -1611,6 +1629,7 @@ pub fn discover_terms_split(
                 ci_lower: lower,
                 significant,
                 cross_fit,
+                implausible: implausible.clone(),
                 one_step_t: pick.t,
                 one_step_share: pick.share,
                 plot: term_plot(
@@ -1626,6 +1645,10 @@ pub fn discover_terms_split(
                 ),
             });
             if !significant {
+                // a term that cannot be physical says nothing of its kind: the next one is tried
+                if implausible.is_none() {
+                    kinds.remove(0);
+                }
                 continue;
             }
             accepted = fitted.terms().to_vec();
@@ -1691,6 +1714,39 @@ pub fn discover_terms_split(
         terms: out_terms,
         summary,
         config: cfg.clone(),
+    })
+}
+
+/// Smallest steering command `|δ|` \[rad\] whose direction [`reversed_steering`] checks.
+const STEER_CHECKED: f64 = 0.05;
+
+/// Share of those commands a steering term may turn the other way (measurement noise and a
+/// rare extreme state, not a law of the car).
+const STEER_REVERSED_SHARE: f64 = 0.05;
+
+/// Why a steering gain term `δ += θ·δ·g`, given as `(δ, θ·δ·g)` over the fit half's
+/// transitions, cannot be physical: it turns the wheels against the command (a negative gain
+/// `1 + θ·g`) on more than [`STEER_REVERSED_SHARE`] of the commands beyond [`STEER_CHECKED`]. A steering
+/// gain that falls with speed, fitted with a wrong speed scale, went to
+/// `−165·δ·vₓ²/(vₓ² + 3.04²)` on the independent generator's car 3 (the wheels against the
+/// command above 0.24 m/s): the fit half's windows it sent into spins left its fit, and the
+/// held-out error rose 19-fold; as that round's term, it ended the search.
+fn reversed_steering(samples: impl Iterator<Item = (f64, f64)>) -> Option<String> {
+    let (mut checked, mut reversed) = (0usize, 0usize);
+    for (delta, term) in samples {
+        if delta.abs() >= STEER_CHECKED && term.is_finite() {
+            checked += 1;
+            if (delta + term) * delta < 0.0 {
+                reversed += 1;
+            }
+        }
+    }
+    let share = reversed as f64 / checked.max(1) as f64;
+    (share > STEER_REVERSED_SHARE).then(|| {
+        format!(
+            "turns the wheels against the command on {:.0} % of the fit half's steering commands beyond {STEER_CHECKED} rad",
+            100.0 * share
+        )
     })
 }
 
@@ -2014,6 +2070,9 @@ impl Discovery {
                 if let Some(x) = &t.cross_fit {
                     let _ = writeln!(o, "    {}", crate::diagnosis::cross_fit_text(x));
                 }
+                if let Some(why) = &t.implausible {
+                    let _ = writeln!(o, "    not physical: {why}");
+                }
             }
         }
         let _ = writeln!(o, "{}", self.summary);
@@ -2084,6 +2143,13 @@ pub fn discovery_html(d: &Discovery) -> String {
                 escape(&crate::diagnosis::cross_fit_text(x))
             );
         }
+        if let Some(why) = &t.implausible {
+            let _ = writeln!(
+                o,
+                "<tr><td></td><td colspan=3>not physical: {}</td></tr>",
+                escape(why)
+            );
+        }
     }
     let _ = writeln!(o, "</table>");
     for t in &d.terms {
@@ -2146,6 +2212,41 @@ pub fn discovery_page(d: &Discovery) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Commands `δ` over ±0.3 rad at speeds `v` over 0 … 2.5 m/s.
+    fn steering_samples() -> Vec<(f64, f64)> {
+        (0..400)
+            .map(|i| {
+                (
+                    -0.3 + 0.6 * (i % 40) as f64 / 39.0,
+                    2.5 * (i / 40) as f64 / 9.0,
+                )
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_steering_term_that_turns_the_wheels_against_the_command_is_not_physical() {
+        let sat = |v: f64| v * v / (v * v + 3.04 * 3.04);
+        let samples = steering_samples();
+        // gains falling with speed: the wheels follow the command
+        for term in [
+            &(|d: f64, v: f64| -0.25 * d * v) as &dyn Fn(f64, f64) -> f64,
+            &|d: f64, v: f64| -1.0 * d * sat(v),
+        ] {
+            assert_eq!(
+                reversed_steering(samples.iter().map(|&(d, v)| (d, term(d, v)))),
+                None
+            );
+        }
+        // −165·δ·vₓ²/(vₓ² + 3.04²) reverses them above 0.24 m/s: at 9 of the 10 speeds
+        let why = reversed_steering(samples.iter().map(|&(d, v)| (d, -165.0 * d * sat(v))))
+            .expect("reversed");
+        assert!(why.contains("against the command on 90 %"), "{why}");
+        // a gain that reverses only at the top speed, on 1 of 10 speeds: beyond the share
+        let top = reversed_steering(samples.iter().map(|&(d, v)| (d, -0.41 * d * v)));
+        assert!(top.is_some_and(|w| w.contains("10 %")));
+    }
 
     #[test]
     fn normal_quantiles() {
