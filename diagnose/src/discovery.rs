@@ -2232,7 +2232,7 @@ mod tests {
         // gains falling with speed: the wheels follow the command
         for term in [
             &(|d: f64, v: f64| -0.25 * d * v) as &dyn Fn(f64, f64) -> f64,
-            &|d: f64, v: f64| -1.0 * d * sat(v),
+            &|d: f64, v: f64| -d * sat(v),
         ] {
             assert_eq!(
                 reversed_steering(samples.iter().map(|&(d, v)| (d, term(d, v)))),
