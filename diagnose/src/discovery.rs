@@ -1502,11 +1502,12 @@ pub fn discover_terms_split(
             Ok(best.map(|b| b.1))
         };
         let mut added = false;
-        let mut kinds = vec![false, true];
-        while !kinds.is_empty() {
-            let positional = kinds[0];
+        // 0: the terms that hold everywhere, 1: the region's
+        let mut kind = 0;
+        while kind < 2 {
+            let positional = kind == 1;
             let Some(pi) = best_pick(positional, &used, &accepted)? else {
-                kinds.remove(0);
+                kind += 1;
                 continue;
             };
             used.push(pi);
@@ -1535,8 +1536,9 @@ pub fn discover_terms_split(
                         .wrapping_mul(0x9E37_79B9_7F4A_7C15),
             );
             let j = theta.len() - 1;
-            // a gain on the steering command, δ·g(state), is a gain, and turns no wheel the
-            // other way (a rate or a lagged command may: a delayed command does after it flips)
+            // a gain on the steering command (`δ` one of the feature's factors) leaves the
+            // wheels following the command; a rate or a lagged command need not (a delayed
+            // command points them the other way right after it flips)
             let gain = pick.target == Target::Delta && feature.factors().contains(&Atom::Delta);
             let implausible = gain
                 .then(|| {
@@ -1647,7 +1649,7 @@ pub fn discover_terms_split(
             if !significant {
                 // a term that cannot be physical says nothing of its kind: the next one is tried
                 if implausible.is_none() {
-                    kinds.remove(0);
+                    kind += 1;
                 }
                 continue;
             }
@@ -1726,8 +1728,8 @@ const STEER_REVERSED_SHARE: f64 = 0.05;
 
 /// Why a steering gain term `δ += θ·δ·g`, given as `(δ, θ·δ·g)` over the fit half's
 /// transitions, cannot be physical: it turns the wheels against the command (a negative gain
-/// `1 + θ·g`) on more than [`STEER_REVERSED_SHARE`] of the commands beyond [`STEER_CHECKED`]. A steering
-/// gain that falls with speed, fitted with a wrong speed scale, went to
+/// `1 + θ·g`) on more than [`STEER_REVERSED_SHARE`] of the commands beyond [`STEER_CHECKED`].
+/// A steering gain that falls with speed, fitted with a wrong speed scale, went to
 /// `−165·δ·vₓ²/(vₓ² + 3.04²)` on the independent generator's car 3 (the wheels against the
 /// command above 0.24 m/s): the fit half's windows it sent into spins left its fit, and the
 /// held-out error rose 19-fold; as that round's term, it ended the search.
