@@ -26,7 +26,7 @@ import sys
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
-from foreign_car import car_params
+from foreign_car import car_params, option_error
 
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
@@ -70,7 +70,7 @@ def run(*cmd):
     return p.stdout
 
 
-PERTURB = [0.1]  # --perturb: the true model's parameters (--floor) are the generator's
+PERTURB = 0.1  # --perturb: the true model's parameters (--floor) are the generator's
 GENERATOR = []  # extra options of foreign_car.py (--friction-ellipse, --rate, --perturb)
 
 
@@ -93,7 +93,7 @@ def true_model(root, car_seed):
     m = root / f"car{car_seed}" / "true_model"
     if not m.exists():
         b = bag(root / f"car{car_seed}" / "nominal", car_seed, 1000 * car_seed + 1, "")
-        sets = [a for k, v in car_params(car_seed, PERTURB[0]).items() for a in ("--set", f"{k}={v}")]
+        sets = [a for k, v in car_params(car_seed, PERTURB).items() for a in ("--set", f"{k}={v}")]
         sets += ["--set", f"ellipse={int('--friction-ellipse' in GENERATOR)}", "--set", "v_reg=0.02"]
         run(DYNLAB, "train", "--world", "car", "--kind", "physics", "--bag", b, "--out", m, "--free", "Cr0",
             *sets, *TOPICS)
@@ -144,18 +144,20 @@ def main():
     ap.add_argument("--out", default=str(REPO / "out" / "eval_foreign"))
     ap.add_argument("--friction-ellipse", action="store_true",
                     help="cars whose drive force takes the rear tire's lateral grip")
-    ap.add_argument("--rate", type=float, help="the generator's motion capture frequency, Hz (default 120)")
+    ap.add_argument("--rate", type=float, default=120.0,
+                    help="the generator's motion capture frequency, Hz (default 120)")
     ap.add_argument("--perturb", type=float, default=0.1,
                     help="each car's parameters within ±F of the datasheet (default 0.1)")
     ap.add_argument("--floor", action="store_true",
                     help="also diagnose with the generator's own car: the share of the removable error")
     a = ap.parse_args()
+    if (err := option_error(a.rate, a.perturb)) is not None:
+        ap.error(err)
+    global PERTURB
+    PERTURB = a.perturb
+    GENERATOR.extend(["--rate", a.rate, "--perturb", a.perturb])
     if a.friction_ellipse:
         GENERATOR.append("--friction-ellipse")
-    if a.rate is not None:
-        GENERATOR.extend(["--rate", a.rate])
-    PERTURB[0] = a.perturb
-    GENERATOR.extend(["--perturb", a.perturb])
     cases = [c for c in CASES if not a.only or c in a.only.split(",")]
     if not cases:
         ap.error(f"no case in --only; cases: {', '.join(CASES)}")

@@ -3,9 +3,9 @@
 car (Pacejka lateral tyres, a DC drivetrain; by default no friction ellipse, so the drive force
 never takes the rear tyres' lateral grip — `--friction-ellipse` caps the rear tyre's combined
 force at its peak instead), integrated with RK4 at 1 kHz in
-numpy, driven by a waypoint-chasing driver with sweeps and throttle steps, seen by a 120 Hz motion
-capture (jittered stamps, 1 mm / 0.004 rad noise, dropouts; `--rate` sets its frequency) and written by `rosbags` as a rosbag2
-MCAP bag under other topic names than dynlab's (`/mocap/orca/pose`, PoseStamped; `/orca/cmd`,
+numpy, driven by a waypoint-chasing driver with sweeps and throttle steps, seen by a motion
+capture (120 Hz unless `--rate`; jittered stamps, 1 mm / 0.004 rad noise, dropouts) and written by
+`rosbags` as a rosbag2 MCAP bag under other topic names than dynlab's (`/mocap/orca/pose`, PoseStamped; `/orca/cmd`,
 AckermannDriveStamped at 50 Hz: steering angle, duty as `acceleration`).
 
 Hidden effects (comma-separated `--effects`): `aero_drag` (−c·vₓ|vₓ| on the drive force, c 0.01),
@@ -55,6 +55,15 @@ TILT_ACC, TILT_DIR = 9.81 * math.sin(math.radians(1.5)), 2.0  # m/s², rad: floo
 STOP = 0.25  # rad, steer_stop: the wheels' mechanical end stop
 TRACTION = 0.06  # N, traction_limit: the most drive force the rear tyres pass before they spin
 SAG = 0.3  # battery_sag: the drive force's loss over the bag
+
+
+def option_error(rate, perturb):
+    """What is wrong with a motion capture `rate` (Hz) or a parameter spread `perturb`, or None."""
+    if not 1.0 <= rate <= 1000.0:
+        return f"--rate {rate:g}: the motion capture runs at 1 to 1000 Hz (the car is integrated at 1 kHz)"
+    if not 0.0 <= perturb < 1.0:
+        return f"--perturb {perturb:g}: each parameter is scaled within 1 ± F, so F is in [0, 1)"
+    return None
 
 
 def car_params(car_seed, perturb):
@@ -181,8 +190,8 @@ def main():
     ap.add_argument("--friction-ellipse", action="store_true",
                     help="the drive force takes the rear tire's lateral grip (default: independent)")
     a = ap.parse_args()
-    if not 1.0 <= a.rate <= 1000.0:
-        ap.error(f"--rate {a.rate:g}: the motion capture runs at 1 to 1000 Hz (the car is integrated at 1 kHz)")
+    if (err := option_error(a.rate, a.perturb)) is not None:
+        ap.error(err)
     effects = {e for e in a.effects.split(",") if e}
     unknown = effects - set(EFFECTS)
     if unknown:

@@ -1548,8 +1548,13 @@ pub fn discover_terms_split(
                 })
                 .flatten();
             let t_ok = (theta[j] / std[j]).abs() > z;
-            // a large reduction the held-out half cannot bound: both halves scored
-            let cross_fit = if reduction >= cfg.min_reduction && t_ok && lower <= 0.0 {
+            // a large reduction the held-out half cannot bound: both halves scored (not for a
+            // term that cannot be physical: it does not count whatever they give)
+            let cross_fit = if implausible.is_none()
+                && reduction >= cfg.min_reduction
+                && t_ok
+                && lower <= 0.0
+            {
                 let (fit_s, base_fit) = fit_scored.get_or_insert_with(|| {
                     let ws = spin_free_windows(physics, &ctx, fit_w);
                     let e = ctx.errors(physics, &ws, None);
