@@ -36,7 +36,7 @@ for name in car_drag_steering car_steering_gain; do
 done
 
 step "Baseline: the physics model fitted on the nominal bag"
-"$dynlab" train --bag bags/car_nominal --kind physics --steps 20 --physics-windows 400 \
+"$dynlab" train --bag bags/car_nominal --kind physics --physics-windows 400 \
   --out "$out/models/car_physics" | tail -n 1
 
 # car_drag_steering: two library effects at once (drag and a steering offset);
@@ -68,7 +68,7 @@ for effect_bag in car_drag_steering car_steering_gain; do
   [[ -f "$diag/custom_effect.toml" ]] && label="${label:+$label+}custom:$(custom_name_of "$diag/custom_effect.toml")"
 
   step "$effect_bag: add $label and refit"
-  "$dynlab" train --bag "bags/$effect_bag" --kind physics --steps 20 --physics-windows 400 \
+  "$dynlab" train --bag "bags/$effect_bag" --kind physics --physics-windows 400 \
     "${add[@]}" --out "$out/models/car_physics+$effect_bag" | tail -n 1
   "$dynlab" eval-model --model "$out/models/car_physics+$effect_bag" --bag "$out/test/$effect_bag" --steps 50 \
     --json > "$out/eval/after@$effect_bag.json"

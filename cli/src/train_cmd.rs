@@ -34,6 +34,10 @@ pub struct TrainArgs {
     /// residual and node-* 5, otherwise 1; the command prints what it chose).
     #[arg(long)]
     steps: Option<usize>,
+    /// Discount γ in (0, 1] of the multi-step loss: step j weighs γ^(j−1) (default: per world
+    /// and kind, car physics 1, otherwise 0.9; the command prints what it chose).
+    #[arg(long)]
+    gamma: Option<f64>,
     /// Physics effects, comma-separated (physics and hybrid only), e.g. aero_drag,steering_offset.
     #[arg(long, value_delimiter = ',')]
     effects: Vec<String>,
@@ -139,6 +143,10 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     if args.steps.is_none() {
         chosen.push(format!("--steps {}", defaults.steps));
     }
+    // the discount matters only over several steps
+    if args.gamma.is_none() && args.steps.unwrap_or(defaults.steps) > 1 {
+        chosen.push(format!("--gamma {}", defaults.gamma));
+    }
     if args.epochs.is_none() && kind.has_network() {
         chosen.push(format!("--epochs {}", defaults.epochs));
     }
@@ -152,6 +160,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     let mut cfg = TrainConfig {
         kind,
         steps: args.steps.unwrap_or(defaults.steps),
+        gamma: args.gamma.unwrap_or(defaults.gamma),
         epochs: args.epochs.unwrap_or(defaults.epochs),
         seed: args.seed,
         effects: args.effects.clone(),

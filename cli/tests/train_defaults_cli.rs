@@ -1,5 +1,5 @@
-//! `dynlab train` picks rollout steps and epochs per world and kind when they are not given,
-//! says which, and explicit flags win.
+//! `dynlab train` picks rollout steps, discount and epochs per world and kind when they are not
+//! given, says which, and explicit flags win.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -10,7 +10,8 @@ fn bag(name: &str) -> PathBuf {
         .join(name)
 }
 
-/// Trains briefly (`--max-samples`) and returns stderr and the recorded (steps, epochs).
+/// Trains briefly (`--max-samples`) and returns stderr and the recorded (steps, epochs); the
+/// recorded discount is in [`gamma`].
 fn train(bag: &Path, kind: &str, extra: &[&str], out: &Path) -> (String, u64, u64) {
     let o = Command::new(env!("CARGO_BIN_EXE_dynlab"))
         .args(["train", "--bag"])
@@ -32,15 +33,23 @@ fn train(bag: &Path, kind: &str, extra: &[&str], out: &Path) -> (String, u64, u6
     )
 }
 
+/// The discount γ recorded in the model at `out`.
+fn gamma(out: &Path) -> f64 {
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("model.json")).unwrap()).unwrap();
+    m["training"]["config"]["gamma"].as_f64().unwrap()
+}
+
 #[test]
 fn the_car_network_kinds_default_to_the_multi_step_loss_and_say_so() {
     let dir = tempfile::tempdir().unwrap();
     let (err, steps, epochs) = train(&bag("car_nominal"), "residual", &[], &dir.path().join("m"));
     assert!(
-        err.contains("defaults for a car residual model: --steps 5 --epochs 40"),
+        err.contains("defaults for a car residual model: --steps 5 --gamma 0.9 --epochs 40"),
         "{err}"
     );
     assert_eq!((steps, epochs), (5, 40));
+    assert_eq!(gamma(&dir.path().join("m")), 0.9);
 }
 
 #[test]
@@ -49,11 +58,12 @@ fn explicit_flags_win_over_the_defaults() {
     let (err, steps, epochs) = train(
         &bag("car_nominal"),
         "residual",
-        &["--steps", "2", "--epochs", "3"],
+        &["--steps", "2", "--gamma", "0.5", "--epochs", "3"],
         &dir.path().join("m"),
     );
     assert!(!err.contains("defaults for"), "{err}");
     assert_eq!((steps, epochs), (2, 3));
+    assert_eq!(gamma(&dir.path().join("m")), 0.5);
     // one flag given: only the other is a default
     let (err, steps, epochs) = train(
         &bag("car_nominal"),
@@ -62,7 +72,7 @@ fn explicit_flags_win_over_the_defaults() {
         &dir.path().join("m2"),
     );
     assert!(
-        err.contains("defaults for a car residual model: --epochs 40"),
+        err.contains("defaults for a car residual model: --gamma 0.9 --epochs 40"),
         "{err}"
     );
     assert_eq!((steps, epochs), (2, 40));
@@ -80,7 +90,7 @@ fn pushing_keeps_one_step_and_300_epochs() {
 }
 
 #[test]
-fn the_car_physics_model_defaults_to_20_step_rollouts() {
+fn the_car_physics_model_defaults_to_undiscounted_50_step_rollouts() {
     let dir = tempfile::tempdir().unwrap();
     let (err, steps, _) = train(
         &bag("car_nominal"),
@@ -89,8 +99,30 @@ fn the_car_physics_model_defaults_to_20_step_rollouts() {
         &dir.path().join("m"),
     );
     assert!(
-        err.contains("defaults for a car physics model: --steps 20 ("),
+        err.contains("defaults for a car physics model: --steps 50 --gamma 1 ("),
         "{err}"
     );
-    assert_eq!(steps, 20);
+    assert_eq!(steps, 50);
+    assert_eq!(gamma(&dir.path().join("m")), 1.0);
+}
+
+#[test]
+fn a_discount_outside_0_to_1_is_refused_with_its_range() {
+    let dir = tempfile::tempdir().unwrap();
+    for g in ["1.5", "0", "nan"] {
+        let o = Command::new(env!("CARGO_BIN_EXE_dynlab"))
+            .args(["train", "--bag"])
+            .arg(bag("car_nominal"))
+            .args(["--kind", "physics", "--gamma", g, "--out"])
+            .arg(dir.path().join("m"))
+            .output()
+            .expect("run dynlab");
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success(), "--gamma {g} was accepted");
+        assert!(err.contains("the discount must be in (0, 1]"), "{err}");
+        assert!(
+            !dir.path().join("m").exists(),
+            "a model was written for --gamma {g}"
+        );
+    }
 }

@@ -23,9 +23,9 @@
 //! `cargo run --release -p dynlab-diagnose --example open_world -- [--seeds N]
 //! [--first-seed N] [--nominal-seeds N] [--perturb F] [--episodes N] [--duration S]
 //! [--only CASE,CASE] [--noise X] [--fit-iterations N] [--fit-windows N] [--car-refit BOOL]
-//! [--refit-tolerance F] [--train-steps K] [--physics-free a,b]`
+//! [--refit-tolerance F] [--train-steps K] [--train-gamma G] [--physics-free a,b]`
 //! (defaults 5 seeds from 0, 20 nominal seeds, f = 0.1, 4 × 15 s, noise ×2; the baseline is
-//! fitted with `dynlab train`'s defaults, which `--train-steps` and `--physics-free` change; `--only` takes case names as printed, e.g.
+//! fitted with `dynlab train`'s defaults, which `--train-steps`, `--train-gamma` and `--physics-free` change; `--only` takes case names as printed, e.g.
 //! `"aero_drag,none (nominal)"`; `--car-refit true` refits the car's nominal parameters in the
 //! diagnosis, within ±F of the model's values with `--refit-tolerance F`); `VERBOSE=1` prints
 //! every diagnosis.
@@ -233,10 +233,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let defaults = TrainConfig::default();
     let fit_iterations: usize = arg("--fit-iterations", defaults.physics_iterations);
     let fit_windows: usize = arg("--fit-windows", defaults.physics_max_windows);
-    let train_steps: usize = arg(
-        "--train-steps",
-        KindDefaults::for_kind(World::Car, ModelKind::Physics).steps,
-    );
+    let kind_defaults = KindDefaults::for_kind(World::Car, ModelKind::Physics);
+    let train_steps: usize = arg("--train-steps", kind_defaults.steps);
+    let train_gamma: f64 = arg("--train-gamma", kind_defaults.gamma);
     let physics_free: Option<Vec<String>> = opt::<String>("--physics-free")
         .map(|s| s.split(',').map(|x| x.trim().to_string()).collect());
     let verbose = std::env::var("VERBOSE").is_ok();
@@ -314,6 +313,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             let tc = TrainConfig {
                 kind: ModelKind::Physics,
                 steps: train_steps,
+                gamma: train_gamma,
                 seed,
                 physics_iterations: fit_iterations,
                 physics_max_windows: fit_windows,
