@@ -272,7 +272,10 @@ def test_a_battery_running_down_is_a_drift_of_the_drive_force_not_an_effect(fore
     recording's time; the drift check fits the drive force (`C_m1`, `C_m2` scaled together) on
     each sixth of the recording alone and finds it falling drive by drive. (`eval_foreign.py`'s
     `battery_sag*`: before the check nothing was reported, though the error was 2–5 × the
-    nominal drive's.)"""
+    nominal drive's.) A rolling resistance rising over the recording slows the car nearly
+    alike on these drives (the throttle stays within 0.1–0.45); where its line removes as much
+    the check names either and says the data hardly tell the two apart, and the drive force's
+    own line is what is checked."""
     d, model, _ = foreign
     bag = generate(d / "battery", 17, "battery_sag", episodes=4, duration=15)
     out = d / "battery_diagnosis"
@@ -282,14 +285,23 @@ def test_a_battery_running_down_is_a_drift_of_the_drive_force_not_an_effect(fore
     j = json.loads((out / "diagnosis.json").read_text())
     assert j["effects"] == [], proc.stdout
     dr = j["drift"]
-    assert dr["significant"] and dr["quantity"] == "the drive force", proc.stdout
-    assert dr["params"] == ["Cm1", "Cm2"], dr
+    assert dr["significant"], proc.stdout
+    tried = dr["tried"]
+    # the drive force removes the most, or within a point of the named rival, which then says so
+    assert tried["the drive force"] >= max(tried.values()) - 0.01, tried
+    assert tried["the drive force"] >= 0.15 and tried["the tyres' grip"] < 0.05, tried
     # the charge is 1, 0.9, 0.8, 0.7 at the drives' centres, which lie 3/4 of the recording
     # apart: a line that falls by 40 % from the recording's start to its end
-    assert -0.6 < dr["change"] < -0.25, proc.stdout
-    scales = [b[1] for b in dr["blocks"]]
-    assert scales[0] > 0.9 and scales[-1] < 0.8, scales
-    assert dr["error_reduction"] >= 0.15, proc.stdout
-    assert "drift: the drive force (Cm1, Cm2)" in proc.stdout, proc.stdout
+    if dr["quantity"] == "the drive force":
+        assert dr["params"] == ["Cm1", "Cm2"], dr
+        change = dr["change"]
+        scales = [b[1] for b in dr["blocks"]]
+        assert scales[0] > 0.9 and scales[-1] < 0.8, scales
+        assert "drift: the drive force (Cm1, Cm2)" in proc.stdout, proc.stdout
+    else:
+        assert dr["quantity"] == "the rolling resistance" and dr["change"] > 0, dr
+        change = dr["alike"]["the drive force"]
+        assert "the drive force changing by" in proc.stdout and "hardly tell the two apart" in proc.stdout
+    assert -0.65 < change < -0.25, proc.stdout
     html = (out / "diagnosis.html").read_text()
     assert "Did the robot change while it was recorded?" in html and "the line through them" in html
