@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The main job on the bundled bags (bags/): the whole loop of finding the missing physics, for
 # each bag with hidden effects, in a few minutes on 2 cores:
-#   1. baseline: the physics model fitted on the nominal bag (k = 20 open-loop steps);
+#   1. baseline: the physics model fitted on the nominal bag (`train`'s default: 50 open-loop steps);
 #   2. its error on held-out data with the hidden effects, and where it fails (`dynlab compare`);
 #   3. diagnosis (`dynlab diagnose`) on the bag: forward selection over the effect library (every
 #      significant effect, one step at a time, with fitted parameters ± std), then, where the
