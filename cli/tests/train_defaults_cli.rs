@@ -10,9 +10,8 @@ fn bag(name: &str) -> PathBuf {
         .join(name)
 }
 
-/// Trains briefly (`--max-samples`) and returns stderr and the recorded (steps, epochs); the
-/// recorded discount is in [`gamma`].
-fn train(bag: &Path, kind: &str, extra: &[&str], out: &Path) -> (String, u64, u64) {
+/// Trains briefly (`--max-samples`) and returns stderr and the recorded (steps, epochs, γ).
+fn train(bag: &Path, kind: &str, extra: &[&str], out: &Path) -> (String, u64, u64, f64) {
     let o = Command::new(env!("CARGO_BIN_EXE_dynlab"))
         .args(["train", "--bag"])
         .arg(bag)
@@ -30,42 +29,35 @@ fn train(bag: &Path, kind: &str, extra: &[&str], out: &Path) -> (String, u64, u6
         err,
         c["steps"].as_u64().unwrap(),
         c["epochs"].as_u64().unwrap(),
+        c["gamma"].as_f64().unwrap(),
     )
-}
-
-/// The discount γ recorded in the model at `out`.
-fn gamma(out: &Path) -> f64 {
-    let m: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("model.json")).unwrap()).unwrap();
-    m["training"]["config"]["gamma"].as_f64().unwrap()
 }
 
 #[test]
 fn the_car_network_kinds_default_to_the_multi_step_loss_and_say_so() {
     let dir = tempfile::tempdir().unwrap();
-    let (err, steps, epochs) = train(&bag("car_nominal"), "residual", &[], &dir.path().join("m"));
+    let (err, steps, epochs, gamma) =
+        train(&bag("car_nominal"), "residual", &[], &dir.path().join("m"));
     assert!(
         err.contains("defaults for a car residual model: --steps 5 --gamma 0.9 --epochs 40"),
         "{err}"
     );
-    assert_eq!((steps, epochs), (5, 40));
-    assert_eq!(gamma(&dir.path().join("m")), 0.9);
+    assert_eq!((steps, epochs, gamma), (5, 40, 0.9));
 }
 
 #[test]
 fn explicit_flags_win_over_the_defaults() {
     let dir = tempfile::tempdir().unwrap();
-    let (err, steps, epochs) = train(
+    let (err, steps, epochs, gamma) = train(
         &bag("car_nominal"),
         "residual",
         &["--steps", "2", "--gamma", "0.5", "--epochs", "3"],
         &dir.path().join("m"),
     );
     assert!(!err.contains("defaults for"), "{err}");
-    assert_eq!((steps, epochs), (2, 3));
-    assert_eq!(gamma(&dir.path().join("m")), 0.5);
+    assert_eq!((steps, epochs, gamma), (2, 3, 0.5));
     // one flag given: only the other is a default
-    let (err, steps, epochs) = train(
+    let (err, steps, epochs, _) = train(
         &bag("car_nominal"),
         "residual",
         &["--steps", "2"],
@@ -81,7 +73,8 @@ fn explicit_flags_win_over_the_defaults() {
 #[test]
 fn pushing_keeps_one_step_and_300_epochs() {
     let dir = tempfile::tempdir().unwrap();
-    let (err, steps, epochs) = train(&bag("push_nominal"), "node-rk4", &[], &dir.path().join("m"));
+    let (err, steps, epochs, _) =
+        train(&bag("push_nominal"), "node-rk4", &[], &dir.path().join("m"));
     assert!(
         err.contains("defaults for a push node-rk4 model: --steps 1 --epochs 300"),
         "{err}"
@@ -92,7 +85,7 @@ fn pushing_keeps_one_step_and_300_epochs() {
 #[test]
 fn the_car_physics_model_defaults_to_undiscounted_50_step_rollouts() {
     let dir = tempfile::tempdir().unwrap();
-    let (err, steps, _) = train(
+    let (err, steps, _, gamma) = train(
         &bag("car_nominal"),
         "physics",
         &["--physics-windows", "100"],
@@ -102,8 +95,7 @@ fn the_car_physics_model_defaults_to_undiscounted_50_step_rollouts() {
         err.contains("defaults for a car physics model: --steps 50 --gamma 1 ("),
         "{err}"
     );
-    assert_eq!(steps, 50);
-    assert_eq!(gamma(&dir.path().join("m")), 1.0);
+    assert_eq!((steps, gamma), (50, 1.0));
 }
 
 #[test]
