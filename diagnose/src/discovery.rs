@@ -214,7 +214,7 @@ impl DiscoveryConfig {
     /// The k of a world.
     pub fn steps_for(&self, world: World) -> usize {
         self.steps.unwrap_or(match world {
-            World::Car => 50,
+            World::Car => dynlab_learn::CAR_JUDGED_STEPS,
             World::Push => 3,
         })
     }

@@ -40,5 +40,7 @@ pub use net::{Network, Normalization};
 
 pub use eval::{EvalReport, evaluate};
 pub use file::{ModelFile, load_model, save_model};
-pub use train::{KindDefaults, Loss, Progress, Split, TrainConfig, TrainOutcome, train};
+pub use train::{
+    CAR_JUDGED_STEPS, KindDefaults, Loss, Progress, Split, TrainConfig, TrainOutcome, train,
+};
 pub use world::World;

@@ -167,6 +167,10 @@ impl Default for TrainConfig {
     }
 }
 
+/// Open-loop steps (0.5 s at the car's 10 ms) over which a car model is judged: the
+/// diagnosis's and the term search's windows, and the car physics fit's rollouts.
+pub const CAR_JUDGED_STEPS: usize = 50;
+
 /// Rollout steps, discount and epochs for a world and model kind, for when the user sets none
 /// of them (`dynlab train` without `--steps`/`--gamma`/`--epochs`). Measured on the bundled bags
 /// (learn/README.md, "Defaults per world and kind"): the car's network kinds need the 5-step
@@ -204,7 +208,7 @@ impl KindDefaults {
                 epochs: 40,
             },
             (World::Car, ModelKind::Physics) => Self {
-                steps: 50,
+                steps: CAR_JUDGED_STEPS,
                 gamma: 1.0,
                 epochs: base.epochs,
             },
