@@ -802,20 +802,15 @@ pub(crate) fn fit_physics(
     let started = screen_starts(p, cfg, trajs, &|theta: &[f64]| {
         eval_on(&ws, theta, false).0.iter().map(|r| r * r).sum()
     })?;
-    // rollouts through a spin out of the fit (see `calm_windows`). The windows calm at the
-    // start are the fit's objective. A window calm there can spin at the parameters the fit
-    // reaches, and its Jacobian then stalls Levenberg–Marquardt short of the optimum: the fit
-    // goes on from where it stopped on the windows calm at that point, and keeps whichever
-    // parameters cost least on the objective's windows, until the set of calm windows stays
-    // the same or the iterations are spent.
-    let all = ws;
-    let calm_at = |theta: &[f64]| -> Vec<Window> {
-        let (r, jac) = eval_on(&all, theta, true);
+    // rollouts through a spin out of the fit (see `calm_windows`): sensitivity of each
+    // window's residuals to the free parameters, each column scaled by its parameter's size
+    let calm_at = |ws: &[Window], theta: &[f64]| -> Vec<Window> {
+        let (r, jac) = eval_on(ws, theta, true);
         let rows = k * lr.len();
-        if r.len() != all.len() * rows || jac.len() != r.len() * np {
-            return all.clone();
+        if r.len() != ws.len() * rows || jac.len() != r.len() * np {
+            return ws.to_vec();
         }
-        let sens: Vec<f64> = (0..all.len())
+        let sens: Vec<f64> = (0..ws.len())
             .map(|i| {
                 let mut s = 0.0;
                 for row in i * rows..(i + 1) * rows {
@@ -827,26 +822,15 @@ pub(crate) fn fit_physics(
                 s
             })
             .collect();
-        all.iter()
+        ws.iter()
             .zip(calm_windows(&sens, SENSITIVITY_LIMIT))
             .filter_map(|(w, keep)| keep.then_some(*w))
             .collect()
     };
     let screen = free.iter().any(|&f| f) && k > 1;
-    let objective = if screen {
-        calm_at(p.params())
-    } else {
-        all.clone()
-    };
-    let judge = |theta: &[f64]| -> f64 {
-        let c: f64 = eval_on(&objective, theta, false)
-            .0
-            .iter()
-            .map(|r| r * r)
-            .sum();
-        if c.is_nan() { f64::INFINITY } else { c }
-    };
-    let mut ws = objective.clone();
+    if screen {
+        ws = calm_at(&ws, p.params());
+    }
     let mut res = bounded_least_squares(
         p.params(),
         &lower,
@@ -855,41 +839,12 @@ pub(crate) fn fit_physics(
         cfg.physics_iterations,
         &mut |theta: &[f64], with_j: bool| eval_on(&ws, theta, with_j),
     );
-    let (initial_cost, mut iterations) = (res.initial_cost, res.iterations);
-    let mut best = (res.cost, res.theta.clone());
-    while screen && iterations < cfg.physics_iterations {
-        let calm = calm_at(&res.theta);
-        if calm == ws {
-            break;
-        }
-        ws = calm;
-        let next = bounded_least_squares(
-            &res.theta,
-            &lower,
-            &upper,
-            &free,
-            cfg.physics_iterations - iterations,
-            &mut |theta: &[f64], with_j: bool| eval_on(&ws, theta, with_j),
-        );
-        iterations += next.iterations.max(1);
-        res = next;
-        let c = judge(&res.theta);
-        if c < best.0 {
-            best = (c, res.theta.clone());
-        }
-    }
-    let (cost, theta) = best;
-    // the standard errors from the windows calm at the result
+    // A window calm at the start can spin at the parameters the fit reaches (and stop it
+    // there); its Jacobian would shrink the standard errors to nothing: they come from the
+    // windows calm at the result.
     if screen {
-        ws = calm_at(&theta);
+        ws = calm_at(&ws, &res.theta);
     }
-    let mut res = LsqResult {
-        theta,
-        cost,
-        initial_cost,
-        iterations,
-        ..res
-    };
     // honest standard errors: clustered by trajectory (windows overlap)
     if free.iter().any(|&f| f) {
         let (r, jac) = eval_on(&ws, &res.theta, true);

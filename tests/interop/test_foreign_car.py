@@ -125,11 +125,11 @@ def test_diagnose_names_both_hidden_effects_and_applies_them(foreign):
     assert after["tve"]["tve"] < 0.5 * before["tve"]["tve"], (before["tve"], after["tve"])
 
 
-def test_the_nominal_fit_is_not_stalled_by_a_window_that_spins_at_the_fitted_parameters(foreign):
+def test_the_nominal_fit_s_standard_errors_leave_out_windows_that_spin_at_the_fitted_parameters(foreign):
     """On this car's drive a fit window calm at the datasheet rolls out through a spin at the
-    parameters the 50-step fit reaches; its Jacobian dwarfs the rest and stalled the fit there,
-    with standard errors of 10⁻¹¹ of the values. The fit judges its windows again where it stops
-    and goes on: every fitted parameter has a standard error that says something."""
+    parameters the 50-step fit reaches; its Jacobian dwarfed the rest and shrank the standard
+    errors to 10⁻¹¹ of the values. They come from the windows calm at the result: every fitted
+    parameter has a standard error that says something."""
     _, model, _ = foreign
     m = json.loads((model / "model.json").read_text())
     fitted = {p["name"]: p for p in m["physics"]["params"] if p["std"] > 0}
