@@ -39,7 +39,7 @@ def foreign(tmp_path_factory):
     effects = generate(d / "drag_offset", 12, "aero_drag,steering_offset")
     model = d / "model"
     run("dynlab", "train", "--world", "car", "--kind", "physics", "--bag", nominal, "--out", model,
-        *TOPICS, timeout=900)
+        *TOPICS, timeout=300)
     return d, model, effects
 
 
