@@ -802,15 +802,15 @@ pub(crate) fn fit_physics(
     let started = screen_starts(p, cfg, trajs, &|theta: &[f64]| {
         eval_on(&ws, theta, false).0.iter().map(|r| r * r).sum()
     })?;
-    // rollouts through a spin out of the fit (see `calm_windows`): sensitivity of each
-    // window's residuals to the free parameters, each column scaled by its parameter's size
-    let calm_at = |ws: &[Window], theta: &[f64]| -> Vec<Window> {
-        let (r, jac) = eval_on(ws, theta, true);
-        let rows = k * lr.len();
-        if r.len() != ws.len() * rows || jac.len() != r.len() * np {
-            return ws.to_vec();
+    let rows = k * lr.len();
+    // rollouts through a spin out of the fit (see `calm_windows`): which of the `n` windows
+    // behind residuals `r` and Jacobian `jac` at `theta` are calm, from each window's
+    // sensitivity to the free parameters, each column scaled by its parameter's size
+    let calm = |n: usize, r: &[f64], jac: &[f64], theta: &[f64]| -> Option<Vec<bool>> {
+        if r.len() != n * rows || jac.len() != r.len() * np {
+            return None;
         }
-        let sens: Vec<f64> = (0..ws.len())
+        let sens: Vec<f64> = (0..n)
             .map(|i| {
                 let mut s = 0.0;
                 for row in i * rows..(i + 1) * rows {
@@ -822,14 +822,14 @@ pub(crate) fn fit_physics(
                 s
             })
             .collect();
-        ws.iter()
-            .zip(calm_windows(&sens, SENSITIVITY_LIMIT))
-            .filter_map(|(w, keep)| keep.then_some(*w))
-            .collect()
+        Some(calm_windows(&sens, SENSITIVITY_LIMIT))
     };
     let screen = free.iter().any(|&f| f) && k > 1;
     if screen {
-        ws = calm_at(&ws, p.params());
+        let (r, jac) = eval_on(&ws, p.params(), true);
+        if let Some(keep) = calm(ws.len(), &r, &jac, p.params()) {
+            ws = kept_windows(ws, &keep);
+        }
     }
     let mut res = bounded_least_squares(
         p.params(),
@@ -839,16 +839,23 @@ pub(crate) fn fit_physics(
         cfg.physics_iterations,
         &mut |theta: &[f64], with_j: bool| eval_on(&ws, theta, with_j),
     );
-    // A window calm at the start can spin at the parameters the fit reaches (and stop it
-    // there); its Jacobian would shrink the standard errors to nothing: they come from the
-    // windows calm at the result.
-    if screen {
-        ws = calm_at(&ws, &res.theta);
-    }
-    // honest standard errors: clustered by trajectory (windows overlap)
+    // honest standard errors: clustered by trajectory (windows overlap), from the windows
+    // calm at the result: a window calm at the start can spin at the parameters the fit
+    // reaches (and stop it there), and its Jacobian would shrink them to nothing
     if free.iter().any(|&f| f) {
-        let (r, jac) = eval_on(&ws, &res.theta, true);
-        let rows = k * lr.len();
+        let (mut r, mut jac) = eval_on(&ws, &res.theta, true);
+        let keep = screen
+            .then(|| calm(ws.len(), &r, &jac, &res.theta))
+            .flatten();
+        if let Some(keep) = keep {
+            let kept = |i: &usize| keep[i / rows];
+            r = (0..r.len()).filter(kept).map(|i| r[i]).collect();
+            jac = (0..jac.len() / np)
+                .filter(kept)
+                .flat_map(|i| jac[i * np..(i + 1) * np].iter().copied())
+                .collect();
+            ws = kept_windows(ws, &keep);
+        }
         let cluster: Vec<usize> = ws
             .iter()
             .flat_map(|w| std::iter::repeat_n(w.trajectory, rows))
@@ -868,6 +875,14 @@ pub(crate) fn fit_physics(
         residuals: res.residuals,
         started,
     })
+}
+
+/// The windows whose `keep` is set.
+fn kept_windows(ws: Vec<Window>, keep: &[bool]) -> Vec<Window> {
+    ws.into_iter()
+        .zip(keep)
+        .filter_map(|(w, &k)| k.then_some(w))
+        .collect()
 }
 
 /// Starts every library effect of `p` that `cfg.physics_values` gives no value from the best

@@ -167,7 +167,7 @@ impl Default for TrainConfig {
     }
 }
 
-/// Open-loop steps (0.5 s at the car's 10 ms) over which a car model is judged: the
+/// Open-loop steps (0.5 s at 100 Hz) over which a car model is judged: the
 /// diagnosis's and the term search's windows, and the car physics fit's rollouts.
 pub const CAR_JUDGED_STEPS: usize = 50;
 
