@@ -1541,8 +1541,8 @@ impl<'a> Ctx<'a> {
             let mut res = lsq(fit_w, &th0, free, iterations);
             // standard errors clustered by segment (overlapping windows are correlated), by
             // the jackknife: the sandwich gave a disc's centre ± 5·10⁻⁵ m, and the joint fit on
-            // the same data put it 18 mm away; residual rows are step-major: (step j, window i,
-            // dimension c)
+            // the same data put it 18 mm away; from the windows calm at the result
+            // (`calm_std`); residual rows are step-major: (step j, window i, dimension c)
             let (r, jac) = eval_with(fit_w, free, &res.theta, true);
             let cluster: Vec<usize> = (0..k)
                 .flat_map(|_| {
@@ -1551,7 +1551,18 @@ impl<'a> Ctx<'a> {
                         .flat_map(|w| std::iter::repeat_n(w.trajectory, ds))
                 })
                 .collect();
-            let cs = cluster_jackknife_std(&jac, &r, res.theta.len(), free, &cluster);
+            let np = res.theta.len();
+            let cs = calm_std(
+                &jac,
+                &r,
+                np,
+                free,
+                &cluster,
+                ds,
+                fit_w.len(),
+                regional,
+                cluster_jackknife_std,
+            );
             if cs.iter().all(|v| !v.is_nan()) {
                 res.std = cs;
             }
@@ -3174,17 +3185,35 @@ pub(crate) fn robust_windows(
     if n == 0 || !resid(theta0, &mut r0) {
         return fit_w.to_vec();
     }
-    let np = theta0.len();
     let jac = forward_jacobian(theta0, &r0, step, &|t: &[f64]| {
         let mut r = Vec::new();
         if resid(t, &mut r) { r } else { Vec::new() }
     });
+    fit_w
+        .iter()
+        .zip(calm_mask(&jac, theta0.len(), ds, n, limit, regional))
+        .filter_map(|(w, k)| k.then_some(*w))
+        .collect()
+}
+
+/// Which of `n` windows are calm ([`calm_windows`]), from the Jacobian `jac` (`np` columns)
+/// of their residual rows, step-major `(step, window, dimension)` with `ds` dimensions: each
+/// window's sensitivity `Σ (∂r/∂θ)²` at most `limit` times the median's; of a `regional` fit,
+/// a region's effect, the median of the windows the parameters reach.
+pub(crate) fn calm_mask(
+    jac: &[f64],
+    np: usize,
+    ds: usize,
+    n: usize,
+    limit: f64,
+    regional: bool,
+) -> Vec<bool> {
     let mut sens = vec![0.0; n];
-    for c in 0..np {
-        for row in 0..r0.len() {
-            let d = jac[row * np + c];
-            sens[(row / ds) % n] += d * d;
-        }
+    if n == 0 || np == 0 {
+        return vec![true; n];
+    }
+    for (row, d) in jac.chunks_exact(np).enumerate() {
+        sens[(row / ds) % n] += d.iter().map(|d| d * d).sum::<f64>();
     }
     // a region's parameters barely reach the windows that never cross it: those are kept and
     // left out of the median. With them as the reference every window that crossed the patch
@@ -3193,11 +3222,7 @@ pub(crate) fn robust_windows(
     // little, and keep the median of all (with the quiet windows left out of a servo's
     // reference, spins stayed in its fit and its rate limit came out 4.9 rad/s, truth 3)
     if !regional {
-        return fit_w
-            .iter()
-            .zip(calm_windows(&sens, limit))
-            .filter_map(|(w, k)| k.then_some(*w))
-            .collect();
+        return calm_windows(&sens, limit);
     }
     let top = sens
         .iter()
@@ -3214,11 +3239,46 @@ pub(crate) fn robust_windows(
         .filter_map(|(v, t)| t.then_some(*v))
         .collect();
     let mut calm = calm_windows(&reached, limit).into_iter();
-    fit_w
+    touched
         .iter()
-        .zip(&touched)
-        .filter_map(|(w, &t)| (!t || calm.next().unwrap_or(true)).then_some(*w))
+        .map(|&t| !t || calm.next().unwrap_or(true))
         .collect()
+}
+
+/// A clustered standard-error estimate: `(jac, r, np, free, cluster)` → σ per parameter
+/// (`cluster_std`, `cluster_jackknife_std`).
+pub(crate) type StdEstimate = fn(&[f64], &[f64], usize, &[bool], &[usize]) -> Vec<f64>;
+
+/// Standard errors clustered by `cluster` (one id per residual row, rows step-major as in
+/// [`calm_mask`]) from the windows calm at the fitted parameters ([`calm_mask`] at
+/// [`SENSITIVITY_LIMIT`]), by `estimate` (`cluster_std` or `cluster_jackknife_std`): a window
+/// calm where a fit started can roll out through a spin where it ended, and its Jacobian
+/// dwarfs the rest's — the standard errors shrank to 10⁻⁴ of the values, or, with such windows
+/// in a few clusters, the jackknife's swung to 100 % — so the spinning windows are left out.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn calm_std(
+    jac: &[f64],
+    r: &[f64],
+    np: usize,
+    free: &[bool],
+    cluster: &[usize],
+    ds: usize,
+    n: usize,
+    regional: bool,
+    estimate: StdEstimate,
+) -> Vec<f64> {
+    if r.len() != cluster.len() || jac.len() != r.len() * np || n == 0 {
+        return estimate(jac, r, np, free, cluster);
+    }
+    let keep = calm_mask(jac, np, ds, n, SENSITIVITY_LIMIT, regional);
+    let kept: Vec<usize> = (0..r.len()).filter(|&row| keep[(row / ds) % n]).collect();
+    let r: Vec<f64> = kept.iter().map(|&i| r[i]).collect();
+    let cluster: Vec<usize> = kept.iter().map(|&i| cluster[i]).collect();
+    let jac: Vec<f64> = kept
+        .iter()
+        .flat_map(|&i| jac[i * np..(i + 1) * np].iter().copied())
+        .collect();
+    estimate(&jac, &r, np, free, &cluster)
 }
 
 /// A window whose sensitivity is below this fraction of the largest one is not reached by the
@@ -3874,6 +3934,7 @@ pub(crate) fn g4(v: f64) -> String {
 mod tests {
     use super::*;
     use crate::discovery::normal_quantile;
+    use dynlab_learn::fit::cluster_std;
 
     fn starts(poses: &[[f64; 3]]) -> Vec<StateTrajectory> {
         poses
@@ -4032,6 +4093,41 @@ mod tests {
         let kept = robust_windows(&ws, 1, &[0.5], &|_| 1e-3, &resid, 1e4, false);
         let kept: Vec<usize> = kept.iter().map(|w| w.trajectory).collect();
         assert_eq!(kept, (0..70).collect::<Vec<_>>());
+    }
+
+    /// A one-parameter fit over 40 windows in 8 segments, k = 2, two dimensions: the windows'
+    /// Jacobian rows ~1 and residuals ~0.1, but two windows spin at the result (∂r/∂θ 10⁴,
+    /// residual 1). With them the sandwich's σ falls 40-fold; `calm_std` gives the calm
+    /// windows' σ.
+    #[test]
+    fn standard_errors_come_from_the_windows_calm_at_the_result() {
+        let (n, k, ds) = (40, 2, 2);
+        let spins = |i: usize| i == 7 || i == 23;
+        let (mut jac, mut r, mut cluster) = (Vec::new(), Vec::new(), Vec::new());
+        for j in 0..k {
+            for i in 0..n {
+                for c in 0..ds {
+                    let x = ((i * 7 + j * 3 + c * 5) % 11) as f64;
+                    jac.push(if spins(i) { 1e4 } else { 1.0 + 0.05 * x });
+                    r.push(if spins(i) { 1.0 } else { 0.1 * (x - 5.0) / 5.0 });
+                    cluster.push(i / 5);
+                }
+            }
+        }
+        let calm = |keep: &dyn Fn(usize) -> bool| -> Vec<f64> {
+            let rows: Vec<usize> = (0..r.len()).filter(|&row| keep((row / ds) % n)).collect();
+            let pick = |v: &[f64]| rows.iter().map(|&i| v[i]).collect::<Vec<f64>>();
+            let cl: Vec<usize> = rows.iter().map(|&i| cluster[i]).collect();
+            cluster_std(&pick(&jac), &pick(&r), 1, &[true], &cl)
+        };
+        let honest = calm(&|i| !spins(i))[0];
+        let all = cluster_std(&jac, &r, 1, &[true], &cluster)[0];
+        let got = calm_std(&jac, &r, 1, &[true], &cluster, ds, n, false, cluster_std)[0];
+        assert!(honest > 1e-3 && all < 0.05 * honest, "{honest} {all}");
+        assert!((got - honest).abs() < 1e-12 * honest, "{got} {honest}");
+        // as a region's fit: the windows the parameter does not reach stay, the spins go
+        let got = calm_std(&jac, &r, 1, &[true], &cluster, ds, n, true, cluster_std)[0];
+        assert!((got - honest).abs() < 1e-12 * honest, "{got} {honest}");
     }
 
     #[test]

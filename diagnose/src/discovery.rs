@@ -86,8 +86,8 @@ use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
 use crate::diagnosis::{
-    CrossFit, SplitFailure, WindowSplit, bootstrap_lower, errors_in_blocks, robust_windows,
-    split_windows,
+    CrossFit, SplitFailure, WindowSplit, bootstrap_lower, calm_std, errors_in_blocks,
+    robust_windows, split_windows,
 };
 use crate::report::{Chart, LineChart, Series, escape};
 
@@ -1873,7 +1873,17 @@ fn fit_effect(
             })
             .collect();
         let std = if r.len() == cluster.len() {
-            cluster_std(&jac, &r, nt, &free, &cluster)
+            calm_std(
+                &jac,
+                &r,
+                nt,
+                &free,
+                &cluster,
+                ctx.ds,
+                ws.len(),
+                local,
+                cluster_std,
+            )
         } else {
             vec![f64::NAN; nt]
         };
