@@ -112,6 +112,12 @@ def test_diagnose_names_both_hidden_effects_and_applies_them(foreign):
     if "steering_offset" in named:
         assert abs(params["steering_offset.delta0"] - 0.03) < 0.02, params
     assert j["joint"]["reduction_vs_model"] > 0.1, j["joint"]
+    # every strength with a standard error that says something: from the fit windows calm at
+    # the fitted parameters (with the windows the fit carried into a spin, this drive's joint
+    # fit gave c ± 480 % and δ₀ ± 150 %, the offset's step ± 420 %)
+    for name, v in params.items():
+        s = j["joint"]["param_std"][name]
+        assert 1e-3 < s / abs(v) < 0.5, (name, v, s)
     assert_no_drift(j)
     assert not any(t["significant"] for t in j["discovery"]["terms"]), j["discovery"]["summary"]
     # the train command it ran names the world (the topics do not tell it)
