@@ -1551,11 +1551,10 @@ impl<'a> Ctx<'a> {
                         .flat_map(|w| std::iter::repeat_n(w.trajectory, ds))
                 })
                 .collect();
-            let np = res.theta.len();
             let cs = calm_std(
                 &jac,
                 &r,
-                np,
+                res.theta.len(),
                 free,
                 &cluster,
                 ds,
@@ -3208,10 +3207,10 @@ pub(crate) fn calm_mask(
     limit: f64,
     regional: bool,
 ) -> Vec<bool> {
-    let mut sens = vec![0.0; n];
     if n == 0 || np == 0 {
         return vec![true; n];
     }
+    let mut sens = vec![0.0; n];
     for (row, d) in jac.chunks_exact(np).enumerate() {
         sens[(row / ds) % n] += d.iter().map(|d| d * d).sum::<f64>();
     }
