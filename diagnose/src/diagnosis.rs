@@ -88,7 +88,7 @@ use dynlab_learn::dynamics::physics::{
 };
 use dynlab_learn::fit::{
     SENSITIVITY_LIMIT, bounded_least_squares, calm_windows, cluster_jackknife_std,
-    forward_jacobian, initial_states_after,
+    forward_jacobian, initial_states_after, kept_rows,
 };
 use dynlab_learn::train::{segment, segment_origins};
 use dynlab_learn::{Dataset, LearnError, Model, World};
@@ -3270,12 +3270,11 @@ pub(crate) fn calm_std(
         return estimate(jac, r, np, free, cluster);
     }
     let keep = calm_mask(jac, np, ds, n, SENSITIVITY_LIMIT, regional);
-    let kept: Vec<usize> = (0..r.len()).filter(|&row| keep[(row / ds) % n]).collect();
-    let r: Vec<f64> = kept.iter().map(|&i| r[i]).collect();
-    let cluster: Vec<usize> = kept.iter().map(|&i| cluster[i]).collect();
-    let jac: Vec<f64> = kept
-        .iter()
-        .flat_map(|&i| jac[i * np..(i + 1) * np].iter().copied())
+    let kept = |row: usize| keep[(row / ds) % n];
+    let (r, jac) = kept_rows(r, jac, np, kept);
+    let cluster: Vec<usize> = (0..cluster.len())
+        .filter(|&i| kept(i))
+        .map(|i| cluster[i])
         .collect();
     estimate(&jac, &r, np, free, &cluster)
 }

@@ -848,12 +848,7 @@ pub(crate) fn fit_physics(
             .then(|| calm(ws.len(), &r, &jac, &res.theta))
             .flatten();
         if let Some(keep) = keep {
-            let kept = |i: &usize| keep[i / rows];
-            r = (0..r.len()).filter(kept).map(|i| r[i]).collect();
-            jac = (0..jac.len() / np)
-                .filter(kept)
-                .flat_map(|i| jac[i * np..(i + 1) * np].iter().copied())
-                .collect();
+            (r, jac) = kept_rows(&r, &jac, np, |row| keep[row / rows]);
             ws = kept_windows(ws, &keep);
         }
         let cluster: Vec<usize> = ws
@@ -875,6 +870,22 @@ pub(crate) fn fit_physics(
         residuals: res.residuals,
         started,
     })
+}
+
+/// The residual rows of `r` for which `keep(row)` holds, with their rows of the Jacobian `jac`
+/// (`np` columns, row-major).
+pub fn kept_rows(
+    r: &[f64],
+    jac: &[f64],
+    np: usize,
+    keep: impl Fn(usize) -> bool,
+) -> (Vec<f64>, Vec<f64>) {
+    let rows: Vec<usize> = (0..r.len()).filter(|&i| keep(i)).collect();
+    let jac = rows
+        .iter()
+        .flat_map(|&i| jac[i * np..(i + 1) * np].iter().copied())
+        .collect();
+    (rows.iter().map(|&i| r[i]).collect(), jac)
 }
 
 /// The windows whose `keep` is set.
