@@ -188,6 +188,11 @@ pub fn run(args: DiagnoseArgs) -> anyhow::Result<()> {
     }
     if let Some(f) = &custom {
         train.extend(["--effects-file".into(), f.display().to_string()]);
+        // from the nominal parameters the term search refitted with its terms (a grip term's
+        // friction-ellipse weight)
+        for (name, v) in d.discovery.iter().flat_map(|x| &x.nominal) {
+            train.extend(["--set".into(), format!("{name}={v}")]);
+        }
     }
     let src = &args.source;
     for (flag, v) in [

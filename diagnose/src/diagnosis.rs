@@ -1072,7 +1072,7 @@ const SCREENED_DISCS: usize = 4;
 /// against 45 %). Where the fit half hardly tells the weight it wanders: on a simulated car
 /// with the full ellipse a right disc with the weight at 0.27 was 0.4 % lower on the fit's
 /// windows and 0.5 % over all than at 1, and removed nothing held out, at 1 83 %.
-const COUPLED_MIN_GAIN: f64 = 0.02;
+pub(crate) const COUPLED_MIN_GAIN: f64 = 0.02;
 
 /// Iterations of a probe: a patch's parameters alone fitted from one of its starts, the rest
 /// held, before the best two probes are refitted with everything. Ranked at their starts, the
@@ -1804,8 +1804,18 @@ impl<'a> Ctx<'a> {
         let shapes: Vec<(Feature, f64)> = if e == Effect::GripPatch {
             let p = |n: &str| f.effect_param(e, n);
             let coefficient = p("k") - 1.0;
+            // at the disc's coupled nominal parameters (its friction-ellipse weight): the
+            // strip's term takes them too
+            let mut physics = cur.physics.clone();
+            let mut values = physics.params().to_vec();
+            for n in e.coupled_nominal() {
+                if let (Some(i), Some(j)) = (physics.param_index(n), f.physics.param_index(n)) {
+                    values[i] = f.physics.params()[j];
+                }
+            }
+            physics.set_params(&values)?;
             strip_through(
-                &cur.physics,
+                &physics,
                 &solver,
                 time,
                 self.d.trajs,
@@ -2768,10 +2778,20 @@ pub fn diagnose(
                             .map(|d| d.equation.clone())
                     })
                     .collect();
+                let rest_terms =
+                    CustomEffect::new(terms.name(), others).map_err(ModelError::from)?;
                 let mut rest = cur.physics.without_effects(&[e])?;
-                rest.add_custom(
-                    CustomEffect::new(terms.name(), others).map_err(ModelError::from)?,
-                )?;
+                // with the nominal parameters the term search refitted with its terms
+                if let Some(d) = &discovery {
+                    let mut p = rest.params().to_vec();
+                    for n in rest_terms.coupled_nominal() {
+                        if let (Some(i), Some(v)) = (rest.param_index(n), d.nominal.get(*n)) {
+                            p[i] = *v;
+                        }
+                    }
+                    rest.set_params(&p)?;
+                }
+                rest.add_custom(rest_terms)?;
                 let rest = ctx.step_model(&Current::unscored(rest))?;
                 looks.forget_models();
                 if let Some((mut c, _)) = ctx.candidate(&rest, e, 1, &looks)?

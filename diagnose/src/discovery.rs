@@ -65,6 +65,7 @@
 //! residual against the term's feature (the plot that shows it), and the TOML text of the
 //! custom effect to pass to `dynlab train --effects-file`.
 
+use std::collections::BTreeMap;
 use std::fmt::Write as _;
 
 use dynlab_learn::dynamics::conventions::wrap_angle;
@@ -86,8 +87,8 @@ use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
 use crate::diagnosis::{
-    CrossFit, SplitFailure, WindowSplit, bootstrap_lower, calm_std, errors_in_blocks,
-    robust_windows, split_windows,
+    COUPLED_MIN_GAIN, CrossFit, SplitFailure, WindowSplit, bootstrap_lower, calm_std,
+    errors_in_blocks, robust_windows, split_windows,
 };
 use crate::report::{Chart, LineChart, Series, escape};
 
@@ -376,6 +377,11 @@ pub struct Discovery {
     pub effect: Option<CustomEffect>,
     /// Its TOML text for `dynlab train --effects-file`.
     pub effect_toml: Option<String>,
+    /// The nominal parameters refitted with the significant terms, where freeing them fitted
+    /// the fit half better ([`CustomEffect::coupled_nominal`]: a grip term's friction-ellipse
+    /// weight `ellipse`); `dynlab train` starts from them (`--set`).
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub nominal: BTreeMap<String, f64>,
     /// One sentence.
     pub summary: String,
     /// Settings.
@@ -1444,8 +1450,11 @@ pub fn discover_terms_split(
         }
         nm
     };
-    let with_terms = |terms: Vec<CustomTerm>| -> Result<PhysicsModel, DiscoveryError> {
-        let mut m = physics.clone();
+    // the model with `terms` and the coupled nominal parameters' values `nominal`
+    let with_terms = |terms: Vec<CustomTerm>,
+                      nominal: &[(usize, f64)]|
+     -> Result<PhysicsModel, DiscoveryError> {
+        let mut m = with_nominal(physics, nominal)?;
         if !terms.is_empty() {
             let e = CustomEffect::new(&name, terms)
                 .map_err(|e| DiscoveryError::Physics(ModelError::Custom(e)))?;
@@ -1457,7 +1466,9 @@ pub fn discover_terms_split(
     let mut accepted_idx: Vec<usize> = Vec::new();
     let mut used: Vec<usize> = Vec::new();
     let mut prev_test = base_test.clone();
-    let mut final_fit: Option<(CustomEffect, Vec<f64>, Vec<f64>)> = None;
+    // the accepted terms' coupled nominal parameters (a grip term's ellipse weight)
+    let mut accepted_nominal: Nominal = Vec::new();
+    let mut final_fit: Option<(CustomEffect, EffectFit)> = None;
     let mut out_terms: Vec<DiscoveredTerm> = Vec::new();
     // the fit half's windows scored in a second look (spins left out as on the held-out half)
     // and the model's errors there
@@ -1467,9 +1478,42 @@ pub fn discover_terms_split(
     // the fit half of `bags/car_steering_gain` better than `tanh(α_f/α₀)` and removed half as
     // much of the held-out error (21 % against 39 %)
     for round in 0..cfg.max_terms {
-        let base_m = with_terms(accepted.clone())?;
+        let base_m = with_terms(accepted.clone(), &accepted_nominal)?;
         let mut r0 = Vec::new();
         ctx.errors(&base_m, fit_w, Some(&mut r0));
+        // a term with coupled nominal parameters (a grip term: the ellipse weight) is also
+        // scored with each of them at each end of its range, for what it adds there beyond
+        // what that change alone does: at a weight the car does not have, the right strip
+        // scored below a bump that removed nothing held out. (parameter, the nominal values
+        // with it there, the residuals of the accepted terms there)
+        let mut alternatives: Vec<(usize, Nominal, Vec<f64>)> = Vec::new();
+        let mut coupled: Vec<&str> = picks
+            .iter()
+            .flat_map(|p| p.target.coupled_nominal().iter().copied())
+            .collect();
+        coupled.sort_unstable();
+        coupled.dedup();
+        let specs = physics.param_specs();
+        for i in coupled.iter().filter_map(|n| physics.param_index(n)) {
+            for b in [specs[i].1.lower, specs[i].1.upper] {
+                if b != base_m.params()[i] {
+                    let mut nominal: Nominal = accepted_nominal
+                        .iter()
+                        .copied()
+                        .filter(|x| x.0 != i)
+                        .collect();
+                    nominal.push((i, b));
+                    let mut r = Vec::new();
+                    ctx.errors(
+                        &with_terms(accepted.clone(), &nominal)?,
+                        fit_w,
+                        Some(&mut r),
+                    );
+                    alternatives.push((i, nominal, r));
+                }
+            }
+        }
+        let cost0: f64 = r0.iter().map(|v| v * v).sum();
         // the screened pair of the given kind with the largest Gauss–Newton gain on the fit
         // half: secant column J = (r(h) − r(0))/h, gain (Jᵀr₀)²/(JᵀJ)
         let best_pick = |positional: bool,
@@ -1489,12 +1533,25 @@ pub fn discover_terms_split(
                 let h = if pick.slope != 0.0 { pick.slope } else { 1.0 };
                 let mut trial = accepted.to_vec();
                 trial.push(bounded_term(pick.target, feats[pick.feature].clone(), h));
-                let m = with_terms(trial)?;
+                let m = with_terms(trial.clone(), &accepted_nominal)?;
                 let mut r1 = Vec::new();
                 ctx.errors(&m, fit_w, Some(&mut r1));
-                let Some(gain) = secant_gain(&r0, &r1, h) else {
+                let Some(mut gain) = secant_gain(&r0, &r1, h) else {
                     continue;
                 };
+                let own = pick.target.coupled_nominal();
+                for (i, nominal, ra) in &alternatives {
+                    if !own.iter().any(|n| physics.param_index(n) == Some(*i)) {
+                        continue;
+                    }
+                    let mut r1 = Vec::new();
+                    ctx.errors(&with_terms(trial.clone(), nominal)?, fit_w, Some(&mut r1));
+                    if let Some(g) = secant_gain(ra, &r1, h) {
+                        // (never more than the change alone and the term together)
+                        let alone = cost0 - ra.iter().map(|v| v * v).sum::<f64>();
+                        gain = gain.max(g.min(g + alone));
+                    }
+                }
                 if gain > best.map_or(0.0, |b| b.0) {
                     best = Some((gain, pi));
                 }
@@ -1517,17 +1574,31 @@ pub fn discover_terms_split(
             trial.push(bounded_term(pick.target, feature.clone(), pick.slope));
             let effect = CustomEffect::new(&name, trial)
                 .map_err(|e| DiscoveryError::Physics(ModelError::Custom(e)))?;
-            let (theta, std) = fit_effect(physics, &effect, &ctx, fit_w, cfg.iterations)?;
-            let fitted = effect.with_coefficients(&theta);
-            let mut m = physics.clone();
-            m.add_custom(fitted.clone())?;
+            let fit = fit_effect(physics, &effect, &ctx, fit_w, cfg.iterations)?;
+            let (theta, std) = (&fit.theta, &fit.std);
+            let fitted = effect.with_coefficients(theta);
+            let m = fit.model(physics, &effect)?;
             let test = ctx.errors(&m, test_w, None);
+            // with coupled nominal parameters freed, the term counts for what it adds to their
+            // change alone, where that alone predicts the held-out half better
+            let before_test = match fit.alone.is_empty() {
+                true => prev_test.clone(),
+                false => {
+                    let alone_m = with_terms(accepted.clone(), &fit.alone)?;
+                    let alone = ctx.errors(&alone_m, test_w, None);
+                    if sum(&alone) < sum(&prev_test) {
+                        alone
+                    } else {
+                        prev_test.clone()
+                    }
+                }
+            };
             let e_new = sum(&test);
-            let e_prev = sum(&prev_test);
+            let e_prev = sum(&before_test);
             let reduction = if e0 > 0.0 { (e_prev - e_new) / e0 } else { 0.0 };
             let lower = bootstrap_lower(
                 test_w,
-                &prev_test,
+                &before_test,
                 &test,
                 cfg.bootstrap,
                 alpha,
@@ -1560,26 +1631,34 @@ pub fn discover_terms_split(
                     let e = ctx.errors(physics, &ws, None);
                     (ws, e)
                 });
-                // the terms' coefficients refitted on the held-out half
-                let on_held_out = |terms: Vec<CustomTerm>| -> Result<PhysicsModel, DiscoveryError> {
-                    if terms.is_empty() {
-                        return with_terms(terms);
-                    }
-                    let e = CustomEffect::new(&name, terms)
-                        .map_err(|e| DiscoveryError::Physics(ModelError::Custom(e)))?;
-                    let (th, _) = fit_effect(physics, &e, &ctx, test_w, cfg.iterations)?;
-                    with_terms(e.with_coefficients(&th).terms().to_vec())
-                };
-                let before_m = on_held_out(accepted.clone())?;
-                let after_m = on_held_out(effect.terms().to_vec())?;
+                // the terms' coefficients refitted on the held-out half (the model, and the
+                // coupled nominal parameters' change alone where the fit freed them)
+                let on_held_out =
+                    |terms: Vec<CustomTerm>| -> Result<(PhysicsModel, Nominal), DiscoveryError> {
+                        if terms.is_empty() {
+                            return Ok((with_terms(terms, &[])?, Vec::new()));
+                        }
+                        let e = CustomEffect::new(&name, terms)
+                            .map_err(|e| DiscoveryError::Physics(ModelError::Custom(e)))?;
+                        let f = fit_effect(physics, &e, &ctx, test_w, cfg.iterations)?;
+                        Ok((f.model(physics, &e)?, f.alone))
+                    };
+                let (before_m, _) = on_held_out(accepted.clone())?;
+                let (after_m, alone) = on_held_out(effect.terms().to_vec())?;
                 let coefficient = after_m
                     .custom_effects()
                     .last()
                     .map(|c| c.terms()[j].coefficient);
-                let b2 = ctx.errors(&before_m, fit_s, None);
+                let mut b2 = ctx.errors(&before_m, fit_s, None);
+                if !alone.is_empty() {
+                    let a = ctx.errors(&with_terms(accepted.clone(), &alone)?, fit_s, None);
+                    if sum(&a) < sum(&b2) {
+                        b2 = a;
+                    }
+                }
                 let a2 = ctx.errors(&after_m, fit_s, None);
                 let ws: Vec<Window> = test_w.iter().chain(fit_s.iter()).copied().collect();
-                let before: Vec<f64> = prev_test.iter().chain(&b2).copied().collect();
+                let before: Vec<f64> = before_test.iter().chain(&b2).copied().collect();
                 let after: Vec<f64> = test.iter().chain(&a2).copied().collect();
                 let e0_both = e0 + sum(base_fit);
                 let mut segs: Vec<usize> = ws.iter().map(|w| w.trajectory).collect();
@@ -1661,7 +1740,8 @@ pub fn discover_terms_split(
             accepted = fitted.terms().to_vec();
             accepted_idx.push(out_terms.len() - 1);
             prev_test = test;
-            final_fit = Some((fitted, theta, std));
+            accepted_nominal = fit.nominal.clone();
+            final_fit = Some((fitted, fit));
             added = true;
             break;
         }
@@ -1670,7 +1750,7 @@ pub fn discover_terms_split(
         }
     }
     // accepted terms report the coefficients of the final fit
-    if let Some((eff, theta, std)) = &final_fit {
+    if let Some((eff, EffectFit { theta, std, .. })) = &final_fit {
         for (q, &i) in accepted_idx.iter().enumerate() {
             let t = &mut out_terms[i];
             t.coefficient = theta[q];
@@ -1682,7 +1762,7 @@ pub fn discover_terms_split(
     let m_test = test_w.len().max(1) as f64;
     let error_reduction = if e0 > 0.0 { 1.0 - e_after / e0 } else { 0.0 };
     let summary = match &final_fit {
-        Some((eff, _, _)) => format!(
+        Some((eff, _)) => format!(
             "found {} term{} outside the effect library removing {:.0} % of the held-out {k}-step error: {}",
             eff.terms().len(),
             if eff.terms().len() == 1 { "" } else { "s" },
@@ -1717,6 +1797,13 @@ pub fn discover_terms_split(
         error_after: e_after / m_test,
         error_reduction,
         effect_toml: final_fit.as_ref().map(|f| f.0.to_toml()),
+        nominal: {
+            let names = physics.param_names();
+            accepted_nominal
+                .iter()
+                .map(|&(i, v)| (names[i].clone(), v))
+                .collect()
+        },
         effect: final_fit.map(|f| f.0),
         terms: out_terms,
         summary,
@@ -1790,6 +1877,51 @@ fn bounded_term(target: Target, feature: Feature, coefficient: f64) -> CustomTer
     t
 }
 
+/// Values of nominal parameters: `(index among the model's parameters, value)`.
+type Nominal = Vec<(usize, f64)>;
+
+/// A custom effect's fit ([`fit_effect`]): its coefficients with their standard errors, and its
+/// coupled nominal parameters ([`CustomEffect::coupled_nominal`]) where freeing them fitted
+/// better (`(index among the model's parameters, value)`; empty where they are held).
+struct EffectFit {
+    theta: Vec<f64>,
+    std: Vec<f64>,
+    nominal: Nominal,
+    /// Where they are freed: they fitted alone, the effect's last term at 0 and the others at
+    /// their starts (what the change of the nominal parameters does without the new term).
+    alone: Nominal,
+}
+
+impl EffectFit {
+    /// `physics` with the coupled nominal parameters' values and `effect` at the fitted
+    /// coefficients.
+    fn model(
+        &self,
+        physics: &PhysicsModel,
+        effect: &CustomEffect,
+    ) -> Result<PhysicsModel, DiscoveryError> {
+        let mut m = with_nominal(physics, &self.nominal)?;
+        m.add_custom(effect.with_coefficients(&self.theta))?;
+        Ok(m)
+    }
+}
+
+/// `physics` with the nominal parameters `values` (`(index, value)`).
+fn with_nominal(
+    physics: &PhysicsModel,
+    values: &[(usize, f64)],
+) -> Result<PhysicsModel, DiscoveryError> {
+    let mut m = physics.clone();
+    if !values.is_empty() {
+        let mut p = m.params().to_vec();
+        for &(i, v) in values {
+            p[i] = v;
+        }
+        m.set_params(&p)?;
+    }
+    Ok(m)
+}
+
 /// Fits the coefficients of `effect` (added to `physics`) on the fit windows' k-step error;
 /// returns them with standard errors clustered by trajectory.
 ///
@@ -1800,21 +1932,35 @@ fn bounded_term(target: Target, feature: Feature, coefficient: f64) -> CustomTer
 /// independent generator's yaw-damped car 3 of 593 windows held 99.98 % of it, and the
 /// clustered σ came out 0.0002 on a coefficient of −4: one segment decided both the
 /// coefficient and its spread).
+///
+/// The effect's coupled nominal parameters (a grip term's friction-ellipse weight) are then
+/// fitted with the coefficients, from the start among the model's values and each end of
+/// their range that fits best, and kept where they lower the error over all the fit windows
+/// by `COUPLED_MIN_GAIN`, as the diagnosis does for a grip patch.
 fn fit_effect(
     physics: &PhysicsModel,
     effect: &CustomEffect,
     ctx: &Ctx,
     fit_w: &[Window],
     iterations: usize,
-) -> Result<(Vec<f64>, Vec<f64>), DiscoveryError> {
+) -> Result<EffectFit, DiscoveryError> {
     let mut with = physics.clone();
     with.add_custom(effect.clone())?;
     let range = with.custom_param_range(effect.name()).unwrap_or(0..0);
     let nt = range.len();
+    let coupled: Vec<usize> = effect
+        .coupled_nominal()
+        .iter()
+        .filter_map(|n| with.param_index(n))
+        .collect();
+    // the parameters fitted: the terms' coefficients, then (when freed) the coupled ones
     let model_of = |th: &[f64]| -> Option<PhysicsModel> {
         let mut m = with.clone();
         let mut p = m.params().to_vec();
-        p[range.clone()].copy_from_slice(th);
+        p[range.clone()].copy_from_slice(&th[..nt]);
+        for (&i, &v) in coupled.iter().zip(&th[nt..]) {
+            p[i] = v;
+        }
         m.set_params(&p).ok().map(|_| m)
     };
     // a region's term, or a command's beyond a level, reaches only the windows that enter
@@ -1840,10 +1986,22 @@ fn fit_effect(
             local,
         )
     };
-    let (lower, upper): (Vec<f64>, Vec<f64>) = effect.terms().iter().map(|t| t.bounds()).unzip();
-    let free = vec![true; nt];
-    // the coefficients fitted from `start` on the windows `ws`, with their σ
-    let fit_on = |ws: &[Window], start: &[f64]| -> (Vec<f64>, Vec<f64>) {
+    let specs = with.param_specs();
+    let (lower, upper): (Vec<f64>, Vec<f64>) = effect
+        .terms()
+        .iter()
+        .map(|t| t.bounds())
+        .chain(
+            coupled
+                .iter()
+                .map(|&i| (specs[i].1.lower, specs[i].1.upper)),
+        )
+        .unzip();
+    // the parameters `free` fitted from `start` (the coefficients, or with the coupled ones) on
+    // the windows `ws`, with the coefficients' σ
+    let fit_on = |ws: &[Window], start: &[f64], free: &[bool]| -> (Vec<f64>, Vec<f64>) {
+        let np = start.len();
+        let (lower, upper) = (&lower[..np], &upper[..np]);
         let nr = (ws.len() * ctx.k * ctx.ds) as f64;
         let resid_of = |th: &[f64]| -> Vec<f64> {
             match model_of(th) {
@@ -1863,8 +2021,7 @@ fn fit_effect(
             let jac = forward_jacobian(th, &r, &|c: usize| 1e-4 * th[c].abs().max(1e-3), &resid_of);
             (r, jac)
         };
-        let theta =
-            bounded_least_squares(start, &lower, &upper, &free, iterations, &mut eval).theta;
+        let theta = bounded_least_squares(start, lower, upper, free, iterations, &mut eval).theta;
         let (r, jac) = eval(&theta, true);
         let cluster: Vec<usize> = (0..ctx.k)
             .flat_map(|_| {
@@ -1872,12 +2029,12 @@ fn fit_effect(
                     .flat_map(|w| std::iter::repeat_n(w.trajectory, ctx.ds))
             })
             .collect();
-        let std = if r.len() == cluster.len() {
+        let mut std = if r.len() == cluster.len() {
             calm_std(
                 &jac,
                 &r,
-                nt,
-                &free,
+                np,
+                free,
                 &cluster,
                 ctx.ds,
                 ws.len(),
@@ -1885,13 +2042,15 @@ fn fit_effect(
                 cluster_std,
             )
         } else {
-            vec![f64::NAN; nt]
+            vec![f64::NAN; np]
         };
+        std.truncate(nt);
         (theta, std)
     };
     let theta0 = with.params()[range.clone()].to_vec();
+    let all_w = fit_w;
     let mut fit_w = calm(fit_w, &theta0);
-    let mut fitted = fit_on(&fit_w, &theta0);
+    let mut fitted = fit_on(&fit_w, &theta0, &vec![true; nt]);
     // at most this many fits: the windows a refit makes chaotic could go on moving. A region's
     // terms are fitted once: the windows that cross the region are its evidence, and those its
     // fitted strength makes chaotic are the ones where it acts most (refitted without them a
@@ -1905,9 +2064,72 @@ fn fit_effect(
             break;
         }
         fit_w = still;
-        fitted = fit_on(&fit_w, &fitted.0);
+        fitted = fit_on(&fit_w, &fitted.0, &vec![true; nt]);
     }
-    Ok(fitted)
+    let (theta, std) = fitted;
+    let held = EffectFit {
+        theta,
+        std,
+        nominal: Vec::new(),
+        alone: Vec::new(),
+    };
+    if coupled.is_empty() {
+        return Ok(held);
+    }
+    // the coupled parameters freed, from the best of the model's values and each end of their
+    // range (one at a time) with the held fit's coefficients
+    let cost = |th: &[f64]| {
+        model_of(th).map_or(f64::INFINITY, |m| {
+            ctx.errors(&m, all_w, None).iter().sum::<f64>()
+        })
+    };
+    let given: Vec<f64> = coupled.iter().map(|&i| with.params()[i]).collect();
+    let mut starts: Vec<Vec<f64>> = vec![given.clone()];
+    for q in 0..coupled.len() {
+        for b in [lower[nt + q], upper[nt + q]] {
+            if b != given[q] {
+                let mut st = given.clone();
+                st[q] = b;
+                starts.push(st);
+            }
+        }
+    }
+    // the best start with the coefficients `terms`
+    let best_start = |terms: &[f64]| {
+        starts
+            .iter()
+            .map(|c| [terms, c].concat())
+            .map(|th| (cost(&th), th))
+            .min_by(|a, b| a.0.total_cmp(&b.0))
+            .map(|s| s.1)
+            .unwrap_or_default()
+    };
+    let all_free = vec![true; nt + coupled.len()];
+    let (theta, std) = fit_on(&fit_w, &best_start(&held.theta), &all_free);
+    let held_cost = cost(&[held.theta.as_slice(), &given].concat());
+    let lower_enough = cost(&theta) < (1.0 - COUPLED_MIN_GAIN) * held_cost;
+    if !lower_enough {
+        return Ok(held);
+    }
+    let mut without = theta0.clone();
+    if let Some(last) = without.last_mut() {
+        *last = 0.0;
+    }
+    let only_coupled: Vec<bool> = (0..all_free.len()).map(|c| c >= nt).collect();
+    let (alone, _) = fit_on(&fit_w, &best_start(&without), &only_coupled);
+    let values = |th: &[f64]| -> Nominal {
+        coupled
+            .iter()
+            .copied()
+            .zip(th[nt..].iter().copied())
+            .collect()
+    };
+    Ok(EffectFit {
+        theta: theta[..nt].to_vec(),
+        std,
+        nominal: values(&theta),
+        alone: values(&alone),
+    })
 }
 
 /// `∂(v̇ₓ, v̇_y, ω̇)/∂input` of `physics` for the input `target` (`δ`, `μ`) at each state of
@@ -2051,6 +2273,25 @@ impl Discovery {
         }
     }
 
+    /// `"with the terms, the nominal parameters refitted: ellipse = 0 (…)"`, or `None`.
+    pub fn nominal_note(&self) -> Option<String> {
+        (!self.nominal.is_empty()).then(|| {
+            format!(
+                "with the terms, the nominal parameters refitted: {} (the model's value fitted the fit half worse; `dynlab train` starts there: {})",
+                self.nominal
+                    .iter()
+                    .map(|(k, v)| format!("{k} = {}", fmt_num(*v)))
+                    .collect::<Vec<_>>()
+                    .join(", "),
+                self.nominal
+                    .iter()
+                    .map(|(k, v)| format!("--set {k}={v}"))
+                    .collect::<Vec<_>>()
+                    .join(" ")
+            )
+        })
+    }
+
     /// The terminal table: every term tried, its equation, error reduction and significance,
     /// then the summary and (when something was found) the custom effect file to write.
     pub fn table(&self) -> String {
@@ -2093,6 +2334,9 @@ impl Discovery {
             }
         }
         let _ = writeln!(o, "{}", self.summary);
+        if let Some(n) = self.nominal_note() {
+            let _ = writeln!(o, "{n}");
+        }
         if let Some(t) = &self.effect_toml {
             let _ = writeln!(
                 o,
@@ -2127,6 +2371,9 @@ pub fn discovery_html(d: &Discovery) -> String {
         "<p style=\"font-size:1.2em;color:{colour}\"><b>{}</b></p>",
         escape(&d.summary)
     );
+    if let Some(n) = d.nominal_note() {
+        let _ = writeln!(o, "<p>{}</p>", escape(&n));
+    }
     let _ = writeln!(
         o,
         "<p>{} (state, feature) pairs searched on the one-step residual of {} transitions; each selected term refitted on the {}-step error of the fit half and scored on {} held-out segments ({} windows{}). Baseline error {} (normalised: 1 = the error of a model that predicts no motion).</p>",

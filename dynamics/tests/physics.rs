@@ -312,6 +312,18 @@ fn car_fit_freed_non_identifiable_mass() {
     let patch = PhysicsModel::car(&[Effect::GripPatch]).unwrap();
     let i = patch.param_index("ellipse").unwrap();
     assert!(patch.default_free()[i]);
+    // and with a custom effect's grip term (a low-grip strip), not with another term
+    let custom = |state: &str, feature: &str| {
+        let mut m = PhysicsModel::car(&[]).unwrap();
+        let toml = format!(
+            "name = \"c\"\n[[term]]\nstate = \"{state}\"\nfeature = \"{feature}\"\ncoefficient = -0.5\n"
+        );
+        m.add_custom(CustomEffect::from_toml(&toml).unwrap())
+            .unwrap();
+        m.default_free()[i]
+    };
+    assert!(custom("grip", "strip(0.5,0.26,0.8)"));
+    assert!(!custom("omega", "delta*vx"));
     let p = PhysicsModel::pushing(&[]).unwrap();
     let pf = p.default_free();
     // a, c, L, kappa, b: the geometry and the push length are measured, c and κ fitted

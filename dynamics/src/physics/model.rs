@@ -457,7 +457,7 @@ impl PhysicsModel {
     /// [`PUSH_FITTED_PARAMS`](super::PUSH_FITTED_PARAMS)) and every effect parameter except the
     /// width `w` of a patch's smooth edge (a modelling choice, not a physical quantity), and the
     /// nominal parameters an enabled effect is fitted with ([`Effect::coupled_nominal`]: the
-    /// car's `ellipse` with a grip patch). Measured values (mass, inertia, geometry, published
+    /// car's `ellipse` with a grip patch; [`CustomEffect::coupled_nominal`]: with a grip term). Measured values (mass, inertia, geometry, published
     /// drag) stay fixed.
     pub fn default_free(&self) -> Vec<bool> {
         let fitted: &[&str] = match self.robot {
@@ -468,6 +468,10 @@ impl PhysicsModel {
             self.effects()
                 .iter()
                 .any(|e| e.coupled_nominal().contains(&name))
+                || self
+                    .custom_effects()
+                    .iter()
+                    .any(|c| c.coupled_nominal().contains(&name))
         };
         let start = self.custom_start();
         self.param_specs()
