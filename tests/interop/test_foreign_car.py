@@ -28,6 +28,13 @@ def generate(out, seed, effects="", episodes=3, duration=12, car_seed=1):
     return out
 
 
+def diagnose(model, bag, out, *args):
+    """`dynlab diagnose` of `bag` with `model` into `out` (more options in `args`): its output and
+    `diagnosis.json`."""
+    proc = run("dynlab", "diagnose", "--model", model, "--bag", bag, "--out", out, *args, *TOPICS, timeout=900)
+    return proc, json.loads((out / "diagnosis.json").read_text())
+
+
 def assert_no_drift(j):
     """The car stayed the same while it was recorded: the drift check finds nothing."""
     assert j["drift"] is not None and not j["drift"]["significant"], j["drift"]
@@ -99,9 +106,7 @@ def test_the_generators_delay_servo_yaw_damping_slope_and_limits_act_as_document
 def test_diagnose_names_both_hidden_effects_and_applies_them(foreign):
     d, model, bag = foreign
     out = d / "diagnosis"
-    proc = run("dynlab", "diagnose", "--model", model, "--bag", bag, "--out", out,
-               "--effects", "aero_drag,steering_offset,grip_patch", "--apply", *TOPICS, timeout=900)
-    j = json.loads((out / "diagnosis.json").read_text())
+    proc, j = diagnose(model, bag, out, "--effects", "aero_drag,steering_offset,grip_patch", "--apply")
     # what is named is hidden (on this short drive of a car whose geometry is off the datasheet
     # the nominal fit's C_m2 takes much of the drag: the evaluation, launch_scripts/eval_foreign.sh,
     # reports over seeds how often both are named)
@@ -164,9 +169,7 @@ def test_a_yaw_damper_is_a_yaw_term_and_the_drag_it_passed_as_is_dropped(tmp_pat
     run("dynlab", "train", "--world", "car", "--kind", "physics", "--bag", nominal, "--out", model,
         "--steps", 20, "--gamma", 0.9, *TOPICS, timeout=600)
     # (the drag alone among the candidates, for time: with the whole library it is the same)
-    proc = run("dynlab", "diagnose", "--model", model, "--bag", bag, "--out", out, "--seed", "2",
-               "--effects", "aero_drag", *TOPICS, timeout=900)
-    j = json.loads((out / "diagnosis.json").read_text())
+    proc, j = diagnose(model, bag, out, "--seed", "2", "--effects", "aero_drag")
     assert j["effects"] == [] and j["joint"] is None, proc.stdout
     assert_no_drift(j)
     first = j["selection"][0]
@@ -195,9 +198,7 @@ def test_a_sloping_floor_is_a_heading_term(foreign):
     bag = generate(d / "tilt", 14, "floor_tilt")
     out = d / "tilt_diagnosis"
     # (the drag alone among the candidates, for time)
-    proc = run("dynlab", "diagnose", "--model", model, "--bag", bag, "--out", out,
-               "--effects", "aero_drag", *TOPICS, timeout=900)
-    j = json.loads((out / "diagnosis.json").read_text())
+    proc, j = diagnose(model, bag, out, "--effects", "aero_drag")
     assert j["effects"] == [], proc.stdout
     assert_no_drift(j)
     terms = [t for t in j["discovery"]["terms"] if t["significant"]]
@@ -228,9 +229,7 @@ def test_a_drive_force_capped_by_traction_is_a_throttle_limit_term_not_a_drag(fo
     bag = generate(d / "traction", 15, "traction_limit")
     out = d / "traction_diagnosis"
     # (the two effects that take part of it among the candidates, for time)
-    proc = run("dynlab", "diagnose", "--model", model, "--bag", bag, "--out", out,
-               "--effects", "aero_drag,motor_lag", "--apply", *TOPICS, timeout=900)
-    j = json.loads((out / "diagnosis.json").read_text())
+    proc, j = diagnose(model, bag, out, "--effects", "aero_drag,motor_lag", "--apply")
     assert j["effects"] == [], proc.stdout
     assert_no_drift(j)
     terms = [t for t in j["discovery"]["terms"] if t["significant"]]
@@ -278,9 +277,8 @@ def test_a_drag_and_a_slow_motor_refused_alone_for_a_drive_limit_term_are_named_
     d, model = car0
     out = d / "drag_lag_diagnosis"
     # (the two hidden effects alone among the candidates, for time)
-    proc = run("dynlab", "diagnose", "--model", model, "--bag", generate_car0(d / "drag_lag", 18, "aero_drag,motor_lag"),
-               "--out", out, "--effects", "aero_drag,motor_lag", *TOPICS, timeout=900)
-    j = json.loads((out / "diagnosis.json").read_text())
+    proc, j = diagnose(model, generate_car0(d / "drag_lag", 18, "aero_drag,motor_lag"), out,
+                       "--effects", "aero_drag,motor_lag")
     assert set(j["effects"]) == {"aero_drag", "motor_lag"}, proc.stdout
     first = j["selection"][0]
     refused = [c for c in first["candidates"] if c.get("paired")]
@@ -309,9 +307,7 @@ def test_a_low_grip_band_is_a_strip_fitted_with_the_friction_ellipse_weight_and_
     bag = generate_car0(d / "band", 10, "grip_band")
     out = d / "band_diagnosis"
     # (the disc alone among the library's candidates, for time)
-    proc = run("dynlab", "diagnose", "--model", model, "--bag", bag, "--out", out,
-               "--effects", "grip_patch", "--apply", *TOPICS, timeout=900)
-    j = json.loads((out / "diagnosis.json").read_text())
+    proc, j = diagnose(model, bag, out, "--effects", "grip_patch", "--apply")
     assert j["effects"] == [], proc.stdout
     disc = j["discovery"]
     terms = [t for t in disc["terms"] if t["significant"]]
@@ -347,9 +343,7 @@ def test_a_battery_running_down_is_a_drift_of_the_drive_force_not_an_effect(fore
     bag = generate(d / "battery", 17, "battery_sag", episodes=4, duration=15)
     out = d / "battery_diagnosis"
     # (the drag, which a weaker drive resembles, alone among the candidates, for time)
-    proc = run("dynlab", "diagnose", "--model", model, "--bag", bag, "--out", out,
-               "--effects", "aero_drag", *TOPICS, timeout=900)
-    j = json.loads((out / "diagnosis.json").read_text())
+    proc, j = diagnose(model, bag, out, "--effects", "aero_drag")
     assert j["effects"] == [], proc.stdout
     dr = j["drift"]
     assert dr["significant"], proc.stdout
