@@ -1807,13 +1807,11 @@ impl<'a> Ctx<'a> {
             // at the disc's coupled nominal parameters (its friction-ellipse weight): the
             // strip's term takes them too
             let mut physics = cur.physics.clone();
-            let mut values = physics.params().to_vec();
             for n in e.coupled_nominal() {
-                if let (Some(i), Some(j)) = (physics.param_index(n), f.physics.param_index(n)) {
-                    values[i] = f.physics.params()[j];
+                if let Some(j) = f.physics.param_index(n) {
+                    physics.set_param(n, f.physics.params()[j])?;
                 }
             }
-            physics.set_params(&values)?;
             strip_through(
                 &physics,
                 &solver,
@@ -2783,13 +2781,11 @@ pub fn diagnose(
                 let mut rest = cur.physics.without_effects(&[e])?;
                 // with the nominal parameters the term search refitted with its terms
                 if let Some(d) = &discovery {
-                    let mut p = rest.params().to_vec();
                     for n in rest_terms.coupled_nominal() {
-                        if let (Some(i), Some(v)) = (rest.param_index(n), d.nominal.get(*n)) {
-                            p[i] = *v;
+                        if let Some(v) = d.nominal.get(*n) {
+                            rest.set_param(n, *v)?;
                         }
                     }
-                    rest.set_params(&p)?;
                 }
                 rest.add_custom(rest_terms)?;
                 let rest = ctx.step_model(&Current::unscored(rest))?;

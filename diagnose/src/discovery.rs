@@ -1485,34 +1485,40 @@ pub fn discover_terms_split(
         // scored with each of them at each end of its range, for what it adds there beyond
         // what that change alone does: at a weight the car does not have, the right strip
         // scored below a bump that removed nothing held out. (parameter, the nominal values
-        // with it there, the residuals of the accepted terms there)
-        let mut alternatives: Vec<(usize, Nominal, Vec<f64>)> = Vec::new();
-        let mut coupled: Vec<&str> = picks
-            .iter()
-            .flat_map(|p| p.target.coupled_nominal().iter().copied())
-            .collect();
-        coupled.sort_unstable();
-        coupled.dedup();
-        let specs = physics.param_specs();
-        for i in coupled.iter().filter_map(|n| physics.param_index(n)) {
-            for b in [specs[i].1.lower, specs[i].1.upper] {
-                if b != base_m.params()[i] {
-                    let mut nominal: Nominal = accepted_nominal
-                        .iter()
-                        .copied()
-                        .filter(|x| x.0 != i)
-                        .collect();
-                    nominal.push((i, b));
-                    let mut r = Vec::new();
-                    ctx.errors(
-                        &with_terms(accepted.clone(), &nominal)?,
-                        fit_w,
-                        Some(&mut r),
-                    );
-                    alternatives.push((i, nominal, r));
+        // with it there, the residuals of the accepted terms there; made when a region's
+        // terms are first scored, the only ones with such parameters)
+        let alternatives: std::cell::OnceCell<Vec<(usize, Nominal, Vec<f64>)>> =
+            std::cell::OnceCell::new();
+        let make_alternatives = || -> Result<Vec<(usize, Nominal, Vec<f64>)>, DiscoveryError> {
+            let mut coupled: Vec<&str> = picks
+                .iter()
+                .flat_map(|p| p.target.coupled_nominal().iter().copied())
+                .collect();
+            coupled.sort_unstable();
+            coupled.dedup();
+            let specs = physics.param_specs();
+            let mut out = Vec::new();
+            for i in coupled.iter().filter_map(|n| physics.param_index(n)) {
+                for b in [specs[i].1.lower, specs[i].1.upper] {
+                    if b != base_m.params()[i] {
+                        let mut nominal: Nominal = accepted_nominal
+                            .iter()
+                            .copied()
+                            .filter(|x| x.0 != i)
+                            .collect();
+                        nominal.push((i, b));
+                        let mut r = Vec::new();
+                        ctx.errors(
+                            &with_terms(accepted.clone(), &nominal)?,
+                            fit_w,
+                            Some(&mut r),
+                        );
+                        out.push((i, nominal, r));
+                    }
                 }
             }
-        }
+            Ok(out)
+        };
         let cost0: f64 = r0.iter().map(|v| v * v).sum();
         // the screened pair of the given kind with the largest Gauss–Newton gain on the fit
         // half: secant column J = (r(h) − r(0))/h, gain (Jᵀr₀)²/(JᵀJ)
@@ -1540,7 +1546,10 @@ pub fn discover_terms_split(
                     continue;
                 };
                 let own = pick.target.coupled_nominal();
-                for (i, nominal, ra) in &alternatives {
+                if !own.is_empty() && alternatives.get().is_none() {
+                    let _ = alternatives.set(make_alternatives()?);
+                }
+                for (i, nominal, ra) in alternatives.get().into_iter().flatten() {
                     if !own.iter().any(|n| physics.param_index(n) == Some(*i)) {
                         continue;
                     }
