@@ -1,13 +1,14 @@
 //! `dynlab diagnose`: which physical effect of the library explains a model's residual on a bag
 //! (a thin adapter over `dynlab_diagnose::diagnosis`).
 
+use std::collections::BTreeMap;
 use std::path::PathBuf;
 
 use anyhow::Context;
 use clap::{Args, Parser};
 use dynlab_diagnose::diagnosis::{DiagnoseConfig, diagnose, diagnosis_page};
 use dynlab_learn::dynamics::data::SavGol;
-use dynlab_learn::dynamics::physics::PhysicsModel;
+use dynlab_learn::dynamics::physics::{LimitSurface, PhysicsModel};
 use dynlab_learn::{load_bags_with, load_model, pipeline_notes};
 
 /// `dynlab diagnose …`
@@ -151,7 +152,7 @@ pub fn run(args: DiagnoseArgs) -> anyhow::Result<()> {
         }
         None => None,
     };
-    if d.effects.is_empty() && custom.is_none() {
+    if d.effects.is_empty() && custom.is_none() && d.limit_surface.is_none() {
         return Ok(());
     }
     let kind = if model.kind().name() == "hybrid" {
@@ -170,18 +171,41 @@ pub fn run(args: DiagnoseArgs) -> anyhow::Result<()> {
         "--kind".into(),
         kind.into(),
     ]);
-    if !d.effects.is_empty() {
-        train.extend(["--effects".into(), d.effects.join(",")]);
+    // the model's own effects stay, the selected ones follow
+    let effects: Vec<&String> = d.model_effects.iter().chain(&d.effects).collect();
+    if !effects.is_empty() {
+        train.push("--effects".into());
+        train.push(
+            effects
+                .iter()
+                .map(|e| e.as_str())
+                .collect::<Vec<_>>()
+                .join(","),
+        );
     }
-    // the fit starts from the diagnosis's values: from the defaults it may not find them (a
-    // patch elsewhere, a servo's rate limit from its no-limit bound)
-    // and from the nominal parameters refitted with them but not for the baseline (a grip
-    // patch's friction-ellipse weight)
+    // what the model carries beyond train's defaults (its measured nominal values, its own
+    // effects' values, its limit surface), then the diagnosis's values: the fit starts from
+    // them, and from the defaults it may not find them (a patch elsewhere, a servo's rate
+    // limit from its no-limit bound), with the nominal parameters refitted with them but not
+    // for the baseline (a grip patch's friction-ellipse weight)
+    let mut sets: BTreeMap<String, f64> = model.physics().map(carried).unwrap_or_default();
     if let Some(j) = &d.joint {
         let effects = j.params.iter().map(|(k, v)| (k, *v));
         for (name, v) in effects.chain(d.coupled_nominal(&j.nominal_params)) {
-            train.extend(["--set".into(), format!("{name}={v}")]);
+            sets.insert(name.clone(), v);
         }
+    }
+    // the limit surface the diagnosis took, or the model's own
+    let surface = match &d.limit_surface {
+        Some(s) => Some(s.to.clone()),
+        None => model
+            .physics()
+            .map(|p| p.limit_surface())
+            .filter(|s| *s != LimitSurface::default())
+            .map(|s| s.name().to_string()),
+    };
+    if let Some(s) = surface {
+        train.extend(["--limit-surface".into(), s]);
     }
     if let Some(free) = model.physics().and_then(|p| d.train_free(p)) {
         train.extend(["--free".into(), free.join(",")]);
@@ -191,8 +215,11 @@ pub fn run(args: DiagnoseArgs) -> anyhow::Result<()> {
         // from the nominal parameters the term search refitted with its terms (a grip term's
         // friction-ellipse weight)
         for (name, v) in d.discovery.iter().flat_map(|x| &x.nominal) {
-            train.extend(["--set".into(), format!("{name}={v}")]);
+            sets.insert(name.clone(), *v);
         }
+    }
+    for (name, v) in sets {
+        train.extend(["--set".into(), format!("{name}={v}")]);
     }
     let src = &args.source;
     for (flag, v) in [
@@ -230,4 +257,18 @@ struct ApplyTrain {
 #[derive(Debug, clap::Subcommand)]
 enum ApplyCommand {
     Train(crate::train_cmd::TrainArgs),
+}
+
+/// The values `physics` holds that `dynlab train` would not start from: the nominal parameters
+/// a fit holds (measured: a block's size, a car's mass) where they differ from their defaults,
+/// and the parameters of its own effects.
+fn carried(physics: &PhysicsModel) -> BTreeMap<String, f64> {
+    physics
+        .param_specs()
+        .into_iter()
+        .zip(physics.param_names())
+        .zip(physics.params().iter().zip(physics.default_free()))
+        .filter(|(((owner, spec), _), (v, free))| owner.is_some() || (!free && **v != spec.default))
+        .map(|((_, name), (v, _))| (name, *v))
+        .collect()
 }

@@ -2,7 +2,9 @@
 
 use std::fmt::Write as _;
 
-use super::{Candidate, Diagnosis, Drift, coupled_text, cross_fit_text, g4, param_text};
+use super::{
+    Candidate, Diagnosis, Drift, coupled_alone_text, coupled_text, cross_fit_text, g4, param_text,
+};
 
 fn esc(s: &str) -> String {
     s.replace('&', "&amp;")
@@ -211,6 +213,7 @@ fn candidate_table(cands: &[Candidate], added: Option<&str>, d: &Diagnosis) -> S
             })
             .collect();
         params.extend(coupled_text(d, &c.nominal_params).map(|t| esc(&t)));
+        params.extend(c.coupled_alone.map(|r| esc(&coupled_alone_text(r))));
         let bold = if added == Some(c.effect.as_str()) {
             "font-weight:bold;"
         } else {
