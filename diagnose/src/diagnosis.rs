@@ -1126,6 +1126,10 @@ const SCREENED_DISCS: usize = 4;
 /// windows and 0.5 % over all than at 1, and removed nothing held out, at 1 83 %.
 pub(crate) const COUPLED_MIN_GAIN: f64 = 0.02;
 
+/// The share of a step's held-out error an effect removes above which the step does not try
+/// the support points' limit surface ([`SurfaceStep`]): the effect is taken first.
+const SURFACE_AFTER: f64 = 0.5;
+
 /// Iterations of a probe: a patch's parameters alone fitted from one of its starts, the rest
 /// held, before the best two probes are refitted with everything. Ranked at their starts, the
 /// friction patch's true disc came 5th to 18th of 18; after 5 iterations among the best two
@@ -2756,8 +2760,11 @@ pub fn diagnose(
         let best = scored.iter().position(|(c, _)| c.significant);
         let mut candidates: Vec<Candidate> = scored.iter().map(|(c, _)| c.clone()).collect();
         // a pushing model's limit surface, where it counts and removes at least as much as the
-        // best effect
-        if let Some((step, f)) = ctx.surface_step(&cur, selection.len() + 1, lib.len() + 1)?
+        // best effect; tried only where no effect takes half the step's error (the misfit it
+        // mends is what is left after one; a support-points fit costs several ellipsoid ones,
+        // and on the simulator's data, where it is never taken, every step paid for one)
+        if best.is_none_or(|b| scored[b].0.error_reduction < SURFACE_AFTER)
+            && let Some((step, f)) = ctx.surface_step(&cur, selection.len() + 1, lib.len() + 1)?
             && step.error_reduction >= cfg.min_reduction
             && step.ci_lower > 0.0
             && best.is_none_or(|b| step.error_reduction >= scored[b].0.error_reduction)
