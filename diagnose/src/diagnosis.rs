@@ -529,9 +529,10 @@ pub struct SelectionStep {
 /// ellipsoid is a closed-form approximation of how a block's distributed friction resists a
 /// push; on blocks whose friction follows Coulomb's law point by point it misses off-centre
 /// pushes, and effects fitted on it take up that misfit (a pusher friction of 0.013, a
-/// forward push `ẋ_b += 0.0013·ℓ·p²` on nominal data). It is a candidate of every step, taken
-/// where it counts (as an effect: ≥ the smallest reduction, bootstrap bound above 0) and
-/// removes at least as much as the best effect.
+/// forward push `ẋ_b += 0.0013·ℓ·p²` on nominal data). It is tried in every step where no
+/// effect removes half the error ([`SURFACE_AFTER`]) and taken where it counts (as an effect:
+/// ≥ the smallest reduction, bootstrap bound above 0) and removes at least as much as the best
+/// effect.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct SurfaceStep {
     /// The selection step (1 for the first).
