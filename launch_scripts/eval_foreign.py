@@ -74,11 +74,15 @@ PERTURB = 0.1  # --perturb: the true model's parameters (--floor) are the genera
 GENERATOR = []  # extra options of foreign_car.py (--friction-ellipse, --rate, --perturb)
 
 
-def bag(out, car_seed, seed, effects):
+def generated(script, out, *args):
+    """The bag `out` of generator `script` (in this folder) with `args`, made if it is not there."""
     if not out.exists():
-        run(sys.executable, HERE / "foreign_car.py", out, "--car-seed", car_seed, "--seed", seed,
-            "--effects", effects, *GENERATOR)
+        run(sys.executable, HERE / script, out, *args)
     return out
+
+
+def bag(out, car_seed, seed, effects):
+    return generated("foreign_car.py", out, "--car-seed", car_seed, "--seed", seed, "--effects", effects, *GENERATOR)
 
 
 def nominal_model(root, car_seed):

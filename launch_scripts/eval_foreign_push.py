@@ -16,7 +16,7 @@ import sys
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
-from eval_foreign import DYNLAB, HERE, REPO, run
+from eval_foreign import DYNLAB, HERE, REPO, generated, run
 from foreign_push import MU_P, OFFSET, PATCH, TILT, option_error
 
 TOPICS = ["--pose-topic", "/mocap/box/pose", "--cmd-topic", "/pusher/push"]
@@ -42,10 +42,8 @@ GENERATOR = []  # --episodes, --perturb
 
 
 def bag(out, block_seed, seed, effects):
-    if not out.exists():
-        run(sys.executable, HERE / "foreign_push.py", out, "--block-seed", block_seed, "--seed", seed,
-            "--effects", effects, *GENERATOR)
-    return out
+    return generated("foreign_push.py", out, "--block-seed", block_seed, "--seed", seed, "--effects", effects,
+                     *GENERATOR)
 
 
 def nominal_model(root, block_seed):

@@ -2071,15 +2071,7 @@ impl<'a> Ctx<'a> {
             None => self.errors(alone, &self.test_w, None),
         };
         let keep = either_calm(&f.calm, &cur.calm);
-        let kept_mean = |v: &[f64]| {
-            mean(
-                &v.iter()
-                    .zip(&keep)
-                    .filter_map(|(x, k)| k.then_some(*x))
-                    .collect::<Vec<_>>(),
-            )
-        };
-        let (alone, given) = (kept_mean(&test), kept_mean(&cur.test));
+        let (alone, given) = (mean_where(&test, &keep), mean_where(&cur.test, &keep));
         Ok(match alone < given {
             true => (
                 Current {
@@ -3034,15 +3026,8 @@ pub fn diagnose(
             .collect();
         // the same on the windows not both the model as given and the final model spin on
         let keep = either_calm(&given_calm, &cur.calm);
-        let kept_mean = |v: &[f64]| {
-            mean(
-                &v.iter()
-                    .zip(&keep)
-                    .filter_map(|(x, k)| k.then_some(*x))
-                    .collect::<Vec<_>>(),
-            )
-        };
-        let (model_error_calm, error_after_calm) = (kept_mean(&given_test), kept_mean(&cur.test));
+        let (model_error_calm, error_after_calm) =
+            (mean_where(&given_test, &keep), mean_where(&cur.test, &keep));
         JointFit {
             effects: added.iter().map(|e| e.name().to_string()).collect(),
             params: eff.iter().map(|&i| (qualified(i), f.theta[i])).collect(),
@@ -3344,6 +3329,16 @@ fn folds_of(
 /// and a 50 % low-grip disc removed 47 % of the held-out error where it removes more than
 /// half at 100×.
 const EFFECT_FIT_SENSITIVITY_LIMIT: f64 = 1e4;
+
+/// The mean of the values of `v` whose `keep` is set.
+fn mean_where(v: &[f64], keep: &[bool]) -> f64 {
+    mean(
+        &v.iter()
+            .zip(keep)
+            .filter_map(|(x, k)| k.then_some(*x))
+            .collect::<Vec<_>>(),
+    )
+}
 
 /// Per window: calm under at least one of two models (both masks from [`Ctx::calm`]; an empty
 /// mask counts every window calm).
