@@ -39,6 +39,7 @@ for `dynlab train --set a=… --set b=…`.
 """
 import argparse
 import math
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -301,7 +302,11 @@ def main():
             phi = rng.uniform(-math.pi / 2, math.pi / 2)
             ell = rng.uniform(0.0, 1.0)
             msgs.append((t + 0.001, "push", (loc, phi, ell)))
-            pose = push(block, pose, loc, phi, ell, t, rng, record)
+            try:
+                pose = push(block, pose, loc, phi, ell, t, rng, record)
+            except RuntimeError as e:
+                sys.exit(f"foreign_push.py: push (p {loc:.3f}, φ {phi:.3f}, ℓ {ell:.3f}) from pose {pose}: {e}; "
+                         "try another --seed or weaker effects")
             t += PERIOD
         record.append((t, pose.copy()))  # the settled pose after the last push
         for tm, s in record:

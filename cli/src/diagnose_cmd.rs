@@ -172,16 +172,14 @@ pub fn run(args: DiagnoseArgs) -> anyhow::Result<()> {
         kind.into(),
     ]);
     // the model's own effects stay, the selected ones follow
-    let effects: Vec<&String> = d.model_effects.iter().chain(&d.effects).collect();
+    let effects: Vec<&str> = d
+        .model_effects
+        .iter()
+        .chain(&d.effects)
+        .map(String::as_str)
+        .collect();
     if !effects.is_empty() {
-        train.push("--effects".into());
-        train.push(
-            effects
-                .iter()
-                .map(|e| e.as_str())
-                .collect::<Vec<_>>()
-                .join(","),
-        );
+        train.extend(["--effects".into(), effects.join(",")]);
     }
     // what the model carries beyond train's defaults (its measured nominal values, its own
     // effects' values, its limit surface), then the diagnosis's values: the fit starts from
