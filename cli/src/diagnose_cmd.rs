@@ -208,6 +208,17 @@ pub fn run(args: DiagnoseArgs) -> anyhow::Result<()> {
     if let Some(free) = model.physics().and_then(|p| d.train_free(p)) {
         train.extend(["--free".into(), free.join(",")]);
     }
+    // the model's own custom effects at its coefficients (the fit starts from them), then the
+    // discovered one
+    for c in model
+        .physics()
+        .map(|p| p.custom_effects())
+        .unwrap_or_default()
+    {
+        let f = args.out.join(format!("model_effect_{}.toml", c.name()));
+        std::fs::write(&f, c.to_toml()).with_context(|| format!("writing {}", f.display()))?;
+        train.extend(["--effects-file".into(), f.display().to_string()]);
+    }
     if let Some(f) = &custom {
         train.extend(["--effects-file".into(), f.display().to_string()]);
         // from the nominal parameters the term search refitted with its terms (a grip term's

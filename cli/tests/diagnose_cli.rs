@@ -1,11 +1,11 @@
 //! `dynlab diagnose` end to end on a bundled bag with a hidden effect: terminal table,
-//! `diagnosis.json` with the contract keys, `diagnosis.html`; and a clear error for a bag of the
-//! wrong robot.
+//! `diagnosis.json` with the contract keys, `diagnosis.html`; the printed `train` command keeps a
+//! model's custom effect; and a clear error for a bag of the wrong robot.
 
 use std::path::Path;
 use std::process::Command;
 
-use dynlab_learn::dynamics::physics::PhysicsModel;
+use dynlab_learn::dynamics::physics::{CustomEffect, PhysicsModel};
 use dynlab_learn::train::default_physics_solver;
 use dynlab_learn::{Model, ModelKind, World, save_model};
 
@@ -15,17 +15,25 @@ fn repo(p: &str) -> std::path::PathBuf {
 
 /// The world's nominal physics model at its documented values, saved to `dir`.
 fn nominal_model(dir: &Path, world: World) {
-    let (physics, dt) = match world {
-        World::Car => (PhysicsModel::car(&[]), 0.01),
-        World::Push => (PhysicsModel::pushing(&[]), 2.0),
+    save_physics(dir, world, None);
+}
+
+/// The world's nominal physics model, with a custom effect when given, saved to `dir`.
+fn save_physics(dir: &Path, world: World, custom: Option<CustomEffect>) {
+    let (mut physics, dt) = match world {
+        World::Car => (PhysicsModel::car(&[]).unwrap(), 0.01),
+        World::Push => (PhysicsModel::pushing(&[]).unwrap(), 2.0),
     };
+    if let Some(c) = custom {
+        physics.add_custom(c).unwrap();
+    }
     let m = Model::new(
         ModelKind::Physics,
         world,
         dt,
         None,
         None,
-        Some(physics.unwrap()),
+        Some(physics),
         default_physics_solver(world),
     )
     .unwrap();
@@ -76,6 +84,46 @@ fn diagnose_names_the_steering_offset_of_the_bundled_bag_and_writes_json_and_htm
     assert!((set - 0.03).abs() < 0.005, "{line}");
     let html = std::fs::read_to_string(out.join("diagnosis.html")).unwrap();
     assert!(html.contains("<section") && html.contains("steering_offset"));
+}
+
+/// A model trained with `--effects-file` and diagnosed again: the command that adds what the
+/// diagnosis found keeps the model's custom effect, written out at the model's coefficients.
+#[test]
+fn the_train_command_keeps_the_models_custom_effect() {
+    let tmp = tempfile::tempdir().unwrap();
+    let model = tmp.path().join("model");
+    let drag = CustomEffect::from_toml(
+        "name = \"speed_drag\"\n[[term]]\nstate = \"vx\"\nfeature = \"vx*|v|\"\ncoefficient = -1.5e-3\n",
+    )
+    .unwrap();
+    save_physics(&model, World::Car, Some(drag));
+    let out = tmp.path().join("diag");
+    let o = Command::new(env!("CARGO_BIN_EXE_dynlab"))
+        .args(["diagnose", "--model"])
+        .arg(&model)
+        .arg("--bag")
+        .arg(repo("bags/car_steering_offset"))
+        .args(["--effects", "steering_offset", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let line = stdout
+        .lines()
+        .find(|l| l.starts_with("add them: dynlab train"))
+        .unwrap_or_else(|| panic!("{stdout}"));
+    let file = out.join("model_effect_speed_drag.toml");
+    assert!(
+        line.contains("--effects steering_offset")
+            && line.contains(&format!("--effects-file {}", file.display())),
+        "{line}"
+    );
+    let kept = CustomEffect::from_toml(&std::fs::read_to_string(&file).unwrap()).unwrap();
+    assert_eq!(kept.name(), "speed_drag");
+    assert_eq!(kept.terms().len(), 1);
+    assert_eq!(kept.terms()[0].feature.name(), "vx*|v|");
+    assert!((kept.terms()[0].coefficient + 1.5e-3).abs() < 1e-12);
 }
 
 #[test]
