@@ -10,4 +10,6 @@ cargo clippy --workspace --all-targets --locked -- -D warnings
 cargo build --release --workspace --bins --locked
 cargo test --release --workspace --locked
 export DYNLAB_BIN_DIR="${CARGO_TARGET_DIR:-$PWD/target}/release"
-.venv/bin/python -m pytest tests/interop -q
+# two workers: the DDS tests on one, one after another, the diagnosis loops beside them
+# (tests/interop/conftest.py)
+.venv/bin/python -m pytest tests/interop -q -n 2

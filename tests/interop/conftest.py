@@ -12,6 +12,33 @@ import pytest
 
 REPO = pathlib.Path(__file__).resolve().parents[2]
 
+# Modules whose tests talk DDS (or read the session's trained model, `car_nominal_model`): run on
+# two workers (`pytest -n 2`, tests/run.sh) they form one unit of work, on one worker one after
+# another, as two DDS tests at once would see each other's participants. Every other module is a
+# unit of its own (its module fixtures are made once), run beside them.
+SERIAL = {
+    "test_bag_peers", "test_control_checks", "test_dds", "test_launch", "test_model_server",
+    "test_mppi_dds", "test_other_data", "test_racer_dds", "test_ros_citizen", "test_sim_dds",
+    "test_stale_dds",
+}
+
+try:
+    from xdist.scheduler import LoadScopeScheduling
+except ImportError:  # pytest without workers runs every test in turn
+    LoadScopeScheduling = None
+
+if LoadScopeScheduling is not None:
+
+    class SerialDdsScheduling(LoadScopeScheduling):
+        """xdist's per-module scheduling with the `SERIAL` modules as one unit."""
+
+        def _split_scope(self, nodeid):
+            module = nodeid.split("::", 1)[0]
+            return "serial" if pathlib.PurePosixPath(module).stem in SERIAL else module
+
+    def pytest_xdist_make_scheduler(config, log):
+        return SerialDdsScheduling(config, log)
+
 
 def bin_dir() -> pathlib.Path:
     return pathlib.Path(os.environ.get("DYNLAB_BIN_DIR", REPO / "target" / "release"))
