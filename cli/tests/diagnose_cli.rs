@@ -40,23 +40,29 @@ fn save_physics(dir: &Path, world: World, custom: Option<CustomEffect>) {
     save_model(&m, dir, None, serde_json::Map::new()).unwrap();
 }
 
+/// `dynlab diagnose` of `model` on the bundled steering-offset bag with the candidate `effects`
+/// into `out`: its standard output (the run must succeed).
+fn diagnose_offset_bag(model: &Path, effects: &str, out: &Path) -> String {
+    let o = Command::new(env!("CARGO_BIN_EXE_dynlab"))
+        .args(["diagnose", "--model"])
+        .arg(model)
+        .arg("--bag")
+        .arg(repo("bags/car_steering_offset"))
+        .args(["--effects", effects, "--out"])
+        .arg(out)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
 #[test]
 fn diagnose_names_the_steering_offset_of_the_bundled_bag_and_writes_json_and_html() {
     let tmp = tempfile::tempdir().unwrap();
     let model = tmp.path().join("model");
     nominal_model(&model, World::Car);
     let out = tmp.path().join("diag");
-    let o = Command::new(env!("CARGO_BIN_EXE_dynlab"))
-        .args(["diagnose", "--model"])
-        .arg(&model)
-        .arg("--bag")
-        .arg(repo("bags/car_steering_offset"))
-        .args(["--effects", "steering_offset,aero_drag", "--out"])
-        .arg(&out)
-        .output()
-        .unwrap();
-    let stdout = String::from_utf8_lossy(&o.stdout);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let stdout = diagnose_offset_bag(&model, "steering_offset,aero_drag", &out);
     assert!(stdout.contains("verdict: steering_offset"), "{stdout}");
     let j: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("diagnosis.json")).unwrap())
@@ -98,17 +104,7 @@ fn the_train_command_keeps_the_models_custom_effect() {
     .unwrap();
     save_physics(&model, World::Car, Some(drag));
     let out = tmp.path().join("diag");
-    let o = Command::new(env!("CARGO_BIN_EXE_dynlab"))
-        .args(["diagnose", "--model"])
-        .arg(&model)
-        .arg("--bag")
-        .arg(repo("bags/car_steering_offset"))
-        .args(["--effects", "steering_offset", "--out"])
-        .arg(&out)
-        .output()
-        .unwrap();
-    let stdout = String::from_utf8_lossy(&o.stdout);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let stdout = diagnose_offset_bag(&model, "steering_offset", &out);
     let line = stdout
         .lines()
         .find(|l| l.starts_with("add them: dynlab train"))
