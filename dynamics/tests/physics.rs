@@ -411,6 +411,55 @@ fn table_tilt_deflects_a_push_downhill_and_holds_a_block_at_rest() {
     assert_eq!(f, [0.0; 3]);
 }
 
+/// The slope's pull is the same all over a tilted table, the friction that holds a block is not:
+/// a block wholly on a patch of half the friction drifts as on a table twice as steep (off a
+/// tilt the patch changes nothing).
+#[test]
+fn a_block_on_a_patch_of_less_friction_drifts_further_down_a_tilted_table() {
+    let s = [0.5, 0.0, 0.3];
+    let u = [0.2, 0.1, 0.5];
+    let mut on_patch = PhysicsModel::pushing(&[Effect::TableTilt, Effect::FrictionPatch]).unwrap();
+    for (k, v) in [
+        ("cx", 0.5),
+        ("cy", 0.0),
+        ("r", 0.3),
+        ("w", 0.005),
+        ("k", 0.5),
+    ] {
+        on_patch
+            .set_param(&format!("friction_patch.{k}"), v)
+            .unwrap();
+    }
+    let mut steep = PhysicsModel::pushing(&[Effect::TableTilt]).unwrap();
+    let mut level = [0.0; 3];
+    PhysicsModel::pushing(&[])
+        .unwrap()
+        .eval_one(&s, &u, &mut level);
+    for (gx, gy) in [(0.0, 0.1), (-0.08, 0.05)] {
+        on_patch.set_param("table_tilt.gx", gx).unwrap();
+        on_patch.set_param("table_tilt.gy", gy).unwrap();
+        steep.set_param("table_tilt.gx", 2.0 * gx).unwrap();
+        steep.set_param("table_tilt.gy", 2.0 * gy).unwrap();
+        let (mut f, mut g) = ([0.0; 3], [0.0; 3]);
+        on_patch.eval_one(&s, &u, &mut f);
+        steep.eval_one(&s, &u, &mut g);
+        for i in 0..3 {
+            assert!(
+                (f[i] - g[i]).abs() < 1e-6 * (1.0 + g[i].abs()),
+                "{f:?} {g:?}"
+            );
+            assert!((f[i] - level[i]).abs() > 1e-4 || i == 0, "{f:?} {level:?}");
+        }
+    }
+    on_patch.set_param("table_tilt.gx", 0.0).unwrap();
+    on_patch.set_param("table_tilt.gy", 0.0).unwrap();
+    let mut f = [0.0; 3];
+    on_patch.eval_one(&s, &u, &mut f);
+    for i in 0..3 {
+        assert!((f[i] - level[i]).abs() < 1e-6, "{f:?} {level:?}");
+    }
+}
+
 #[test]
 fn a_flat_pusher_is_the_same_pad_turned_by_pi_or_a_quarter_with_its_sides_swapped() {
     let solver = Solver::Rk4 { substeps: 4 };

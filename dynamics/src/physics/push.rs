@@ -49,7 +49,9 @@
 //! * `friction_patch`: a disc of the table where μ is `k` times the table's. The friction is
 //!   per support point (a 5 × 5 grid over the footprint, as in the simulator): a block partly on
 //!   the patch has its centre of friction moved towards the patch, which turns it. A block fully
-//!   on or off the patch moves the same (quasi-static: friction scale does not change motion).
+//!   on or off the patch moves the same (quasi-static: friction scale does not change motion),
+//!   except on a tilted table: the slope's pull is the same everywhere, the friction that holds
+//!   it is not, so `table_tilt`'s `g` is divided by the block's friction limit over the table's.
 //! * `pusher_friction`: sticking inside the motion cone, sliding on its edge (see above).
 //! * `flat_pusher`: the pusher is a flat pad `2·t` thick and `2·w` wide held at the world yaw
 //!   `ψ_f` whatever the block's heading (a gripper kept at one orientation). Turned against the
@@ -298,16 +300,24 @@ pub(crate) fn rhs_line<R: Real>(
     }
     // the support points where the friction model needs them, computed once
     let exact = model.limit_surface() == LimitSurface::SupportPoints;
-    let pts = (exact || com.is_some() || patch.is_some())
+    let support = (exact || com.is_some() || patch.is_some())
         .then(|| support_points([a, b], c, [x, y, th], com, patch));
+    let (pts, friction) = match support {
+        Some((pts, k)) => (Some(pts), k),
+        None => (None, R::cst(1.0)),
+    };
     // centre of friction and limit-surface ratio of the support distribution
     let (ox, oy, c) = match &pts {
         Some(pts) if com.is_some() || patch.is_some() => support_friction(pts),
         _ => (zero, zero, c),
     };
     let (st, ct) = (th.sin(), th.cos());
-    // tilt force in the block frame, normalised by the friction limit
-    let tilt = tilt.map(|(gx, gy)| (ct * gx + st * gy, ct * gy - st * gx));
+    // tilt force in the block frame, normalised by the friction limit: the table's, scaled by
+    // the friction the block stands on (on a patch of less friction the same slope pulls harder)
+    let tilt = tilt.map(|(gx, gy)| {
+        let (gx, gy) = (gx / friction, gy / friction);
+        (ct * gx + st * gy, ct * gy - st * gx)
+    });
     let rel = psi - th;
     let (nd, td) = (rel.cos(), rel.sin());
     if nd.value() <= 1e-6 {
@@ -431,14 +441,15 @@ pub(crate) fn rhs_line<R: Real>(
 /// the simulator's load model), and `μᵢ/μ = 1 + (k − 1)·σ((r − ‖pᵢ − c‖)/w)` on a disc patch
 /// (`friction_patch`). The arms about the weighted centroid are scaled by `c` over the uniform
 /// grid's mean distance from the centre, so that `c` is the limit-surface ratio of the uniform
-/// support.
+/// support. Also returned: the block's friction limit over the table's, `Σ Nᵢμᵢ / (μ Σ Nᵢ)`
+/// (1 off a patch).
 fn support_points<R: Real>(
     [a, b]: [R; 2],
     c: R,
     [x, y, th]: [R; 3],
     com: Option<(R, R)>,
     patch: Option<&[R]>,
-) -> Vec<[R; 3]> {
+) -> (Vec<[R; 3]>, R) {
     let (st, ct) = (th.sin(), th.cos());
     let nn = PATCH_GRID as f64;
     // ⟨x²⟩ of the grid in units of a², ⟨y²⟩ in units of b²
@@ -448,6 +459,7 @@ fn support_points<R: Real>(
         / nn;
     let mut pts = Vec::with_capacity(PATCH_GRID * PATCH_GRID);
     let mut uniform = R::cst(0.0);
+    let mut load = R::cst(0.0);
     for i in 0..PATCH_GRID {
         for j in 0..PATCH_GRID {
             let fx = (i as f64 + 0.5) / nn - 0.5;
@@ -459,6 +471,7 @@ fn support_points<R: Real>(
                 let l = cx_ * fx / (a * m2) + cy_ * fy / (b * m2) + 1.0;
                 wi = if l.value() > 0.0 { l } else { R::cst(0.0) };
             }
+            load = load + wi;
             if let Some(q) = patch {
                 let wx = x + ct * lx - st * ly;
                 let wy = y + st * lx + ct * ly;
@@ -480,7 +493,7 @@ fn support_points<R: Real>(
             p[2] / sw,
         ];
     }
-    pts
+    (pts, sw / load)
 }
 
 /// Centre of friction `(o_x, o_y)` (block frame) and limit-surface ratio of the
