@@ -4,7 +4,10 @@
 //! by at least half; nominal data → no significant effect. The model under diagnosis is the
 //! nominal physics model at its documented values (the simulator's nominal car).
 //!
-//! Data are generated in process (seeded), small but sufficient: 3 episodes of 15 s at 100 Hz.
+//! Data are generated in process (seeded), small but sufficient: 3 episodes of 15 s at 100 Hz
+//! (4 × 30 s for the regional effects). One seed per case: the spread over seeds is measured by
+//! `launch_scripts/eval_diagnose.sh` (our simulator) and `eval_foreign.sh` (an independent
+//! generator), and for the term search by `discovery.rs`.
 
 use dynlab_diagnose::diagnosis::simdata::{
     car_dataset, car_scenario, low_grip_band, nominal_model, over_low_grip_band,
@@ -41,10 +44,16 @@ fn run_episodes(
 ) -> Diagnosis {
     let data = car_dataset(scenario, episodes[0] as u64, episodes[1], data_seed, 2).unwrap();
     let model = nominal_model(World::Car, data.pose_dt_s).unwrap();
+    // fewer windows than the defaults, for time; more on 4 × 30 s (with 250 fit and 1000 scored
+    // windows a grip patch's joint fit removed 44 % of the held-out error)
+    let [fit_windows, score_windows] = match episodes[0] * episodes[1] > 60.0 {
+        true => [400, 1500],
+        false => [250, 1000],
+    };
     let cfg = DiagnoseConfig {
         seed,
-        fit_windows: 400,
-        score_windows: 1500,
+        fit_windows,
+        score_windows,
         bootstrap: 500,
         effects,
         ..DiagnoseConfig::default()
@@ -117,7 +126,7 @@ fn car_command_delay_is_found_and_its_delay_recovered() {
     assert_found(&d, Effect::CommandDelay, "delay", 0.06, 0.015);
 }
 
-/// A disc of radius 0.6 m at (0.5, 0) with half the tire peak force, 4 × 30 s, two seeds. On
+/// A disc of radius 0.6 m at (0.5, 0) with half the tire peak force, 4 × 30 s. On
 /// 3 × 15 s (8 held-out segments) the fitted disc was right (k 0.455 and 0.486, r 0.61) and
 /// removed 86 and 95 % of the held-out error, but only the one or two segments that cross the
 /// patch gained and the bootstrap bound was −52 % and −125 %. (Beside the patch, for time, the
@@ -131,34 +140,27 @@ fn car_grip_patch_is_found() {
         Effect::SteeringOffset,
         Effect::MotorLag,
     ];
-    for seed in [5, 6] {
-        let scenario = car_scenario(Some(Effect::GripPatch), 1.0);
-        let d = run_episodes(
-            &scenario,
-            [4.0, 30.0],
-            300 + seed,
-            seed,
-            Some(effects.clone()),
-        );
-        assert_found(&d, Effect::GripPatch, "k", 0.5, 0.15);
-        let p = &d.candidates[0].params;
-        // the centre within a third of the radius
-        let off = (p["cx"] - 0.5).hypot(p["cy"]);
-        assert!(off < 0.2 && (p["r"] - 0.6).abs() < 0.1, "{}", d.table());
-        // the car has the full friction ellipse: its weight is held at the model's 1 or
-        // refitted near it, never wandered off where the data hardly tell it
-        let ellipse = d.candidates[0].nominal_params.get("ellipse");
-        assert!(ellipse.is_none_or(|w| *w > 0.8), "{}", d.table());
-        // held in the joint fit, training is told to hold it too
-        let model = nominal_model(World::Car, 0.01).unwrap();
-        let free = d.train_free(model.physics().unwrap());
-        let joint = d.joint.as_ref().unwrap();
-        match joint.nominal_params.contains_key("ellipse") {
-            true => assert!(free.is_none(), "{free:?}"),
-            false => {
-                let free = free.unwrap();
-                assert!(free.iter().any(|n| n == "Df") && !free.iter().any(|n| n == "ellipse"));
-            }
+    let seed = 6;
+    let scenario = car_scenario(Some(Effect::GripPatch), 1.0);
+    let d = run_episodes(&scenario, [4.0, 30.0], 300 + seed, seed, Some(effects));
+    assert_found(&d, Effect::GripPatch, "k", 0.5, 0.15);
+    let p = &d.candidates[0].params;
+    // the centre within a third of the radius
+    let off = (p["cx"] - 0.5).hypot(p["cy"]);
+    assert!(off < 0.2 && (p["r"] - 0.6).abs() < 0.1, "{}", d.table());
+    // the car has the full friction ellipse: its weight is held at the model's 1 or
+    // refitted near it, never wandered off where the data hardly tell it
+    let ellipse = d.candidates[0].nominal_params.get("ellipse");
+    assert!(ellipse.is_none_or(|w| *w > 0.8), "{}", d.table());
+    // held in the joint fit, training is told to hold it too
+    let model = nominal_model(World::Car, 0.01).unwrap();
+    let free = d.train_free(model.physics().unwrap());
+    let joint = d.joint.as_ref().unwrap();
+    match joint.nominal_params.contains_key("ellipse") {
+        true => assert!(free.is_none(), "{free:?}"),
+        false => {
+            let free = free.unwrap();
+            assert!(free.iter().any(|n| n == "Df") && !free.iter().any(|n| n == "ellipse"));
         }
     }
 }
@@ -226,28 +228,27 @@ fn a_pair_of_library_effects_is_named_by_forward_selection() {
 #[test]
 fn a_steering_gain_falling_with_speed_gets_no_library_name_and_a_steering_term() {
     // outside the library: the simulator's steering angle times 1/(1 + (vₓ/v₀)²), v₀ = 2 m/s
-    for seed in [8, 9] {
-        let mut scenario = car_scenario(None, 1.0);
-        scenario.effects.steering_gain_speed = Some(dynlab_sim::car::SteeringGainSpeed {
-            enabled: true,
-            v0: 2.0,
-        });
-        let d = run_scenario(&scenario, 320 + seed, seed, None);
-        let table = d.table();
-        assert!(d.effects.is_empty(), "no library effect: {table}");
-        let disc = d.discovery.as_ref().expect("the term search ran");
-        let found: Vec<_> = disc.terms.iter().filter(|t| t.significant).collect();
-        assert!(!found.is_empty(), "{table}");
-        // the steering the tires see shrinks with speed: δ += c·δ·vₓ² (or |v|, vₓ) with c < 0
-        let t = found[0];
-        assert_eq!(t.state, "delta", "{table}");
-        assert!(
-            t.feature.starts_with("delta*") && t.feature.contains('v'),
-            "{table}"
-        );
-        assert!(t.coefficient < 0.0, "{table}");
-        assert!(disc.error_reduction >= 0.4, "{table}");
-    }
+    let seed = 9;
+    let mut scenario = car_scenario(None, 1.0);
+    scenario.effects.steering_gain_speed = Some(dynlab_sim::car::SteeringGainSpeed {
+        enabled: true,
+        v0: 2.0,
+    });
+    let d = run_scenario(&scenario, 320 + seed, seed, None);
+    let table = d.table();
+    assert!(d.effects.is_empty(), "no library effect: {table}");
+    let disc = d.discovery.as_ref().expect("the term search ran");
+    let found: Vec<_> = disc.terms.iter().filter(|t| t.significant).collect();
+    assert!(!found.is_empty(), "{table}");
+    // the steering the tires see shrinks with speed: δ += c·δ·vₓ² (or |v|, vₓ) with c < 0
+    let t = found[0];
+    assert_eq!(t.state, "delta", "{table}");
+    assert!(
+        t.feature.starts_with("delta*") && t.feature.contains('v'),
+        "{table}"
+    );
+    assert!(t.coefficient < 0.0, "{table}");
+    assert!(disc.error_reduction >= 0.4, "{table}");
 }
 
 /// Outside the library: half the grip within 0.4 m of a line at 0.5 rad through (0, 0.3)

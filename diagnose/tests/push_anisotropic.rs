@@ -22,7 +22,7 @@ use dynlab_sim::push::AnisotropicFriction;
 /// significant grain term in 10/10, first on `ℓ·cos φ·cos 2θ`, the `sin 2θ` one second in 8,
 /// every sign the truth's, 43–78 % of the held-out 3-step error removed; the library named
 /// `friction_patch` (a disc of higher friction) beside it in 1/10 (seed 3) until a patch had to
-/// remove more than the best sideways-drift term (the grain's). The test runs three, seed 3
+/// remove more than the best sideways-drift term (the grain's). The test runs two, seed 3
 /// among them.
 const GRAIN: [&str; 2] = ["l*cos_phi*sin_2theta", "l*cos_phi*cos_2theta"];
 
@@ -56,7 +56,7 @@ fn diagnosed(data: &Dataset, seed: u64) -> Diagnosis {
 #[test]
 fn anisotropic_friction_is_found_beyond_the_library() {
     let gamma = 30f64.to_radians();
-    for seed in [1u64, 2, 3] {
+    for seed in [1u64, 3] {
         let d = diagnosed(&data(Some(gamma), seed), seed);
         let table = d.table();
         println!("seed {seed}\n{table}");
@@ -95,19 +95,18 @@ fn anisotropic_friction_is_found_beyond_the_library() {
 /// predicts; that is the model, not a grain.)
 #[test]
 fn nominal_pushing_data_have_no_grain_term() {
-    for seed in [1u64, 2] {
-        let d = diagnosed(&data(None, seed), seed);
-        let table = d.table();
-        println!("nominal seed {seed}\n{table}");
-        assert!(d.effects.is_empty(), "{table}");
-        let disc = d.discovery.as_ref().expect("the term search runs");
-        assert!(
-            disc.terms
-                .iter()
-                .all(|t| !(t.significant && GRAIN.contains(&t.feature.as_str()))),
-            "{table}"
-        );
-    }
+    let seed = 2;
+    let d = diagnosed(&data(None, seed), seed);
+    let table = d.table();
+    println!("nominal seed {seed}\n{table}");
+    assert!(d.effects.is_empty(), "{table}");
+    let disc = d.discovery.as_ref().expect("the term search runs");
+    assert!(
+        disc.terms
+            .iter()
+            .all(|t| !(t.significant && GRAIN.contains(&t.feature.as_str()))),
+        "{table}"
+    );
 }
 
 /// 30 episodes: 15 held-out segments, where the held-out half alone does not bound the grain
