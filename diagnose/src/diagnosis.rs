@@ -1753,28 +1753,10 @@ impl<'a> Ctx<'a> {
             let at = |n: &str| mine.iter().copied().find(|&i| f.names[i] == n);
             if let (Some(x), Some(y)) = (at("ox"), at("oy")) {
                 let arm = 0.5 * tol * self.base.params()[j];
-                let (ox, oy, s_oy) = (f.theta[x], f.theta[y], f.std[y]);
-                // an undetermined σ does not make the lateral part significant
-                let across = s_oy.is_finite() && oy.abs() > 2.0 * s_oy;
-                if ox.abs() <= arm && across && oy.abs() <= arm {
-                    return Some(format!(
-                        "the offset (ox = {} m, oy = {} ± {} m) lies within half the measured depth's ±{:.0} % ({} m) both ways: along the push a depth off its measure moves the contact's arm as much, across it a block width or a pusher's calibration off by as little (block and pusher known better: hold the depth, `--refit c,kappa`)",
-                        g4(ox),
-                        g4(oy),
-                        g4(s_oy),
-                        100.0 * tol,
-                        g4(arm)
-                    ));
-                }
-                if ox.abs() <= arm && !across {
-                    return Some(format!(
-                        "the offset (ox = {} m, oy = {} ± {} m) lies along the push within half the measured depth's ±{:.0} % ({} m): the pusher works one face, where a depth off its measure moves the contact's arm as much (a depth known better: hold it, `--refit c,kappa`)",
-                        g4(ox),
-                        g4(oy),
-                        g4(s_oy),
-                        100.0 * tol,
-                        g4(arm)
-                    ));
+                if let Some(why) =
+                    offset_within_depth_tolerance(f.theta[x], f.theta[y], f.std[y], tol, arm)
+                {
+                    return Some(why);
                 }
             }
         }
@@ -4124,6 +4106,44 @@ pub(crate) fn cross_fit_text(x: &CrossFit) -> String {
     )
 }
 
+/// Why a pushed block's centre-of-mass offset `(ox, oy ± s_oy)` is not a physical explanation,
+/// if it is not: along the push within `arm` (half the measured depth's tolerance `tol`, e.g.
+/// 0.1, of the depth), a depth off its measure moves the contact's arm as much; when the lateral
+/// part is also within `arm`, a block width or a pusher's calibration off by as little stands for
+/// it (see `Ctx::implausible`). A lateral part within 2σ, or whose σ is undetermined, does not
+/// count as one.
+fn offset_within_depth_tolerance(
+    ox: f64,
+    oy: f64,
+    s_oy: f64,
+    tol: f64,
+    arm: f64,
+) -> Option<String> {
+    if ox.abs() > arm {
+        return None;
+    }
+    let across = s_oy.is_finite() && oy.abs() > 2.0 * s_oy;
+    match (across, oy.abs() <= arm) {
+        (true, true) => Some(format!(
+            "the offset (ox = {} m, oy = {} ± {} m) lies within half the measured depth's ±{:.0} % ({} m) both ways: along the push a depth off its measure moves the contact's arm as much, across it a block width or a pusher's calibration off by as little (block and pusher known better: hold the depth, `--refit c,kappa`)",
+            g4(ox),
+            g4(oy),
+            g4(s_oy),
+            100.0 * tol,
+            g4(arm)
+        )),
+        (false, _) => Some(format!(
+            "the offset (ox = {} m, oy = {} ± {} m) lies along the push within half the measured depth's ±{:.0} % ({} m): the pusher works one face, where a depth off its measure moves the contact's arm as much (a depth known better: hold it, `--refit c,kappa`)",
+            g4(ox),
+            g4(oy),
+            g4(s_oy),
+            100.0 * tol,
+            g4(arm)
+        )),
+        (true, false) => None,
+    }
+}
+
 /// 4 significant digits.
 pub(crate) fn g4(v: f64) -> String {
     let a = v.abs();
@@ -4615,5 +4635,31 @@ mod tests {
         after[0] = 1.0;
         let lower = bootstrap_lower(&ws, &before, &after, 2000, 0.02, 7);
         assert!(lower.is_finite(), "bound {lower}");
+    }
+
+    #[test]
+    fn a_com_offset_within_the_depths_tolerance_is_explained_by_the_block_and_pusher() {
+        // the nominal block's depth 0.1 m known to ±10 %: offsets within 5 mm are what it leaves
+        let (tol, arm) = (0.1, 0.5 * 0.1 * 0.1);
+        // both ways within it, the lateral part beyond its 2σ: a width or a pusher off as little
+        let both = offset_within_depth_tolerance(0.0024, 0.0007, 0.0002, tol, arm).unwrap();
+        assert!(
+            both.contains("both ways") && both.contains("±10 %"),
+            "{both}"
+        );
+        // along the push only (the lateral part within 2σ, or its σ undetermined): one face
+        for s_oy in [0.001, f64::NAN] {
+            let along = offset_within_depth_tolerance(-0.004, 0.0007, s_oy, tol, arm).unwrap();
+            assert!(along.contains("along the push") && !along.contains("both ways"));
+        }
+        // beyond the arm along the push, or a clear lateral offset beyond it: an offset
+        assert_eq!(
+            offset_within_depth_tolerance(0.006, 0.0, 0.001, tol, arm),
+            None
+        );
+        assert_eq!(
+            offset_within_depth_tolerance(0.002, -0.008, 0.001, tol, arm),
+            None
+        );
     }
 }
