@@ -64,7 +64,7 @@ pub struct DiagnoseArgs {
 }
 
 pub fn run(args: DiagnoseArgs) -> anyhow::Result<()> {
-    let (model, _meta) = load_model(&args.model, None, None)
+    let (model, meta) = load_model(&args.model, None, None)
         .with_context(|| format!("loading the model {}", args.model.display()))?;
     let opts = args.source.options()?;
     let mut data = load_bags_with(
@@ -229,6 +229,10 @@ pub fn run(args: DiagnoseArgs) -> anyhow::Result<()> {
     }
     for (name, v) in sets {
         train.extend(["--set".into(), format!("{name}={v}")]);
+    }
+    // trained as the model was (its steps, seed, windows, … where not train's defaults)
+    if let Some(t) = &meta.training {
+        train.extend(crate::train_cmd::settings_flags(&t.config, model.world()));
     }
     let src = &args.source;
     for (flag, v) in [

@@ -51,7 +51,7 @@ pub struct TrainArgs {
     #[arg(long, value_delimiter = ',', value_name = "NAMES")]
     free: Option<Vec<String>>,
     /// Physics fit: windows used at most (seeded subsample).
-    #[arg(long, default_value_t = 2000, value_name = "N")]
+    #[arg(long, default_value_t = TrainConfig::default().physics_max_windows, value_name = "N")]
     physics_windows: usize,
     /// A physics parameter value set before the fit (repeatable), e.g. --set m=0.045 (kg).
     #[arg(long = "set", value_name = "NAME=VALUE")]
@@ -68,7 +68,7 @@ pub struct TrainArgs {
     #[arg(long)]
     max_samples: Option<u64>,
     /// Seed of the split, shuffles and initial weights.
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = TrainConfig::default().seed)]
     seed: u64,
     /// Adam learning rate (default 1e-3).
     #[arg(long)]
@@ -81,7 +81,7 @@ pub struct TrainArgs {
     split: SplitArg,
     /// Pushing: add N rigidly moved and turned copies of every training trajectory (pushing on a
     /// homogeneous table does not depend on the block's pose; validation data stay as recorded).
-    #[arg(long, default_value_t = 0, value_name = "N")]
+    #[arg(long, default_value_t = TrainConfig::default().augment_se2, value_name = "N")]
     augment_se2: usize,
     /// Threads (results do not depend on it).
     #[arg(long, default_value_t = 2)]
@@ -103,6 +103,57 @@ pub struct TrainArgs {
     /// No progress bar.
     #[arg(long)]
     quiet: bool,
+}
+
+/// The `dynlab train` flags that reproduce `cfg`'s settings where they differ from what the
+/// command chooses without them on `world` (what `diagnose` carries from a model's training
+/// record into the command it prints). The effects, the fitted and set parameters and the
+/// limit surface are the caller's; `--threads` does not change the result.
+pub(crate) fn settings_flags(cfg: &TrainConfig, world: World) -> Vec<String> {
+    let defaults = KindDefaults::for_kind(world, cfg.kind);
+    let base = TrainConfig::default();
+    let mut flags: Vec<(&str, String)> = Vec::new();
+    if cfg.steps != defaults.steps {
+        flags.push(("--steps", cfg.steps.to_string()));
+    }
+    if cfg.steps > 1 && cfg.gamma != defaults.gamma {
+        flags.push(("--gamma", cfg.gamma.to_string()));
+    }
+    if cfg.kind.has_network() && cfg.epochs != defaults.epochs {
+        flags.push(("--epochs", cfg.epochs.to_string()));
+    }
+    if let Some(n) = cfg.max_samples {
+        flags.push(("--max-samples", n.to_string()));
+    }
+    if cfg.seed != base.seed {
+        flags.push(("--seed", cfg.seed.to_string()));
+    }
+    if cfg.lr != base.lr {
+        flags.push(("--lr", cfg.lr.to_string()));
+    }
+    if cfg.batch != base.batch {
+        flags.push(("--batch", cfg.batch.to_string()));
+    }
+    if cfg.split == Split::OverlappingWindows {
+        flags.push(("--split", "overlapping".into()));
+    }
+    if cfg.augment_se2 != base.augment_se2 {
+        flags.push(("--augment-se2", cfg.augment_se2.to_string()));
+    }
+    if cfg.physics_max_windows != base.physics_max_windows {
+        flags.push(("--physics-windows", cfg.physics_max_windows.to_string()));
+    }
+    if let Some(Loss::LRel { norm, .. }) = &cfg.loss {
+        let name = match norm {
+            LossNorm::L1 => "l1",
+            LossNorm::L2 => "l2",
+        };
+        flags.push(("--loss-norm", name.into()));
+    }
+    flags
+        .into_iter()
+        .flat_map(|(f, v)| [f.to_string(), v])
+        .collect()
 }
 
 #[derive(Debug, Clone, Copy, ValueEnum)]
@@ -374,4 +425,70 @@ fn plot_curve(path: &Path, curve: &[Progress]) -> anyhow::Result<()> {
         .draw()?;
     root.present()?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[derive(Debug, clap::Parser)]
+    struct Train {
+        #[command(flatten)]
+        args: TrainArgs,
+    }
+
+    fn parsed(flags: Vec<String>) -> TrainArgs {
+        let required = ["train", "--bag", "b", "--kind", "hybrid", "--out", "m"];
+        Train::try_parse_from(required.into_iter().map(String::from).chain(flags))
+            .unwrap()
+            .args
+    }
+
+    #[test]
+    fn settings_flags_parse_back_to_the_settings_they_carry() {
+        let cfg = TrainConfig {
+            kind: ModelKind::Hybrid,
+            steps: 3,
+            gamma: 0.8,
+            epochs: 7,
+            max_samples: Some(900),
+            seed: 4,
+            lr: 2e-3,
+            batch: 64,
+            split: Split::OverlappingWindows,
+            augment_se2: 2,
+            physics_max_windows: 500,
+            loss: Some(Loss::LRel {
+                norm: LossNorm::L2,
+                eps: 0.1,
+            }),
+            ..TrainConfig::default()
+        };
+        let a = parsed(settings_flags(&cfg, World::Car));
+        assert_eq!(
+            (a.steps, a.gamma, a.epochs, a.max_samples),
+            (Some(3), Some(0.8), Some(7), Some(900))
+        );
+        assert_eq!((a.seed, a.lr, a.batch), (4, Some(2e-3), Some(64)));
+        assert!(matches!(a.split, SplitArg::Overlapping));
+        assert_eq!((a.augment_se2, a.physics_windows), (2, 500));
+        assert!(matches!(a.loss_norm, Some(NormArg::L2)));
+        // what train chooses by itself is not repeated
+        for (world, kind) in [
+            (World::Car, ModelKind::Physics),
+            (World::Push, ModelKind::Physics),
+            (World::Car, ModelKind::Hybrid),
+        ] {
+            let d = KindDefaults::for_kind(world, kind);
+            let cfg = TrainConfig {
+                kind,
+                steps: d.steps,
+                gamma: d.gamma,
+                epochs: d.epochs,
+                ..TrainConfig::default()
+            };
+            assert_eq!(settings_flags(&cfg, world), Vec::<String>::new());
+        }
+    }
 }

@@ -1,13 +1,15 @@
 //! `dynlab diagnose` end to end on a bundled bag with a hidden effect: terminal table,
 //! `diagnosis.json` with the contract keys, `diagnosis.html`; the printed `train` command keeps a
-//! model's custom effect; and a clear error for a bag of the wrong robot.
+//! model's custom effect and its training settings; and a clear error for a bag of the wrong
+//! robot.
 
 use std::path::Path;
 use std::process::Command;
 
 use dynlab_learn::dynamics::physics::{CustomEffect, PhysicsModel};
+use dynlab_learn::file::TrainingMeta;
 use dynlab_learn::train::default_physics_solver;
-use dynlab_learn::{Model, ModelKind, World, save_model};
+use dynlab_learn::{Model, ModelKind, TrainConfig, World, save_model};
 
 fn repo(p: &str) -> std::path::PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join(p)
@@ -15,11 +17,17 @@ fn repo(p: &str) -> std::path::PathBuf {
 
 /// The world's nominal physics model at its documented values, saved to `dir`.
 fn nominal_model(dir: &Path, world: World) {
-    save_physics(dir, world, None);
+    save_physics(dir, world, None, None);
 }
 
-/// The world's nominal physics model, with a custom effect when given, saved to `dir`.
-fn save_physics(dir: &Path, world: World, custom: Option<CustomEffect>) {
+/// The world's nominal physics model, with a custom effect and a training record when given,
+/// saved to `dir`.
+fn save_physics(
+    dir: &Path,
+    world: World,
+    custom: Option<CustomEffect>,
+    training: Option<TrainingMeta>,
+) {
     let (mut physics, dt) = match world {
         World::Car => (PhysicsModel::car(&[]).unwrap(), 0.01),
         World::Push => (PhysicsModel::pushing(&[]).unwrap(), 2.0),
@@ -37,7 +45,7 @@ fn save_physics(dir: &Path, world: World, custom: Option<CustomEffect>) {
         default_physics_solver(world),
     )
     .unwrap();
-    save_model(&m, dir, None, serde_json::Map::new()).unwrap();
+    save_model(&m, dir, training, serde_json::Map::new()).unwrap();
 }
 
 /// `dynlab diagnose` of `model` on the bundled steering-offset bag with the candidate `effects`
@@ -92,17 +100,30 @@ fn diagnose_names_the_steering_offset_of_the_bundled_bag_and_writes_json_and_htm
     assert!(html.contains("<section") && html.contains("steering_offset"));
 }
 
-/// A model trained with `--effects-file` and diagnosed again: the command that adds what the
-/// diagnosis found keeps the model's custom effect, written out at the model's coefficients.
+/// A model trained with `--effects-file` (and `--steps 3 --seed 4`) and diagnosed again: the
+/// command that adds what the diagnosis found keeps the model's custom effect, written out at
+/// the model's coefficients, and trains as the model was trained.
 #[test]
-fn the_train_command_keeps_the_models_custom_effect() {
+fn the_train_command_keeps_the_models_custom_effect_and_training_settings() {
     let tmp = tempfile::tempdir().unwrap();
     let model = tmp.path().join("model");
     let drag = CustomEffect::from_toml(
         "name = \"speed_drag\"\n[[term]]\nstate = \"vx\"\nfeature = \"vx*|v|\"\ncoefficient = -1.5e-3\n",
     )
     .unwrap();
-    save_physics(&model, World::Car, Some(drag));
+    let training = TrainingMeta {
+        bags: Vec::new(),
+        config: TrainConfig {
+            kind: ModelKind::Physics,
+            steps: 3,
+            seed: 4,
+            ..TrainConfig::default()
+        },
+        best_epoch: 1,
+        epochs_run: 1,
+        windows: (100, 20),
+    };
+    save_physics(&model, World::Car, Some(drag), Some(training));
     let out = tmp.path().join("diag");
     let stdout = diagnose_offset_bag(&model, "steering_offset", &out);
     let line = stdout
@@ -113,6 +134,10 @@ fn the_train_command_keeps_the_models_custom_effect() {
     assert!(
         line.contains("--effects steering_offset")
             && line.contains(&format!("--effects-file {}", file.display())),
+        "{line}"
+    );
+    assert!(
+        line.contains(" --steps 3 ") && line.contains(" --seed 4 "),
         "{line}"
     );
     let kept = CustomEffect::from_toml(&std::fs::read_to_string(&file).unwrap()).unwrap();
