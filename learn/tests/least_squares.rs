@@ -1,0 +1,62 @@
+//! `bounded_least_squares`: an exponential fitted to exact data, bounds kept, and the residuals
+//! and Jacobian it returns at its result equal to an evaluation there.
+
+use dynlab_learn::fit::bounded_least_squares;
+
+/// `y = a·exp(b·x)` at 20 points: the residuals and, when asked, the Jacobian (rows × 2).
+fn eval(th: &[f64], with_j: bool) -> (Vec<f64>, Vec<f64>) {
+    let xs = (0..20).map(|i| i as f64 * 0.1);
+    let (a, b) = (th[0], th[1]);
+    let mut r = Vec::new();
+    let mut j = Vec::new();
+    for x in xs {
+        let y = 2.0 * (-0.7 * x).exp();
+        let e = (b * x).exp();
+        r.push(a * e - y);
+        if with_j {
+            j.extend([e, a * x * e]);
+        }
+    }
+    (r, j)
+}
+
+#[test]
+fn an_exponential_is_fitted_and_its_residuals_and_jacobian_are_those_at_the_result() {
+    let res = bounded_least_squares(
+        &[1.0, 0.0],
+        &[0.0, -5.0],
+        &[10.0, 5.0],
+        &[true, true],
+        50,
+        &mut eval,
+    );
+    assert!((res.theta[0] - 2.0).abs() < 1e-6, "{:?}", res.theta);
+    assert!((res.theta[1] + 0.7).abs() < 1e-6, "{:?}", res.theta);
+    let (r, j) = res.at_theta.expect("evaluated at the result");
+    assert_eq!((r, j), eval(&res.theta, true));
+    // a bound that excludes the truth holds
+    let held = bounded_least_squares(
+        &[1.0, 0.0],
+        &[0.0, -0.5],
+        &[10.0, 5.0],
+        &[true, true],
+        50,
+        &mut eval,
+    );
+    let bh = held.theta[1];
+    assert!((-0.5..-0.5 + 1e-6).contains(&bh), "{bh}");
+    if let Some(at) = held.at_theta {
+        assert_eq!(at, eval(&held.theta, true));
+    }
+    // nothing free: nothing fitted, no Jacobian
+    let fixed = bounded_least_squares(
+        &[1.0, 0.0],
+        &[0.0, -5.0],
+        &[10.0, 5.0],
+        &[false, false],
+        50,
+        &mut eval,
+    );
+    assert_eq!(fixed.theta, vec![1.0, 0.0]);
+    assert!(fixed.at_theta.is_none());
+}
