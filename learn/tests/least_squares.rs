@@ -20,43 +20,34 @@ fn eval(th: &[f64], with_j: bool) -> (Vec<f64>, Vec<f64>) {
     (r, j)
 }
 
-#[test]
-fn an_exponential_is_fitted_and_its_residuals_and_jacobian_are_those_at_the_result() {
-    let res = bounded_least_squares(
+/// `bounded_least_squares` of [`eval`] from (1, 0) within a ≥ 0 and b ≥ `b_min`.
+fn fit(b_min: f64, free: [bool; 2]) -> dynlab_learn::fit::LsqResult {
+    bounded_least_squares(
         &[1.0, 0.0],
-        &[0.0, -5.0],
+        &[0.0, b_min],
         &[10.0, 5.0],
-        &[true, true],
+        &free,
         50,
         &mut eval,
-    );
+    )
+}
+
+#[test]
+fn an_exponential_is_fitted_and_its_residuals_and_jacobian_are_those_at_the_result() {
+    let res = fit(-5.0, [true, true]);
     assert!((res.theta[0] - 2.0).abs() < 1e-6, "{:?}", res.theta);
     assert!((res.theta[1] + 0.7).abs() < 1e-6, "{:?}", res.theta);
     let (r, j) = res.at_theta.expect("evaluated at the result");
     assert_eq!((r, j), eval(&res.theta, true));
     // a bound that excludes the truth holds
-    let held = bounded_least_squares(
-        &[1.0, 0.0],
-        &[0.0, -0.5],
-        &[10.0, 5.0],
-        &[true, true],
-        50,
-        &mut eval,
-    );
+    let held = fit(-0.5, [true, true]);
     let bh = held.theta[1];
     assert!((-0.5..-0.5 + 1e-6).contains(&bh), "{bh}");
     if let Some(at) = held.at_theta {
         assert_eq!(at, eval(&held.theta, true));
     }
     // nothing free: nothing fitted, no Jacobian
-    let fixed = bounded_least_squares(
-        &[1.0, 0.0],
-        &[0.0, -5.0],
-        &[10.0, 5.0],
-        &[false, false],
-        50,
-        &mut eval,
-    );
+    let fixed = fit(-5.0, [false, false]);
     assert_eq!(fixed.theta, vec![1.0, 0.0]);
     assert!(fixed.at_theta.is_none());
 }
