@@ -1599,12 +1599,8 @@ impl<'a> Ctx<'a> {
             // standard errors clustered by segment (overlapping windows are correlated), by
             // the jackknife: the sandwich gave a disc's centre ± 5·10⁻⁵ m, and the joint fit on
             // the same data put it 18 mm away; from the windows calm at the result
-            // (`calm_std`); residual rows are step-major: (step j, window i, dimension c); the
-            // residuals and Jacobian are the fit's own at its result, where it has them
-            let (r, jac) = match res.at_theta.take() {
-                Some(at) => at,
-                None => eval_with(fit_w, free, &res.theta, true),
-            };
+            // (`calm_std`); residual rows are step-major: (step j, window i, dimension c)
+            let (r, jac) = eval_with(fit_w, free, &res.theta, true);
             let cluster: Vec<usize> = (0..k)
                 .flat_map(|_| {
                     fit_w

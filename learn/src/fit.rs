@@ -42,10 +42,6 @@ pub struct LsqResult {
     pub iterations: usize,
     /// Number of residuals.
     pub residuals: usize,
-    /// The residuals and their Jacobian (as `eval` returns them) at `theta`, where the fit
-    /// evaluated both there: not when no parameter is free, nor after a last step accepted but
-    /// too small to go on from.
-    pub at_theta: Option<(Vec<f64>, Vec<f64>)>,
 }
 
 /// Minimises `‖r(θ)‖²` over the parameters with `free[i]` set, within `[lower, upper]`.
@@ -74,8 +70,6 @@ pub fn bounded_least_squares(
     let mut c = initial_cost;
     let mut lambda = 1e-3;
     let mut its = 0;
-    // whether `r` and `jac` are at `theta`
-    let mut fresh = true;
     while nf > 0 && its < iterations {
         its += 1;
         let (jtj, jtr) = reduced_normal_equations(&jac, &r, n, &idx);
@@ -103,7 +97,6 @@ pub fn bounded_least_squares(
                 c = ct;
                 lambda = (lambda / 3.0).max(1e-12);
                 improved = rel > 1e-10;
-                fresh = false;
                 break;
             }
             lambda *= 4.0;
@@ -111,8 +104,9 @@ pub fn bounded_least_squares(
         if !improved {
             break;
         }
-        (r, jac) = eval(&theta, true);
-        fresh = true;
+        let (r2, j2) = eval(&theta, true);
+        r = r2;
+        jac = j2;
     }
     let m = r.len();
     let mut std = vec![0.0; n];
@@ -141,7 +135,6 @@ pub fn bounded_least_squares(
         cost: c,
         iterations: its,
         residuals: m,
-        at_theta: (nf > 0 && fresh).then_some((r, jac)),
     }
 }
 

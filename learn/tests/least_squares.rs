@@ -1,5 +1,5 @@
-//! `bounded_least_squares`: an exponential fitted to exact data, bounds kept, and the residuals
-//! and Jacobian it returns at its result equal to an evaluation there.
+//! `bounded_least_squares`: an exponential fitted to exact data, a bound that excludes the truth
+//! kept, nothing moved when nothing is free.
 
 use dynlab_learn::fit::bounded_least_squares;
 
@@ -33,21 +33,21 @@ fn fit(b_min: f64, free: [bool; 2]) -> dynlab_learn::fit::LsqResult {
 }
 
 #[test]
-fn an_exponential_is_fitted_and_its_residuals_and_jacobian_are_those_at_the_result() {
+fn an_exponential_is_fitted_within_its_bounds() {
     let res = fit(-5.0, [true, true]);
     assert!((res.theta[0] - 2.0).abs() < 1e-6, "{:?}", res.theta);
     assert!((res.theta[1] + 0.7).abs() < 1e-6, "{:?}", res.theta);
-    let (r, j) = res.at_theta.expect("evaluated at the result");
-    assert_eq!((r, j), eval(&res.theta, true));
+    assert!(
+        res.cost < 1e-20 && res.cost < res.initial_cost,
+        "{}",
+        res.cost
+    );
     // a bound that excludes the truth holds
     let held = fit(-0.5, [true, true]);
     let bh = held.theta[1];
     assert!((-0.5..-0.5 + 1e-6).contains(&bh), "{bh}");
-    if let Some(at) = held.at_theta {
-        assert_eq!(at, eval(&held.theta, true));
-    }
-    // nothing free: nothing fitted, no Jacobian
+    // nothing free: nothing fitted
     let fixed = fit(-5.0, [false, false]);
     assert_eq!(fixed.theta, vec![1.0, 0.0]);
-    assert!(fixed.at_theta.is_none());
+    assert_eq!((fixed.iterations, fixed.cost), (0, fixed.initial_cost));
 }
