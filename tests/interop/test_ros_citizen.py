@@ -329,11 +329,29 @@ def test_sim_node_discovery_info_lists_its_topics_and_rosout_carries_its_log(tmp
     subs = BuiltinDataReader(dp, BuiltinTopicDcpsSubscription)
     sim = start("sim_node", "--ros-args", "-r", "__node:=sim_citizen", "-p", "rate:=5.0", domain=domain)
     try:
-        infos = take_all(disc, 20, until=lambda got: any(
-            n.node_name == "sim_citizen" and len(n.writer_gid_seq) >= 3
-            for s in got for n in s.node_entities_info_seq))
-        nodes = [(s, n) for s in infos for n in s.node_entities_info_seq if n.node_name == "sim_citizen"]
-        assert nodes, f"sim_citizen not in ros_discovery_info: {infos}"
+        want_w = ["rt/push/block_pose", "rt/clock", "rt/rosout", "rt/parameter_events",
+                  "rr/sim_citizen/set_parametersReply"]
+        want_r = ["rt/push/action", "rq/sim_citizen/set_parametersRequest",
+                  "rq/sim_citizen/list_parametersRequest"]
+        # The node announces its entities as it creates them, so early samples list only some:
+        # read until its latest sample lists every expected endpoint (or the time is up).
+        nodes, topics_w, topics_r = [], {}, {}
+        node_w, node_r = set(), set()
+        deadline = time.monotonic() + 20
+        while time.monotonic() < deadline:
+            nodes += [(s, n) for s in disc.take(N=100) if type(s).__name__ != "InvalidSample"
+                      for n in s.node_entities_info_seq if n.node_name == "sim_citizen"]
+            topics_w.update({guid_bytes(p.key): p.topic_name for p in pubs.take(N=1000)
+                             if type(p).__name__ != "InvalidSample"})
+            topics_r.update({guid_bytes(p.key): p.topic_name for p in subs.take(N=1000)
+                             if type(p).__name__ != "InvalidSample"})
+            if nodes:
+                node_w = {topics_w.get(bytes(g.data)) for g in nodes[-1][1].writer_gid_seq}
+                node_r = {topics_r.get(bytes(g.data)) for g in nodes[-1][1].reader_gid_seq}
+                if set(want_w) <= node_w and set(want_r) <= node_r:
+                    break
+            time.sleep(0.05)
+        assert nodes, "sim_citizen not in ros_discovery_info"
         part, node = nodes[-1]
         assert node.node_namespace == "/"
         writers = {bytes(g.data) for g in node.writer_gid_seq}
@@ -341,18 +359,9 @@ def test_sim_node_discovery_info_lists_its_topics_and_rosout_carries_its_log(tmp
         # every writer and reader GID of the node is a DDS endpoint of its participant
         prefix = bytes(part.gid.data)[:12]
         assert all(g[:12] == prefix for g in writers | readers)
-        time.sleep(1.0)
-        topics_w = {guid_bytes(p.key): p.topic_name for p in pubs.take(N=1000)
-                    if type(p).__name__ != "InvalidSample"}
-        topics_r = {guid_bytes(p.key): p.topic_name for p in subs.take(N=1000)
-                    if type(p).__name__ != "InvalidSample"}
-        node_w = {topics_w.get(g) for g in writers}
-        node_r = {topics_r.get(g) for g in readers}
-        for t in ["rt/push/block_pose", "rt/clock", "rt/rosout", "rt/parameter_events",
-                  "rr/sim_citizen/set_parametersReply"]:
+        for t in want_w:
             assert t in node_w, f"{t} not among the node's writers: {sorted(map(str, node_w))}"
-        for t in ["rt/push/action", "rq/sim_citizen/set_parametersRequest",
-                  "rq/sim_citizen/list_parametersRequest"]:
+        for t in want_r:
             assert t in node_r, f"{t} not among the node's readers: {sorted(map(str, node_r))}"
 
         # a log line from the node itself, as the node logs it to stderr: its start line
