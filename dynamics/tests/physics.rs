@@ -736,6 +736,52 @@ fn step_jacobians_of_the_car_match_finite_differences() {
 }
 
 #[test]
+fn reverse_passes_through_one_tape_equal_those_through_a_fresh_tape() {
+    // a taped step keeps the field's Jacobians from its first reverse pass for the next ones:
+    // every pass (with or without θ, in either order, and after the tape records a new point)
+    // gives bit for bit what a pass through a tape of its own gives
+    let solver = Solver::Rk4 { substeps: 2 };
+    for m in [car_all(), push_all(0.2)] {
+        let (ds, du, np) = (m.dim_state(), m.dim_input(), m.params().len());
+        let points: Vec<(Vec<f64>, Vec<f64>)> = if ds == 3 {
+            let s2 = [PUSH_S[0] - 0.05, PUSH_S[1] + 0.02, PUSH_S[2] - 0.3];
+            vec![
+                (PUSH_S.to_vec(), PUSH_U.to_vec()),
+                (s2.to_vec(), PUSH_U.to_vec()),
+            ]
+        } else {
+            let mut s2 = CAR_S.to_vec();
+            s2[3] = 0.6;
+            s2[5] = -1.0;
+            vec![(CAR_S.to_vec(), CAR_U.to_vec()), (s2, vec![-0.1, 0.3])]
+        };
+        let dt = if ds == 3 { 1.0 } else { 0.02 };
+        let pass = |tape: &StepTape, r: usize, with_p: bool| {
+            let mut ybar = vec![0.0; ds];
+            ybar[r] = 1.0;
+            let (mut sb, mut ub) = (vec![0.0; ds], vec![0.0; du]);
+            let mut pb = vec![0.0; if with_p { np } else { 0 }];
+            m.integrate_step_vjp(tape, &ybar, &mut sb, &mut ub, &mut pb);
+            [sb, ub, pb].concat()
+        };
+        let mut reused = StepTape::default();
+        let mut out = vec![0.0; ds];
+        for (s, u) in &points {
+            m.integrate_step_taped(&solver, 1, s, u, dt, &mut out, &mut reused);
+            for (r, with_p) in [(0, false), (1, true), (2, false), (0, true), (1, false)] {
+                let mut fresh = StepTape::default();
+                m.integrate_step_taped(&solver, 1, s, u, dt, &mut out, &mut fresh);
+                assert_eq!(
+                    pass(&reused, r, with_p),
+                    pass(&fresh, r, with_p),
+                    "row {r}, θ {with_p}"
+                );
+            }
+        }
+    }
+}
+
+#[test]
 fn residual_jacobian_matches_finite_differences_and_vanishes_at_the_truth() {
     let mut truth = PhysicsModel::car(&[Effect::AeroDrag, Effect::SteeringOffset]).unwrap();
     truth.set_param("aero_drag.c", 0.1).unwrap();

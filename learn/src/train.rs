@@ -11,8 +11,8 @@ use dynlab_dynamics::conventions::{LossNorm, wrap_angle};
 use dynlab_dynamics::data::{
     SplitMix64, StateTrajectory, Window, split_trajectories, split_windows_overlapping, windows,
 };
-use dynlab_dynamics::ode::{self, InputTape, Solver, SolverTape, VectorField};
-use dynlab_dynamics::physics::{CustomEffect, Effect, LimitSurface, PhysicsModel};
+use dynlab_dynamics::ode::{self, Solver, SolverTape, VectorField};
+use dynlab_dynamics::physics::{CustomEffect, Effect, JacobianTape, LimitSurface, PhysicsModel};
 use dynlab_nn::{Activation, Adam, AdamConfig, Init, Mlp, MlpSpec};
 use serde::{Deserialize, Serialize};
 
@@ -508,7 +508,7 @@ struct ChunkState {
     node_tapes: Vec<SolverTape<f32, NetTape>>,
     fixed_tapes: Vec<FixedStepTape>,
     net_tapes: Vec<NetTape>,
-    phys_tapes: Vec<SolverTape<f64, InputTape<f64>>>,
+    phys_tapes: Vec<SolverTape<f64, JacobianTape>>,
     sfull: Vec<f64>,
     sfull_next: Vec<f64>,
     /// Effect states of the physics part at the current rollout step (`n × dim_extra`).

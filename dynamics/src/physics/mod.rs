@@ -44,6 +44,9 @@ pub use model::{EffectTerm, ModelError, PhysicsModel};
 pub use push::{LimitSurface, PUSH_FITTED_PARAMS, PUSH_NOMINAL_PARAMS, PUSHER_RADIUS_M};
 pub use step::StepTape;
 
+use crate::ode::InputTape;
+use std::cell::RefCell;
+
 /// Which robot a model or effect belongs to.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -623,12 +626,13 @@ fn scatter_duals<const N: usize>(
 }
 
 /// One row of a vector–Jacobian product from a dense Jacobian `j` (`ȳ.len()` rows; columns: the
-/// state, then the input, then the parameters): sets `s̄ = ȳᵀ ∂f/∂s`, `ū = ȳᵀ ∂f/∂u` and adds
-/// `ȳᵀ ∂f/∂p` to `p̄` (parameters only when `p̄` is not empty).
+/// state, then the input, then the parameters if any): sets `s̄ = ȳᵀ ∂f/∂s`, `ū = ȳᵀ ∂f/∂u` and
+/// adds `ȳᵀ ∂f/∂p` to `p̄` (parameters only when `p̄` is not empty).
 fn vjp_row(ybar: &[f64], j: &[f64], sbar: &mut [f64], ubar: &mut [f64], pbar: &mut [f64]) {
     let (ds, du) = (sbar.len(), ubar.len());
     let nz = j.len() / ybar.len().max(1);
-    for c in 0..nz {
+    let cols = if pbar.is_empty() { ds + du } else { nz };
+    for c in 0..cols {
         let g: f64 = (0..ybar.len()).map(|r| ybar[r] * j[r * nz + c]).sum();
         if c < ds {
             sbar[c] = g;
@@ -636,6 +640,64 @@ fn vjp_row(ybar: &[f64], j: &[f64], sbar: &mut [f64], ubar: &mut [f64], pbar: &m
             ubar[c - ds] = g;
         } else {
             pbar[c - ds - du] += g;
+        }
+    }
+}
+
+/// What a physics field keeps for its reverse pass: the call's inputs and, once a reverse pass
+/// has needed them, each sample's Jacobian `∂f/∂[s, u, θ]`. A step's Jacobian takes one reverse
+/// pass per state row through the same taped stages; the field's derivatives are evaluated on
+/// the first and reused by the others.
+#[derive(Debug, Default)]
+pub struct JacobianTape {
+    inputs: InputTape<f64>,
+    /// `(with the θ columns, n × dim_s × nz)`: empty until a reverse pass after the last record
+    jac: RefCell<Option<(bool, Vec<f64>)>>,
+}
+
+impl JacobianTape {
+    fn record(&mut self, n: usize, s: &[f64], u: &[f64]) {
+        self.inputs.record(n, s, u);
+        *self.jac.get_mut() = None;
+    }
+
+    /// The reverse pass of [`VectorField::vjp`](crate::ode::VectorField::vjp) over the recorded
+    /// samples, with `jac(s, u, with_θ, f, J)` writing one sample's value and Jacobian
+    /// (`dim_s × nz`, `nz = dim_s + dim_u (+ n_params)`).
+    #[allow(clippy::too_many_arguments)]
+    fn vjp(
+        &self,
+        (ds, du, np): (usize, usize, usize),
+        jac: impl Fn(&[f64], &[f64], bool, &mut [f64], &mut [f64]),
+        ybar: &[f64],
+        sbar: &mut [f64],
+        ubar: &mut [f64],
+        pbar: &mut [f64],
+    ) {
+        let (n, with_p) = (self.inputs.n, !pbar.is_empty());
+        let mut cache = self.jac.borrow_mut();
+        if !matches!(&*cache, Some((w, _)) if *w || !with_p) {
+            let nz = ds + du + if with_p { np } else { 0 };
+            let mut js = vec![0.0; n * ds * nz];
+            let mut f = vec![0.0; ds];
+            for (i, j) in js.chunks_exact_mut(ds * nz).enumerate() {
+                let s = &self.inputs.s[i * ds..(i + 1) * ds];
+                let u = &self.inputs.u[i * du..(i + 1) * du];
+                jac(s, u, with_p, &mut f, j);
+            }
+            *cache = Some((with_p, js));
+        }
+        if let Some((_, js)) = &*cache {
+            let per = js.len() / n.max(1);
+            for i in 0..n {
+                vjp_row(
+                    &ybar[i * ds..(i + 1) * ds],
+                    &js[i * per..(i + 1) * per],
+                    &mut sbar[i * ds..(i + 1) * ds],
+                    &mut ubar[i * du..(i + 1) * du],
+                    pbar,
+                );
+            }
         }
     }
 }

@@ -1,11 +1,12 @@
 //! [`PhysicsModel`]: nominal model + enabled effects + flat parameter vector.
 
+use super::JacobianTape;
 use super::car::{self, CAR_NOMINAL_PARAMS, Slot};
 use super::custom::{CustomEffect, CustomError, Target};
 use super::features::{INPUT_LAG_STATES, INPUT_LAGS_S, input_lag_rates, input_lags_settled};
 use super::push::{self, LimitSurface, PUSH_NOMINAL_PARAMS};
 use super::{Effect, ParamSpec, Robot};
-use crate::ode::{InputTape, VectorField};
+use crate::ode::VectorField;
 use crate::real::{Dual, Real};
 use std::fmt::Write as _;
 use std::ops::Range;
@@ -1201,7 +1202,7 @@ impl std::fmt::Display for PhysicsModel {
 }
 
 impl VectorField<f64> for PhysicsModel {
-    type Tape = InputTape<f64>;
+    type Tape = JacobianTape;
 
     fn dim_s(&self) -> usize {
         self.dim_s
@@ -1237,24 +1238,15 @@ impl VectorField<f64> for PhysicsModel {
         ubar: &mut [f64],
         pbar: &mut [f64],
     ) {
-        let (ds, du) = (self.dim_s, self.dim_input());
-        let with_p = !pbar.is_empty();
-        let nz = ds + du + if with_p { self.params.len() } else { 0 };
         let act = self.all_active();
-        let mut f = vec![0.0; ds];
-        let mut j = vec![0.0; ds * nz];
-        for i in 0..tape.n {
-            let s = &tape.s[i * ds..(i + 1) * ds];
-            let u = &tape.u[i * du..(i + 1) * du];
-            self.jacobian_full(s, u, &act, with_p, &mut f, &mut j);
-            super::vjp_row(
-                &ybar[i * ds..(i + 1) * ds],
-                &j,
-                &mut sbar[i * ds..(i + 1) * ds],
-                &mut ubar[i * du..(i + 1) * du],
-                pbar,
-            );
-        }
+        tape.vjp(
+            (self.dim_s, self.dim_input(), self.params.len()),
+            |s, u, with_p, f, j| self.jacobian_full(s, u, &act, with_p, f, j),
+            ybar,
+            sbar,
+            ubar,
+            pbar,
+        );
     }
     fn jvp(
         &self,

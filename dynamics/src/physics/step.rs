@@ -7,9 +7,10 @@
 //! public dimension stay `(x, y, θ)`. Derivatives chain through `h` exactly (forward-mode
 //! dual numbers), so fits, reverse mode and the input Jacobians see the world-line pusher.
 
+use super::JacobianTape;
 use super::model::PhysicsModel;
 use super::{Robot, push};
-use crate::ode::{self, InputTape, OdeReport, Solver, SolverTape, VectorField};
+use crate::ode::{self, OdeReport, Solver, SolverTape, VectorField};
 use crate::real::{Dual, Real};
 
 /// Number of step constants of a push.
@@ -77,7 +78,7 @@ impl PushLine<'_> {
 }
 
 impl VectorField<f64> for PushLine<'_> {
-    type Tape = InputTape<f64>;
+    type Tape = JacobianTape;
     fn dim_s(&self) -> usize {
         DS + NC
     }
@@ -110,23 +111,14 @@ impl VectorField<f64> for PushLine<'_> {
         ubar: &mut [f64],
         pbar: &mut [f64],
     ) {
-        let dz = DS + NC;
-        let with_p = !pbar.is_empty();
-        let nz = dz + DU + if with_p { self.n_params() } else { 0 };
-        let mut f = vec![0.0; dz];
-        let mut j = vec![0.0; dz * nz];
-        for i in 0..tape.n {
-            let z = &tape.s[i * dz..(i + 1) * dz];
-            let u = &tape.u[i * DU..(i + 1) * DU];
-            self.jac(z, u, with_p, &mut f, &mut j);
-            super::vjp_row(
-                &ybar[i * dz..(i + 1) * dz],
-                &j,
-                &mut sbar[i * dz..(i + 1) * dz],
-                &mut ubar[i * DU..(i + 1) * DU],
-                pbar,
-            );
-        }
+        tape.vjp(
+            (DS + NC, DU, self.n_params()),
+            |z, u, with_p, f, j| self.jac(z, u, with_p, f, j),
+            ybar,
+            sbar,
+            ubar,
+            pbar,
+        );
     }
     fn jvp(
         &self,
@@ -213,7 +205,7 @@ fn project(n: usize, z: &[f64], out: &mut [f64]) {
 /// Reuse one tape across calls to avoid allocations.
 #[derive(Debug, Default)]
 pub struct StepTape {
-    inner: SolverTape<f64, InputTape<f64>>,
+    inner: SolverTape<f64, JacobianTape>,
     n: usize,
     s0: Vec<f64>,
     u: Vec<f64>,
