@@ -45,7 +45,7 @@ pub use push::{LimitSurface, PUSH_FITTED_PARAMS, PUSH_NOMINAL_PARAMS, PUSHER_RAD
 pub use step::StepTape;
 
 use crate::ode::InputTape;
-use std::cell::RefCell;
+use std::cell::{Cell, RefCell};
 
 /// Which robot a model or effect belongs to.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -651,20 +651,22 @@ fn vjp_row(ybar: &[f64], j: &[f64], sbar: &mut [f64], ubar: &mut [f64], pbar: &m
 #[derive(Debug, Default)]
 pub struct JacobianTape {
     inputs: InputTape<f64>,
-    /// `(with the θ columns, n × dim_s × nz)`: empty until a reverse pass after the last record
-    jac: RefCell<Option<(bool, Vec<f64>)>>,
+    /// Whether `jac` holds the Jacobians at the recorded inputs, and with the θ columns: `None`
+    /// until a reverse pass after the last record
+    with_p: Cell<Option<bool>>,
+    /// `n × dim_s × nz`, the buffer reused from record to record
+    jac: RefCell<Vec<f64>>,
 }
 
 impl JacobianTape {
     fn record(&mut self, n: usize, s: &[f64], u: &[f64]) {
         self.inputs.record(n, s, u);
-        *self.jac.get_mut() = None;
+        self.with_p.set(None);
     }
 
     /// The reverse pass of [`VectorField::vjp`](crate::ode::VectorField::vjp) over the recorded
     /// samples, with `jac(s, u, with_θ, f, J)` writing one sample's value and Jacobian
     /// (`dim_s × nz`, `nz = dim_s + dim_u (+ n_params)`).
-    #[allow(clippy::too_many_arguments)]
     fn vjp(
         &self,
         (ds, du, np): (usize, usize, usize),
@@ -674,30 +676,35 @@ impl JacobianTape {
         ubar: &mut [f64],
         pbar: &mut [f64],
     ) {
-        let (n, with_p) = (self.inputs.n, !pbar.is_empty());
-        let mut cache = self.jac.borrow_mut();
-        if !matches!(&*cache, Some((w, _)) if *w || !with_p) {
-            let nz = ds + du + if with_p { np } else { 0 };
-            let mut js = vec![0.0; n * ds * nz];
-            let mut f = vec![0.0; ds];
-            for (i, j) in js.chunks_exact_mut(ds * nz).enumerate() {
-                let s = &self.inputs.s[i * ds..(i + 1) * ds];
-                let u = &self.inputs.u[i * du..(i + 1) * du];
-                jac(s, u, with_p, &mut f, j);
+        let n = self.inputs.n;
+        let want_p = !pbar.is_empty();
+        let has_p = match self.with_p.get() {
+            Some(has_p) if has_p || !want_p => has_p,
+            _ => {
+                let nz = ds + du + if want_p { np } else { 0 };
+                let mut js = self.jac.borrow_mut();
+                js.clear();
+                js.resize(n * ds * nz, 0.0);
+                let mut f = vec![0.0; ds];
+                for (i, j) in js.chunks_exact_mut(ds * nz).enumerate() {
+                    let s = &self.inputs.s[i * ds..(i + 1) * ds];
+                    let u = &self.inputs.u[i * du..(i + 1) * du];
+                    jac(s, u, want_p, &mut f, j);
+                }
+                self.with_p.set(Some(want_p));
+                want_p
             }
-            *cache = Some((with_p, js));
-        }
-        if let Some((_, js)) = &*cache {
-            let per = js.len() / n.max(1);
-            for i in 0..n {
-                vjp_row(
-                    &ybar[i * ds..(i + 1) * ds],
-                    &js[i * per..(i + 1) * per],
-                    &mut sbar[i * ds..(i + 1) * ds],
-                    &mut ubar[i * du..(i + 1) * du],
-                    pbar,
-                );
-            }
+        };
+        let per = ds * (ds + du + if has_p { np } else { 0 });
+        let js = self.jac.borrow();
+        for i in 0..n {
+            vjp_row(
+                &ybar[i * ds..(i + 1) * ds],
+                &js[i * per..(i + 1) * per],
+                &mut sbar[i * ds..(i + 1) * ds],
+                &mut ubar[i * du..(i + 1) * du],
+                pbar,
+            );
         }
     }
 }
