@@ -7,7 +7,8 @@
 //!
 //! 1. **One-step residual of each state derivative** on the fit half: `r = (s_meas(t + h) −
 //!    Φ(s(t), u))/h` for the targets of the robot (car: `vx`, `vy`, `omega`; pushing: `x`, `y`,
-//!    `theta` in the world frame and `bx`, `by` in the block frame, per push). Two of the car's
+//!    `theta` in the world frame and `bx`, `by` in the block frame, per push, and the table's
+//!    friction under the block, below). Two of the car's
 //!    tire-model inputs are targets too: the steering angle `delta`, a correction of the angle
 //!    the tires see, and the grip `grip` (`μ`), a scale `1 + μ` of both axles' peak forces. Their
 //!    rows are the three velocity residuals, each divided by its RMS, and a term's column is
@@ -21,7 +22,13 @@
 //!    and `δ·vₓ²` follow only over part of the speeds). Each command also gets the part of it
 //!    beyond the level that, screened the same way, explains the most alone (`δ_{>l}` on `δ`,
 //!    `d_{>l}` on `v̇ₓ`): an actuator's hard limit, a steering end stop or a drive force capped by
-//!    traction. A caller may add grip regions of its own,
+//!    traction. The pushing model's table friction `friction` (`μ`, a scale `1 + μ` of the
+//!    friction under each support point, read at the point's place on the table) takes the
+//!    strip and the bump screened the same way: a region of other friction moves a
+//!    quasi-static block only while the block straddles its edge, through the field's moments
+//!    over the footprint (the centre of friction's shift and the limit-surface ratio's change,
+//!    [`FrictionField`]), so a region's column is those moments times the prediction's
+//!    sensitivity to a centre-of-mass offset and to `c`. A caller may add grip regions of its own,
 //!    chosen on the k-step error: the diagnosis adds the strip through a disc it found
 //!    ([`strip_through`]), which the screen then passes whatever its one-step `t`.
 //! 2. **Screen** per target: every feature regressed alone on the residual; a (target, feature)
@@ -76,7 +83,8 @@ use dynlab_learn::dynamics::physics::features::{
     Area, Atom, Feature, INPUT_LAG_STATES, input_lags_along, library, time_unit,
 };
 use dynlab_learn::dynamics::physics::{
-    CustomEffect, CustomTerm, ModelError, PhysicsModel, Robot, Target, lattice,
+    CustomEffect, CustomTerm, Effect, ModelError, PhysicsModel, Robot, Target, lattice,
+    support_grid,
 };
 use dynlab_learn::fit::{
     SENSITIVITY_LIMIT, bounded_least_squares, cluster_std, forward_jacobian, initial_states,
@@ -228,7 +236,7 @@ impl DiscoveryConfig {
             return bad(
                 "targets",
                 t.clone(),
-                "use target names of effect files: vx, vy, omega, delta, grip (car); x, y, theta, bx, by (pushing)",
+                "use target names of effect files: vx, vy, omega, delta, grip (car); x, y, theta, bx, by, friction (pushing)",
             );
         }
         if !(self.holdout_fraction > 0.0 && self.holdout_fraction < 1.0) {
@@ -510,13 +518,16 @@ impl<'a> Ctx<'a> {
 struct Regression {
     target: Target,
     /// Rows per transition: 1, or for the car's inputs `δ`, `μ` the three velocity
-    /// derivatives they act on.
+    /// derivatives they act on, for the table's friction the three pose rates.
     rows: usize,
     /// The residual per row (`n × rows`; for an input each derivative divided by its RMS
     /// residual).
     y: Vec<f64>,
     /// Per row, what a unit of the target adds to `y` (1, or for an input the derivative's
-    /// sensitivity to it on the same scale): a term's column is this times the feature.
+    /// sensitivity to it on the same scale): a term's column is this times the feature. For
+    /// the table's friction ([`FrictionField`]) three per row (`n × rows × 3`), what each
+    /// moment of the field over the footprint adds: a term's column is their sum over the
+    /// feature's moments.
     gain: Vec<f64>,
     /// Per transition, the residual in the target's units and its weight, for the plot (for an
     /// input the error of it the three residuals imply, weighted by its sensitivity).
@@ -535,17 +546,35 @@ impl Regression {
         }
     }
 
+    /// The table friction's regression from the pose rates' residuals `r` (`n × 3`) and their
+    /// sensitivities `g` to the field's three moments (`n × 3 × 3`), each rate divided by its
+    /// RMS residual. The points of the plot are made per feature ([`FrictionField::points`]).
+    fn moments(target: Target, r: &[f64], g: &[f64], n: usize) -> Self {
+        let w = row_weights(r, 3);
+        Self {
+            target,
+            rows: 3,
+            y: r.iter().enumerate().map(|(j, v)| v * w[j % 3]).collect(),
+            gain: g
+                .iter()
+                .enumerate()
+                .map(|(j, v)| v * w[(j / 3) % 3])
+                .collect(),
+            point: vec![(0.0, 0.0); n],
+        }
+    }
+
+    /// Whether a term's column is made of the feature's moments over the block's footprint.
+    fn by_moments(&self) -> bool {
+        self.target.is_field()
+    }
+
     /// An input's (`δ`, `μ`) regression from the velocity derivatives' residuals `r` and their
     /// sensitivities `g = ∂(v̇ₓ, v̇_y, ω̇)/∂input` (both `n × 3`), each derivative divided by
     /// its RMS residual.
     fn input(target: Target, r: &[f64], g: &[f64]) -> Self {
         let n = r.len() / 3;
-        let w: Vec<f64> = (0..3)
-            .map(|c| {
-                let ms = (0..n).map(|i| r[i * 3 + c].powi(2)).sum::<f64>() / n.max(1) as f64;
-                if ms > 0.0 { 1.0 / ms.sqrt() } else { 0.0 }
-            })
-            .collect();
+        let w = row_weights(r, 3);
         let y: Vec<f64> = r.iter().enumerate().map(|(j, v)| v * w[j % 3]).collect();
         let gain: Vec<f64> = g.iter().enumerate().map(|(j, v)| v * w[j % 3]).collect();
         let point = (0..n)
@@ -566,6 +595,119 @@ impl Regression {
             point,
         }
     }
+}
+
+/// Per row of residuals `r` (`n × rows`), one over its RMS (0 for a row without residual).
+fn row_weights(r: &[f64], rows: usize) -> Vec<f64> {
+    let n = r.len() / rows;
+    (0..rows)
+        .map(|c| {
+            let ms = (0..n).map(|i| r[i * rows + c].powi(2)).sum::<f64>() / n.max(1) as f64;
+            if ms > 0.0 { 1.0 / ms.sqrt() } else { 0.0 }
+        })
+        .collect()
+}
+
+/// The block's support points on the table at each transition's start, for a term on the
+/// table's friction (pushing): the friction model reads the field `φ` under each point, and to
+/// first order a field moves the block through its moments over the footprint — the centre of
+/// friction's shift `(⟨φ·x⟩, ⟨φ·y⟩)` (block frame, the points' mean) and the limit-surface
+/// ratio's relative change `(⟨φ·ρ⟩ − ⟨φ⟩⟨ρ⟩)/⟨ρ⟩`, `ρ` a point's distance from the centre —
+/// which the regression's sensitivities turn into a column (the same first order the model's
+/// own `com_offset` and `c` have). A field that is the same all over the footprint has no
+/// moments: it does not move a quasi-static block.
+struct FrictionField {
+    /// The support points about the centre (block frame) and their distances from it.
+    arms: Vec<[f64; 2]>,
+    rho: Vec<f64>,
+    mean_rho: f64,
+    /// Per transition, each point's place on the table (`n × points`).
+    places: Vec<[f64; 2]>,
+}
+
+impl FrictionField {
+    /// For the states `s0` (`n × dp`, pose first) of a block of depth `a` and width `b`.
+    fn new(s0: &[f64], dp: usize, a: f64, b: f64) -> Self {
+        let arms = support_grid(a, b);
+        let rho: Vec<f64> = arms.iter().map(|p| p[0].hypot(p[1])).collect();
+        let mean_rho = (rho.iter().sum::<f64>() / rho.len().max(1) as f64).max(1e-9);
+        let places = s0
+            .chunks(dp)
+            .flat_map(|s| {
+                let (st, ct) = s[2].sin_cos();
+                arms.iter()
+                    .map(move |p| [s[0] + ct * p[0] - st * p[1], s[1] + st * p[0] + ct * p[1]])
+            })
+            .collect();
+        Self {
+            arms,
+            rho,
+            mean_rho,
+            places,
+        }
+    }
+
+    /// The field `phi`'s three moments at transition `i`.
+    fn moments(&self, i: usize, phi: impl Fn([f64; 2]) -> f64) -> [f64; 3] {
+        let np = self.arms.len();
+        let (mut mx, mut my, mut mr, mut m) = (0.0, 0.0, 0.0, 0.0);
+        for (k, place) in self.places[i * np..(i + 1) * np].iter().enumerate() {
+            let v = phi(*place);
+            let v = if v.is_finite() { v } else { 0.0 };
+            mx += v * self.arms[k][0];
+            my += v * self.arms[k][1];
+            mr += v * self.rho[k];
+            m += v;
+        }
+        let q = np.max(1) as f64;
+        [
+            mx / q,
+            my / q,
+            (mr / q - m / q * self.mean_rho) / self.mean_rho,
+        ]
+    }
+
+    /// The moments of a region `atom` at every transition (`n × 3`).
+    fn of_atom(&self, atom: &Atom, n: usize) -> Vec<f64> {
+        (0..n)
+            .flat_map(|i| self.moments(i, |p| atom.eval::<f64>(Robot::Pushing, &[], &p, &[])))
+            .collect()
+    }
+
+    /// The squared residual the region with moments `m` (`n × 3`) removes from `reg` fitted
+    /// alone, and its coefficient.
+    fn fit(reg: &Regression, m: &[f64]) -> Option<(f64, f64)> {
+        let (mut sy, mut sg) = (0.0, 0.0);
+        for (j, y) in reg.y.iter().enumerate() {
+            let c = moment_column(reg, m, j);
+            sy += c * y;
+            sg += c * c;
+        }
+        (sg > 0.0 && (sy * sy / sg).is_finite()).then(|| (sy * sy / sg, sy / sg))
+    }
+
+    /// Per transition, the friction change the residual implies along the region with moments
+    /// `m` and its weight (for the plot).
+    fn points(reg: &Regression, m: &[f64]) -> Vec<(f64, f64)> {
+        (0..reg.y.len() / reg.rows)
+            .map(|i| {
+                let (mut gy, mut gg) = (0.0, 0.0);
+                for j in i * reg.rows..(i + 1) * reg.rows {
+                    let c = moment_column(reg, m, j);
+                    gy += c * reg.y[j];
+                    gg += c * c;
+                }
+                if gg > 0.0 { (gy / gg, gg) } else { (0.0, 0.0) }
+            })
+            .collect()
+    }
+}
+
+/// Row `j` of the column of a term whose feature has the moments `m` (`n × 3`) in the table
+/// friction's regression `reg`.
+fn moment_column(reg: &Regression, m: &[f64], j: usize) -> f64 {
+    let i = j / reg.rows;
+    (0..3).map(|c| reg.gain[j * 3 + c] * m[i * 3 + c]).sum()
 }
 
 /// One-step predictions of a model from a sample of the fit half's transitions.
@@ -636,9 +778,70 @@ impl OneStep {
             Target::Theta => d(2),
             Target::BlockX => th.cos() * d(0) + th.sin() * d(1),
             Target::BlockY => -th.sin() * d(0) + th.cos() * d(1),
-            Target::Delta | Target::Grip => 0.0,
+            Target::Delta | Target::Grip | Target::Friction => 0.0,
         };
         v / ctx.h
+    }
+
+    /// The regression of the table's friction (pushing; [`FrictionField`]): the residuals of
+    /// `x`, `y`, `θ` each divided by its RMS, and per row the prediction's sensitivity to the
+    /// centre of friction's two coordinates and to the limit-surface ratio on the same scale,
+    /// by forward differences of the model with a `com_offset` at its value (0 when it has
+    /// none).
+    fn friction_regression(
+        &self,
+        physics: &PhysicsModel,
+        ctx: &Ctx,
+    ) -> Result<(Regression, FrictionField), DiscoveryError> {
+        const STEP_M: f64 = 1e-3;
+        const STEP_REL: f64 = 1e-3;
+        let n = self.trans.len();
+        let dp = self.dp;
+        let targets = [Target::X, Target::Y, Target::Theta];
+        let r: Vec<f64> = (0..n)
+            .flat_map(|i| targets.map(|t| self.residual(ctx, i, t)))
+            .collect();
+        let mut base = physics.clone();
+        if !physics.effects().contains(&Effect::ComOffset) {
+            base = base.with_effects(&[Effect::ComOffset])?;
+            for name in ["com_offset.ox", "com_offset.oy"] {
+                base.set_param(name, 0.0)?;
+            }
+        }
+        let step = |name: &str, by: f64| -> Result<Vec<f64>, DiscoveryError> {
+            let mut m = base.clone();
+            let v = m.param_index(name).map_or(0.0, |i| m.params()[i]);
+            m.set_param(name, v + by)?;
+            let mut pred = vec![0.0; n * dp];
+            m.integrate_step(&ctx.solver, n, &self.s0, &self.u0, ctx.h, &mut pred);
+            Ok(pred)
+        };
+        let p0 = step("c", 0.0)?;
+        let c = base.params()[base.param_index("c").unwrap_or(0)];
+        let moved = [
+            (step("com_offset.ox", STEP_M)?, STEP_M),
+            (step("com_offset.oy", STEP_M)?, STEP_M),
+            // per relative change of `c`: the third moment is one
+            (step("c", STEP_REL * c)?, STEP_REL),
+        ];
+        let mut g = vec![0.0; n * 9];
+        for i in 0..n {
+            for (row, col) in (0..3).flat_map(|row| (0..3).map(move |col| (row, col))) {
+                let (pred, by) = &moved[col];
+                let mut d = pred[i * dp + row] - p0[i * dp + row];
+                if row == ctx.angle {
+                    d = wrap_angle(d);
+                }
+                g[i * 9 + row * 3 + col] = d / by / ctx.h;
+            }
+        }
+        let [a, b] = ["a", "b"].map(|name| {
+            physics
+                .param_index(name)
+                .map_or(0.1, |i| physics.params()[i])
+        });
+        let field = FrictionField::new(&self.s0, dp, a, b);
+        Ok((Regression::moments(Target::Friction, &r, &g, n), field))
     }
 
     /// The regression of the car's input `target` (`δ`, `μ`): the three velocity residuals
@@ -718,23 +921,23 @@ pub(crate) fn area_of(points: &[[f64; 2]]) -> Area {
     Area { lo, hi }
 }
 
-/// The strip and the bump that explain the most of the grip regression `reg` alone, their
+/// The strip and the bump that explain the most of a region's regression alone (`gain`: the
+/// squared residual a region removes fitted alone, the grip's or the table friction's), their
 /// shapes (a strip's direction, offset and width; a bump's centre and width) screened on a fine
-/// lattice over the positions of `one`: the library's coarse lattice places a region's edges
+/// lattice over the area of the positions: the library's coarse lattice places a region's edges
 /// only to within its spacing (a band of the true direction, a third of the floor off, removed
 /// under half of what the band removes). A strip is flat inside with sharp edges, as a stripe
 /// of other grip is; a Gaussian band fitted the same way takes too much at its centre line and
 /// spreads past the edges. The best strip is then refined off the lattice ([`refine`]). They
 /// join the library as two more candidates.
-fn fitted_regions(reg: &Regression, one: &OneStep) -> Vec<Feature> {
+fn fitted_regions(area: Area, gain: &dyn Fn(&Atom) -> Option<f64>) -> Vec<Feature> {
     const ANGLES: usize = 36;
     const OFFSETS: usize = 30;
     const CENTRES: usize = 15;
     const BUMP_WIDTHS: [f64; 4] = [0.04, 0.07, 0.1, 0.14];
     // full widths of a strip: 12, geometric from 6 to 45 % of the area's larger side
     const STRIP_WIDTHS: usize = 12;
-    let sums = RowSums::of(reg, one.positions());
-    let Area { lo, hi } = sums.area();
+    let Area { lo, hi } = area;
     let side = (hi[0] - lo[0]).max(hi[1] - lo[1]).max(1e-3);
     let round = round3;
     let strip = |[a, d, w]: [f64; 3]| Atom::Strip { a, d, w };
@@ -767,8 +970,8 @@ fn fitted_regions(reg: &Regression, one: &OneStep) -> Vec<Feature> {
                 r,
             })
     });
-    let refined = best_shape(&sums, strips, strip).map(|shape| {
-        let gain = |shape| sums.gain(&strip(shape)).unwrap_or(f64::NEG_INFINITY);
+    let refined = best_shape(gain, strips, strip).map(|shape| {
+        let gain = |shape| gain(&strip(shape)).unwrap_or(f64::NEG_INFINITY);
         // steps: half the lattice's direction and offset spacings, a tenth of the width
         let steps = [
             std::f64::consts::PI / 72.0,
@@ -777,22 +980,22 @@ fn fitted_regions(reg: &Regression, one: &OneStep) -> Vec<Feature> {
         ];
         strip(refine(shape, steps, 40, gain).map(round))
     });
-    [refined, best_shape(&sums, bumps, |atom| atom)]
+    [refined, best_shape(gain, bumps, |atom| atom)]
         .into_iter()
         .flatten()
         .filter_map(|atom| Feature::new(vec![atom]).ok())
         .collect()
 }
 
-/// The shape among `shapes` whose region (`atom`) explains the most of `sums`' regression.
+/// The shape among `shapes` whose region (`atom`) explains the most of a regression (`gain`).
 fn best_shape<T: Copy>(
-    sums: &RowSums,
+    gain: &dyn Fn(&Atom) -> Option<f64>,
     shapes: impl Iterator<Item = T>,
     atom: impl Fn(T) -> Atom,
 ) -> Option<T> {
     let mut best: Option<(f64, T)> = None;
     for shape in shapes {
-        if let Some(gain) = sums.gain(&atom(shape))
+        if let Some(gain) = gain(&atom(shape))
             && best.is_none_or(|b| gain > b.0)
         {
             best = Some((gain, shape));
@@ -881,34 +1084,8 @@ pub fn strip_through(
         return Ok(None);
     }
     let ctx = Ctx::new(physics.robot(), trajs, ws, k, solver, h);
-    let fit_w = ws[0];
-    let mut r0 = Vec::new();
-    ctx.errors(physics, fit_w, Some(&mut r0));
-    let mut name = "strip".to_string();
-    while physics.custom_effects().iter().any(|c| c.name() == name) {
-        name.push('_');
-    }
-    let round = round3;
-    let strip = |[a, d, w]: [f64; 3]| Feature::new(vec![Atom::Strip { a, d, w }]).ok();
-    let mut failed = None;
-    let mut gain = |shape: [f64; 3]| -> f64 {
-        let Some(feature) = strip(shape.map(round)) else {
-            return f64::NEG_INFINITY;
-        };
-        let term = bounded_term(Target::Grip, feature, coefficient);
-        let h = term.coefficient;
-        let mut m = physics.clone();
-        if let Err(e) = CustomEffect::new(&name, vec![term])
-            .map_err(|e| DiscoveryError::Physics(ModelError::Custom(e)))
-            .and_then(|e| m.add_custom(e).map_err(DiscoveryError::from))
-        {
-            failed.get_or_insert(e);
-            return f64::NEG_INFINITY;
-        }
-        let mut r1 = Vec::new();
-        ctx.errors(&m, fit_w, Some(&mut r1));
-        secant_gain(&r0, &r1, h).unwrap_or(f64::NEG_INFINITY)
-    };
+    let mut strips = StripGain::new(physics, &ctx, ws[0], Target::Grip, coefficient);
+    let mut gain = |shape: [f64; 3]| strips.gain(shape);
     let mut best: Option<(f64, [f64; 3])> = None;
     let mut try_shape = |shape: [f64; 3], best: &mut Option<(f64, [f64; 3])>| {
         let g = gain(shape);
@@ -936,10 +1113,81 @@ pub fn strip_through(
         let steps = [std::f64::consts::PI / (2 * ANGLES) as f64, 0.25 * r, 0.1];
         refine(shape, steps, 12, &mut gain)
     });
-    if let Some(e) = failed {
-        return Err(e);
+    strips.finish(refined)
+}
+
+/// The Gauss–Newton gain on the k-step error of the fit windows (the forward selection's
+/// score of a pick) of a strip term `target += coefficient·s(a, d; w)` added to a model, as a
+/// function of the strip's shape `[a, d, w]` (rounded to the millimetre and milliradian).
+struct StripGain<'a> {
+    physics: &'a PhysicsModel,
+    ctx: &'a Ctx<'a>,
+    fit_w: &'a [Window],
+    r0: Vec<f64>,
+    name: String,
+    target: Target,
+    coefficient: f64,
+    failed: Option<DiscoveryError>,
+}
+
+impl<'a> StripGain<'a> {
+    fn new(
+        physics: &'a PhysicsModel,
+        ctx: &'a Ctx<'a>,
+        fit_w: &'a [Window],
+        target: Target,
+        coefficient: f64,
+    ) -> Self {
+        let mut r0 = Vec::new();
+        ctx.errors(physics, fit_w, Some(&mut r0));
+        let mut name = "strip".to_string();
+        while physics.custom_effects().iter().any(|c| c.name() == name) {
+            name.push('_');
+        }
+        Self {
+            physics,
+            ctx,
+            fit_w,
+            r0,
+            name,
+            target,
+            coefficient,
+            failed: None,
+        }
     }
-    Ok(refined.and_then(|shape| strip(shape.map(round))))
+
+    fn strip(shape: [f64; 3]) -> Option<Feature> {
+        let [a, d, w] = shape.map(round3);
+        Feature::new(vec![Atom::Strip { a, d, w }]).ok()
+    }
+
+    /// The gain of the strip `shape` (−∞ where it cannot be a term).
+    fn gain(&mut self, shape: [f64; 3]) -> f64 {
+        let Some(feature) = Self::strip(shape) else {
+            return f64::NEG_INFINITY;
+        };
+        let term = bounded_term(self.target, feature, self.coefficient);
+        let h = term.coefficient;
+        let mut m = self.physics.clone();
+        if let Err(e) = CustomEffect::new(&self.name, vec![term])
+            .map_err(|e| DiscoveryError::Physics(ModelError::Custom(e)))
+            .and_then(|e| m.add_custom(e).map_err(DiscoveryError::from))
+        {
+            self.failed.get_or_insert(e);
+            return f64::NEG_INFINITY;
+        }
+        let mut r1 = Vec::new();
+        self.ctx.errors(&m, self.fit_w, Some(&mut r1));
+        secant_gain(&self.r0, &r1, h).unwrap_or(f64::NEG_INFINITY)
+    }
+
+    /// The strip of `shape`, or the first error a model with a strip gave.
+    fn finish(self, shape: Option<[f64; 3]>) -> Result<Option<Feature>, DiscoveryError> {
+        match self.failed {
+            Some(e) => Err(e),
+            None => Ok(shape.and_then(Self::strip)),
+        }
+    }
 }
 
 /// The steering term `δ·vₓ²/(vₓ² + v₀²)` whose speed scale `v₀`, screened on a fine lattice
@@ -1264,8 +1512,13 @@ pub fn discover_terms_split(
         })
         .collect();
     let mut regs: Vec<Regression> = Vec::new();
+    let mut field: Option<FrictionField> = None;
     for &target in &targets {
-        regs.push(if target.is_input() {
+        regs.push(if target.is_field() {
+            let (reg, f) = one.friction_regression(physics, &ctx)?;
+            field = Some(f);
+            reg
+        } else if target.is_input() {
             one.input_regression(physics, &ctx, target)?
         } else {
             Regression::direct(
@@ -1284,13 +1537,45 @@ pub fn discover_terms_split(
     if cfg.grid > 0
         && let Some(reg) = regs.iter().find(|r| r.target == Target::Grip)
     {
-        for f in fitted_regions(reg, &one)
+        let sums = RowSums::of(reg, one.positions());
+        for f in fitted_regions(sums.area(), &|atom| sums.gain(atom))
             .into_iter()
             .chain(shapes.iter().map(|s| s.0.clone()))
         {
             if !feats.contains(&f) {
                 feats.push(f);
                 fitted_for.push(Target::Grip);
+            }
+        }
+    }
+    // the table's friction: its regions screened on their moments over the footprint
+    if cfg.grid > 0
+        && let (Some(reg), Some(field)) = (
+            regs.iter().find(|r| r.target == Target::Friction),
+            field.as_ref(),
+        )
+    {
+        let fit = |atom: &Atom| FrictionField::fit(reg, &field.of_atom(atom, n));
+        let area = area_of(&one.positions());
+        let side = (area.hi[0] - area.lo[0]).max(area.hi[1] - area.lo[1]);
+        for f in fitted_regions(area, &|atom| fit(atom).map(|g| g.0)) {
+            // a strip's shape then refined on the fit half's k-step error: the moments are a
+            // first order, and a stripe of 2.5 times the friction is not a small change (the
+            // screen's direction was 0.2 rad off on one of five blocks)
+            let f = match f.factors() {
+                [atom @ Atom::Strip { a, d, w }] => {
+                    let coefficient = fit(atom).map_or(1.0, |g| g.1);
+                    let mut strips =
+                        StripGain::new(physics, &ctx, fit_w, Target::Friction, coefficient);
+                    let steps = [std::f64::consts::PI / 72.0, 0.02 * side, 0.1];
+                    let shape = refine([*a, *d, *w], steps, 12, |shape| strips.gain(shape));
+                    strips.finish(Some(shape))?.unwrap_or(f)
+                }
+                _ => f,
+            };
+            if !feats.contains(&f) {
+                feats.push(f);
+                fitted_for.push(Target::Friction);
             }
         }
     }
@@ -1342,6 +1627,20 @@ pub fn discover_terms_split(
             x[i * nf + f] = if v.is_finite() { v } else { 0.0 };
         }
     }
+    // the moments over the footprint of the features tried on the table's friction (`n × 3`
+    // per feature; empty for the others)
+    let moments: Vec<Vec<f64>> = (0..nf)
+        .map(|f| match &field {
+            Some(field) if tried(Target::Friction, f) => (0..n)
+                .flat_map(|i| {
+                    field.moments(i, |p| {
+                        feats[f].eval(robot, params, &[p[0], p[1], s0[i * dp + 2]], &[])
+                    })
+                })
+                .collect(),
+            _ => Vec::new(),
+        })
+        .collect();
     let cluster: Vec<usize> = trans.iter().map(|&(ti, _)| ti).collect();
     let pairs: usize = targets
         .iter()
@@ -1370,7 +1669,10 @@ pub fn discover_terms_split(
             .collect();
         // the term's column, fitted alone
         let jac: Vec<f64> = (0..n * reg.rows)
-            .map(|j| reg.gain[j] * x[(j / reg.rows) * nf + f])
+            .map(|j| match reg.by_moments() {
+                true => moment_column(reg, &moments[f], j),
+                false => reg.gain[j] * x[(j / reg.rows) * nf + f],
+            })
             .collect();
         let jj: f64 = jac.iter().map(|v| v * v).sum();
         if jj.is_nan() || jj <= 0.0 {
@@ -1728,7 +2030,16 @@ pub fn discover_terms_split(
                 one_step_t: pick.t,
                 one_step_share: pick.share,
                 plot: term_plot(
-                    &regs,
+                    &{
+                        let reg = regs
+                            .iter()
+                            .find(|r| r.target == pick.target)
+                            .expect("a regression per target");
+                        match reg.by_moments() {
+                            true => FrictionField::points(reg, &moments[pick.feature]),
+                            false => reg.point.clone(),
+                        }
+                    },
                     pick.target,
                     &feature,
                     &x,
@@ -2213,7 +2524,7 @@ fn erfc(x: f64) -> f64 {
 /// The binned residual of `target` against feature column `f`.
 #[allow(clippy::too_many_arguments)]
 fn term_plot(
-    regs: &[Regression],
+    pts: &[(f64, f64)],
     target: Target,
     feature: &Feature,
     x: &[f64],
@@ -2223,11 +2534,6 @@ fn term_plot(
     bins: usize,
     time: &str,
 ) -> TermPlot {
-    let pts = &regs
-        .iter()
-        .find(|r| r.target == target)
-        .expect("a regression per target")
-        .point;
     let mut idx: Vec<usize> = (0..pts.len()).collect();
     idx.sort_by(|&a, &b| x[a * nf + f].total_cmp(&x[b * nf + f]));
     let nb = bins.max(1).min(idx.len().max(1));

@@ -1006,3 +1006,56 @@ fn a_grip_term_scales_the_tires_peak_forces() {
     );
     check_field_jacobians(&region, s, &u);
 }
+
+#[test]
+fn a_table_friction_term_turns_a_block_that_straddles_its_edge_and_no_other() {
+    let strip = |d: f64, w: f64, c: f64| {
+        CustomEffect::from_toml(&format!(
+            "name = \"stripe\"\n[[term]]\nstate = \"friction\"\nfeature = \"strip(0,{d},{w})\"\ncoefficient = {c}\n"
+        ))
+        .unwrap()
+    };
+    // a central push along the block's x at heading 0: no turn on a uniform table
+    let (s, u) = ([0.3, 0.1, 0.0], [0.0, 0.0, 0.7]);
+    for surface in [LimitSurface::Ellipsoid, LimitSurface::SupportPoints] {
+        let mut plain = PhysicsModel::pushing(&[]).unwrap();
+        plain.set_limit_surface(surface).unwrap();
+        let (mut f0, mut f) = ([0.0; 3], [0.0; 3]);
+        plain.eval_one(&s, &u, &mut f0);
+        assert!(f0[2].abs() < 1e-9, "{surface}: {f0:?}");
+        // 2.5 times the friction over the block's +y half (the stripe y ∈ [0.1, 1.1]): the
+        // centre of friction moves to +y, the push passes on its −y side, the block turns
+        // towards +y (counter-clockwise)
+        let mut half = plain.clone();
+        half.add_custom(strip(0.6, 1.0, 1.5)).unwrap();
+        half.eval_one(&s, &u, &mut f);
+        assert!(f[2] > 0.05, "{surface}: θ̇ {} on the stripe's edge", f[2]);
+        check_field_jacobians(&half, &s, &u);
+        // all of the footprint on the stripe, or none of it: the motion of the uniform table
+        for d in [0.1, 3.0] {
+            let mut on = plain.clone();
+            on.add_custom(strip(d, 1.0, 1.5)).unwrap();
+            on.eval_one(&s, &u, &mut f);
+            assert!(
+                max_rel_diff(&f, &f0) < 1e-9,
+                "{surface} d {d}: {f:?} vs {f0:?}"
+            );
+        }
+    }
+    // the friction is a property of the place: features of the motion are refused, and a
+    // region's coefficient keeps the friction positive
+    let file = |feature: &str, c: f64| {
+        format!(
+            "name = \"t\"\n[[term]]\nstate = \"friction\"\nfeature = \"{feature}\"\ncoefficient = {c}\n"
+        )
+    };
+    let e = CustomEffect::from_toml(&file("l*x", 0.5)).unwrap_err();
+    assert!(matches!(e, CustomError::NotAField { .. }), "{e}");
+    assert!(e.to_string().contains("position alone"), "{e}");
+    assert!(CustomEffect::from_toml(&file("strip(0,0.1,0.2)", -1.2)).is_err());
+    let ok = CustomEffect::from_toml(&file("x", -3.0)).unwrap();
+    assert_eq!(ok.terms()[0].target, Target::Friction);
+    assert!(Target::Friction.searched_with(&Feature::parse("strip(0,0.1,0.2)").unwrap()));
+    assert!(!Target::Friction.searched_with(&Feature::parse("x").unwrap()));
+    assert!(!Target::Friction.searched_with(&Feature::parse("1").unwrap()));
+}

@@ -102,3 +102,31 @@ def test_an_offset_centre_of_mass_is_named_and_the_ellipsoid_replaced_by_the_sup
     values = {q["name"]: q["value"] for q in m["physics"]["params"]}
     assert values["a"] == pytest.approx(0.098) and values["b"] == pytest.approx(0.094), values
     assert values["com_offset.ox"] == pytest.approx(0.010, abs=0.0015), values
+
+
+def test_a_band_of_more_table_friction_is_a_friction_strip_beyond_the_library_and_applied(block1):
+    """Block 1 of `eval_foreign_push.py`'s `friction_band*` case: a 0.2 m wide band through
+    (0, 0.1) at 0.4 rad where the table's friction is 2.5 times the rest's. The library's disc
+    patch does not explain it (a band turns a block only while the block straddles one of its
+    two straight edges); the term search's table-friction strip is the band, with about its
+    factor, and `--apply` trains the model with it."""
+    d, model, size = block1
+    bag = generate(d / "friction_band", 1012, "friction_band")
+    out = d / "band_diagnosis"
+    # (the disc alone among the library's candidates, for time)
+    proc = run("dynlab", "diagnose", "--model", model, "--bag", bag, "--out", out, "--seed", "1",
+               "--effects", "friction_patch", "--apply", *TOPICS, timeout=900)
+    j = json.loads((out / "diagnosis.json").read_text())
+    assert j["effects"] == [], proc.stdout
+    disc = j["discovery"]
+    terms = [t for t in disc["terms"] if t["significant"]]
+    assert terms and terms[0]["state"] == "friction" and terms[0]["feature"].startswith("strip("), disc["summary"]
+    a, off, w = (float(v) for v in terms[0]["feature"][len("strip("):-1].split(","))
+    # the band: direction 0.4 rad, its centre line 0.1·cos 0.4 = 0.092 m from the origin, 0.2 m wide
+    assert abs(a - 0.4) < 0.1 and abs(off - 0.092) < 0.02 and abs(w - 0.2) < 0.03, terms[0]["feature"]
+    assert 1.0 < terms[0]["coefficient"] < 2.2, terms[0]["equation"]
+    assert disc["error_reduction"] >= 0.5, disc["summary"]
+    applied = json.loads((out / "model" / "model.json").read_text())
+    assert '"friction"' in json.dumps(applied["physics"]), applied["physics"]
+    for s_ in size:
+        assert f"--set {s_}" in proc.stdout, proc.stdout

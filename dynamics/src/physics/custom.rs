@@ -23,6 +23,11 @@
 //! in the **block frame** (rotated by the block's current heading `θ`), for effects that move
 //! with the block (an offset load, a skewed contact). A quasi-static block moves only while
 //! pushed: multiply pushing features by `l` (`ℓ`) unless the term should act without a push.
+//! `friction` (`μ`, dimensionless) scales the table's friction under each of the block's
+//! support points by `1 + Σ θ·feature` evaluated at the point's place on the table (features of
+//! the position alone): `μ += 1.5·strip(0.4,0.1,0.2)` is a stripe of 2.5 times the friction,
+//! which turns a block that straddles its edge. Friction that is the same all over the
+//! footprint does not move a quasi-static block.
 //!
 //! A custom effect is linear in its parameters (one coefficient per term). In a
 //! [`PhysicsModel`](super::PhysicsModel) the coefficients are appended to the parameter vector
@@ -63,9 +68,13 @@ pub enum Target {
     BlockX,
     /// Pushing: block-frame y rate (per push), rotated into the world by `θ`.
     BlockY,
+    /// Pushing: the table's friction `μ`, a scale `1 + μ` of the friction under each of the
+    /// block's support points, the feature evaluated at the point's place on the table (a
+    /// correction through the friction model, not a derivative).
+    Friction,
 }
 
-const TARGETS: [(Target, &str, &str, Unit, Robot); 10] = [
+const TARGETS: [(Target, &str, &str, Unit, Robot); 11] = [
     (Target::Vx, "vx", "v̇ₓ", Unit::new(1, -2), Robot::Car),
     (Target::Vy, "vy", "v̇_y", Unit::new(1, -2), Robot::Car),
     (Target::Omega, "omega", "ω̇", Unit::new(0, -2), Robot::Car),
@@ -92,6 +101,13 @@ const TARGETS: [(Target, &str, &str, Unit, Robot); 10] = [
         "by",
         "ẏ_b",
         Unit::new(1, -1),
+        Robot::Pushing,
+    ),
+    (
+        Target::Friction,
+        "friction",
+        "μ",
+        Unit::new(0, 0),
         Robot::Pushing,
     ),
 ];
@@ -169,7 +185,9 @@ impl Target {
     /// custom effect file may still put any feature on `δ`. On the grip `μ` only features of the position (`x`,
     /// `y`, the bumps and bands): a grip that changes everywhere alike is the tires' own
     /// parameters, a grip that changes with the motion is a tire model's shape. The bands are
-    /// tried on `μ` only (a strip of other grip across a floor).
+    /// tried on `μ` only (a strip of other grip across a floor). On the table's friction only
+    /// regions (bumps, bands, strips): a friction that changes everywhere alike does not move
+    /// a quasi-static block at all.
     pub fn searched_with(self, feature: &Feature) -> bool {
         let all = |ok: fn(&Atom) -> bool| feature.factors().iter().all(ok);
         let lagged = |input: usize| {
@@ -199,6 +217,7 @@ impl Target {
                     })
             }
             Target::Grip => all(Atom::is_position),
+            Target::Friction => !feature.factors().is_empty() && all(Atom::is_region),
             Target::Vx => {
                 lagged(1) && all(|a| !matches!(a, Atom::Band { .. } | Atom::Strip { .. }))
             }
@@ -217,10 +236,17 @@ impl Target {
         }
     }
 
-    /// Whether the target corrects an input of the tire model (`δ`, `μ`) rather than adding to
-    /// a derivative.
+    /// Whether the target corrects an input of the tire or friction model (`δ`, `μ`) rather
+    /// than adding to a derivative.
     pub fn is_input(self) -> bool {
-        matches!(self, Target::Delta | Target::Grip)
+        matches!(self, Target::Delta | Target::Grip | Target::Friction)
+    }
+
+    /// Whether the target is evaluated at places on the table or floor rather than at the
+    /// state: the table's friction, at each support point of the block. Its features are then
+    /// of the position alone.
+    pub fn is_field(self) -> bool {
+        self == Target::Friction
     }
 
     /// Looks a target up by name.
@@ -232,7 +258,7 @@ impl Target {
             .ok_or_else(|| CustomError::UnknownState {
                 name: name.to_string(),
                 known:
-                    "car: vx, vy, omega, delta (the effective steering angle), grip (a scale of the tires' peak forces); pushing: x, y, theta (world frame), bx, by (block frame)"
+                    "car: vx, vy, omega, delta (the effective steering angle), grip (a scale of the tires' peak forces); pushing: x, y, theta (world frame), bx, by (block frame), friction (a scale of the table's friction under the block)"
                         .into(),
             })
     }
@@ -275,7 +301,7 @@ pub enum CustomError {
     },
     /// A coefficient that is not finite or outside its bounds ([`CustomTerm::bounds`]).
     #[error(
-        "custom effect '{effect}', term {term}: coefficient {value} must be finite within [{lower}, {upper}] (a grip term on a region keeps the grip between 5 % and 4 × the rest's)"
+        "custom effect '{effect}', term {term}: coefficient {value} must be finite within [{lower}, {upper}] (a grip term on a region keeps the grip between 5 % and 4 × the rest's, a table-friction term the friction between 5 % and 10 ×)"
     )]
     BadCoefficient {
         /// The effect.
@@ -288,6 +314,18 @@ pub enum CustomError {
         lower: f64,
         /// Its bounds.
         upper: f64,
+    },
+    /// A table-friction term on a feature that is not of the position alone.
+    #[error(
+        "custom effect '{effect}', term {term}: the table's friction is a property of the place, so its feature must be of the position alone (x, y, gauss(…), band(…), strip(…)), not '{feature}'"
+    )]
+    NotAField {
+        /// The effect.
+        effect: String,
+        /// The term index.
+        term: usize,
+        /// The feature given.
+        feature: String,
     },
     /// Terms of both robots.
     #[error(
@@ -324,6 +362,10 @@ pub struct CustomTerm {
 /// the grip there stays between 5 % and 4 × the rest's.
 pub const GRIP_REGION_BOUNDS: (f64, f64) = (-0.95, 3.0);
 
+/// Bounds of a table-friction term's coefficient on a region: the friction there between 5 %
+/// and 10 × the rest's (PTFE on steel against rubber on wood spans more).
+pub const FRICTION_REGION_BOUNDS: (f64, f64) = (-0.95, 9.0);
+
 impl CustomTerm {
     /// Unit of the coefficient: the derivative's over the feature's.
     pub fn coefficient_unit(&self) -> Unit {
@@ -331,14 +373,15 @@ impl CustomTerm {
     }
 
     /// Bounds of the coefficient: [`GRIP_REGION_BOUNDS`] for a grip term on a region (a
-    /// coefficient below −1 would make the tires push, not grip), else `±`[`COEFFICIENT_BOUND`].
+    /// coefficient below −1 would make the tires push, not grip), [`FRICTION_REGION_BOUNDS`]
+    /// for a table-friction term on one, else `±`[`COEFFICIENT_BOUND`].
     pub fn bounds(&self) -> (f64, f64) {
         let region = !self.feature.factors().is_empty()
             && self.feature.factors().iter().all(Atom::is_region);
-        if self.target == Target::Grip && region {
-            GRIP_REGION_BOUNDS
-        } else {
-            (-COEFFICIENT_BOUND, COEFFICIENT_BOUND)
+        match self.target {
+            Target::Grip if region => GRIP_REGION_BOUNDS,
+            Target::Friction if region => FRICTION_REGION_BOUNDS,
+            _ => (-COEFFICIENT_BOUND, COEFFICIENT_BOUND),
         }
     }
 }
@@ -367,7 +410,7 @@ pub struct CustomEffectSpec {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct CustomTermSpec {
-    /// Target state (`vx`, `vy`, `omega`; `x`, `y`, `theta`, `bx`, `by`).
+    /// Target state (`vx`, `vy`, `omega`; `x`, `y`, `theta`, `bx`, `by`, `friction`).
     pub state: String,
     /// Feature (`delta*vx`).
     pub feature: String,
@@ -400,6 +443,13 @@ impl TryFrom<CustomEffectSpec> for CustomEffect {
                     term: j,
                     source,
                 })?;
+            if target.is_field() && !feature.factors().iter().all(Atom::is_position) {
+                return Err(CustomError::NotAField {
+                    effect: name,
+                    term: j,
+                    feature: feature.name(),
+                });
+            }
             let term = CustomTerm {
                 target,
                 feature,
@@ -547,6 +597,11 @@ impl CustomEffect {
         )
     }
 
+    /// Whether a term acts on `target`.
+    pub fn acts_on(&self, target: Target) -> bool {
+        self.terms.iter().any(|t| t.target == target)
+    }
+
     /// The correction of the input `target` (`δ`, `μ`): the sum of its terms with coefficients
     /// `theta` (0 without such terms).
     pub(crate) fn input<R: Real>(
@@ -573,7 +628,7 @@ impl CustomEffect {
             let v = c * t.feature.eval(self.robot, p, s, u);
             match t.target {
                 // input corrections: `input`
-                Target::Delta | Target::Grip => {}
+                Target::Delta | Target::Grip | Target::Friction => {}
                 Target::Vx => out[3] = out[3] + v,
                 Target::Vy => out[4] = out[4] + v,
                 Target::Omega => out[5] = out[5] + v,

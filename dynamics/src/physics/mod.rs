@@ -41,7 +41,9 @@ pub use custom::{CustomEffect, CustomError, CustomTerm, Target};
 pub use features::{Feature, FeatureError};
 pub use fit::{ResidualJacobian, Transition, residuals, residuals_and_jacobian};
 pub use model::{EffectTerm, ModelError, PhysicsModel};
-pub use push::{LimitSurface, PUSH_FITTED_PARAMS, PUSH_NOMINAL_PARAMS, PUSHER_RADIUS_M};
+pub use push::{
+    LimitSurface, PUSH_FITTED_PARAMS, PUSH_NOMINAL_PARAMS, PUSHER_RADIUS_M, support_grid,
+};
 pub use step::StepTape;
 
 use crate::ode::InputTape;

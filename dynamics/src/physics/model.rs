@@ -606,8 +606,13 @@ impl PhysicsModel {
         }
     }
 
+    /// Whether a custom effect has a term on `target`.
+    pub(crate) fn has_custom_target(&self, target: Target) -> bool {
+        self.custom.iter().any(|c| c.acts_on(target))
+    }
+
     /// The custom effects' correction of the input `target` (`δ`, `μ` terms).
-    fn custom_input<R: Real>(&self, target: Target, p: &[R], s: &[R], u: &[R]) -> R {
+    pub(crate) fn custom_input<R: Real>(&self, target: Target, p: &[R], s: &[R], u: &[R]) -> R {
         let mut off = self.custom_start();
         let mut d = R::cst(0.0);
         for c in &self.custom {

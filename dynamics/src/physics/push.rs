@@ -64,6 +64,7 @@
 //! support grid of `com_offset` and `friction_patch` spans the `a × b` footprint.
 
 use super::car::disc;
+use super::custom::Target;
 use super::{Effect, ParamSpec, PhysicsModel, ps};
 use crate::conventions::PUSH_MAX_LENGTH_M;
 use crate::real::Real;
@@ -173,6 +174,21 @@ pub const PUSHER_RADIUS_M: f64 = 0.01;
 
 /// Support grid of the `friction_patch` term: `N × N` points over the footprint.
 const PATCH_GRID: usize = 5;
+
+/// Least scale of the table's friction under a support point from the custom terms on it
+/// (a term on `x` or `y` grows without bound across the table).
+const MIN_FRICTION_SCALE: f64 = 0.05;
+
+/// The support points of a block of depth `a` and width `b` (block frame, about its centre):
+/// the `N × N` grid of cell centres the friction model places under the footprint, where the
+/// table's friction is read.
+pub fn support_grid(a: f64, b: f64) -> Vec<[f64; 2]> {
+    let nn = PATCH_GRID as f64;
+    let at = |i: usize| (i as f64 + 0.5) / nn - 0.5;
+    (0..PATCH_GRID)
+        .flat_map(|i| (0..PATCH_GRID).map(move |j| [a * at(i), b * at(j)]))
+        .collect()
+}
 
 /// How sharply the flat pusher's touching corner switches sides as its turn against the face
 /// passes zero: `sgn(sin β) ≈ tanh(sin β / FLAT_SWITCH)`. Around alignment the pad touches
@@ -298,17 +314,24 @@ pub(crate) fn rhs_line<R: Real>(
             _ => {}
         }
     }
+    // the table's friction from the custom terms on it, at a place on the table
+    let field = model
+        .has_custom_target(Target::Friction)
+        .then_some(|wx: R, wy: R| model.custom_input(Target::Friction, p, &[wx, wy, th], &[]));
+    let uneven = com.is_some() || patch.is_some() || field.is_some();
     // the support points where the friction model needs them, computed once
     let exact = model.limit_surface() == LimitSurface::SupportPoints;
-    let support = (exact || com.is_some() || patch.is_some())
-        .then(|| support_points([a, b], c, [x, y, th], com, patch));
+    let support = (exact || uneven).then(|| {
+        let field = field.as_ref().map(|f| f as &dyn Fn(R, R) -> R);
+        support_points([a, b], c, [x, y, th], com, patch, field)
+    });
     let (pts, friction) = match support {
         Some((pts, k)) => (Some(pts), k),
         None => (None, R::cst(1.0)),
     };
     // centre of friction and limit-surface ratio of the support distribution
     let (ox, oy, c) = match &pts {
-        Some(pts) if com.is_some() || patch.is_some() => support_friction(pts),
+        Some(pts) if uneven => support_friction(pts),
         _ => (zero, zero, c),
     };
     let (st, ct) = (th.sin(), th.cos());
@@ -439,16 +462,18 @@ pub(crate) fn rhs_line<R: Real>(
 /// friction weights `wᵢ ∝ Nᵢ·μᵢ`, `Σ wᵢ = 1` — the normal load varies linearly so that its
 /// centroid is the centre of mass (`com_offset`: `Nᵢ ∝ max(0, 1 + o_x xᵢ/⟨x²⟩ + o_y yᵢ/⟨y²⟩)`,
 /// the simulator's load model), and `μᵢ/μ = 1 + (k − 1)·σ((r − ‖pᵢ − c‖)/w)` on a disc patch
-/// (`friction_patch`). The arms about the weighted centroid are scaled by `c` over the uniform
-/// grid's mean distance from the centre, so that `c` is the limit-surface ratio of the uniform
-/// support. Also returned: the block's friction limit over the table's, `Σ Nᵢμᵢ / (μ Σ Nᵢ)`
-/// (1 off a patch).
+/// (`friction_patch`), times `1 + field(pᵢ)` (the custom terms on the table's friction, at
+/// least [`MIN_FRICTION_SCALE`]), `pᵢ` the point's place on the table. The arms about the
+/// weighted centroid are scaled by `c` over the uniform grid's mean distance from the centre,
+/// so that `c` is the limit-surface ratio of the uniform support. Also returned: the block's
+/// friction limit over the table's, `Σ Nᵢμᵢ / (μ Σ Nᵢ)` (1 off a patch).
 fn support_points<R: Real>(
     [a, b]: [R; 2],
     c: R,
     [x, y, th]: [R; 3],
     com: Option<(R, R)>,
     patch: Option<&[R]>,
+    field: Option<&dyn Fn(R, R) -> R>,
 ) -> (Vec<[R; 3]>, R) {
     let (st, ct) = (th.sin(), th.cos());
     let nn = PATCH_GRID as f64;
@@ -472,10 +497,19 @@ fn support_points<R: Real>(
                 wi = if l.value() > 0.0 { l } else { R::cst(0.0) };
             }
             load = load + wi;
+            let wx = x + ct * lx - st * ly;
+            let wy = y + st * lx + ct * ly;
             if let Some(q) = patch {
-                let wx = x + ct * lx - st * ly;
-                let wy = y + st * lx + ct * ly;
                 wi = wi * (disc(wx, wy, q[0], q[1], q[2], q[3]) * (q[4] - 1.0) + 1.0);
+            }
+            if let Some(f) = field {
+                let k = f(wx, wy) + 1.0;
+                wi = wi
+                    * if k.value() > MIN_FRICTION_SCALE {
+                        k
+                    } else {
+                        R::cst(MIN_FRICTION_SCALE)
+                    };
             }
             // + 1e-12: the distance of the grid's centre point has no derivative at 0
             uniform = uniform + (lx * lx + ly * ly + 1e-12).sqrt();
