@@ -126,7 +126,10 @@ def test_a_band_of_more_table_friction_is_a_friction_strip_beyond_the_library_an
     assert abs(a - 0.4) < 0.1 and abs(off - 0.092) < 0.02 and abs(w - 0.2) < 0.03, terms[0]["feature"]
     assert 1.0 < terms[0]["coefficient"] < 2.2, terms[0]["equation"]
     assert disc["error_reduction"] >= 0.5, disc["summary"]
+    # trained with it: the term, refitted on the whole bag, keeps its strip and about its factor
     applied = json.loads((out / "model" / "model.json").read_text())
-    assert '"friction"' in json.dumps(applied["physics"]), applied["physics"]
+    [term] = [t for c in applied["physics"]["custom_effects"] for t in c["term"]]
+    assert term["state"] == "friction" and term["feature"] == terms[0]["feature"], applied["physics"]
+    assert 1.0 < term["coefficient"] < 2.2, term
     for s_ in size:
         assert f"--set {s_}" in proc.stdout, proc.stdout
