@@ -714,11 +714,29 @@ impl FrictionField {
         ]
     }
 
-    /// The moments of a region `atom` at every transition (`n × 3`).
+    /// The moments of a region `atom` at every transition (`n × 3`). A strip's value is the
+    /// feature's own, its direction's sine and cosine taken once and `tanh` skipped where it
+    /// is ±1 in f64 (`|x| ≥ 22`; most of the screen's time went to both).
     fn of_atom(&self, atom: &Atom, n: usize) -> Vec<f64> {
-        (0..n)
-            .flat_map(|i| self.moments(i, |p| atom.eval::<f64>(Robot::Pushing, &[], &p, &[])))
-            .collect()
+        let moments = |phi: &dyn Fn([f64; 2]) -> f64| -> Vec<f64> {
+            (0..n).flat_map(|i| self.moments(i, phi)).collect()
+        };
+        match *atom {
+            Atom::Strip { a, d, w } => {
+                let (sa, ca) = (a.sin(), a.cos());
+                let eps = 0.05 * w;
+                let tanh = |x: f64| match x {
+                    x if x >= 22.0 => 1.0,
+                    x if x <= -22.0 => -1.0,
+                    x => x.tanh(),
+                };
+                moments(&|p: [f64; 2]| {
+                    let e = p[1] * ca - p[0] * sa - d;
+                    (tanh((e + 0.5 * w) / eps) - tanh((e - 0.5 * w) / eps)) * 0.5
+                })
+            }
+            _ => moments(&|p: [f64; 2]| atom.eval::<f64>(Robot::Pushing, &[], &p, &[])),
+        }
     }
 
     /// The squared residual the region with moments `m` (`n × 3`) removes from `reg` fitted
