@@ -551,7 +551,7 @@ impl Regression {
     /// RMS residual. The pushes more than [`FRICTION_SCREEN_LIMIT`] times as sensitive as the
     /// median push are left out (their rows 0). The points of the plot are made per feature
     /// ([`FrictionField::points`]).
-    fn moments(target: Target, r: &[f64], g: &[f64], n: usize) -> Self {
+    fn moments(r: &[f64], g: &[f64], n: usize) -> Self {
         let w = row_weights(r, 3);
         let mut y: Vec<f64> = r.iter().enumerate().map(|(j, v)| v * w[j % 3]).collect();
         let mut gain: Vec<f64> = g
@@ -573,7 +573,7 @@ impl Regression {
             }
         }
         Self {
-            target,
+            target: Target::Friction,
             rows: 3,
             y,
             gain,
@@ -906,7 +906,7 @@ impl OneStep {
                 .map_or(0.1, |i| physics.params()[i])
         });
         let field = FrictionField::new(&self.s0, &self.pred, dp, a, b);
-        Ok((Regression::moments(Target::Friction, &r, &g, n), field))
+        Ok((Regression::moments(&r, &g, n), field))
     }
 
     /// The regression of the car's input `target` (`δ`, `μ`): the three velocity residuals

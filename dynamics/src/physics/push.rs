@@ -183,11 +183,15 @@ const MIN_FRICTION_SCALE: f64 = 0.05;
 /// the `N × N` grid of cell centres the friction model places under the footprint, where the
 /// table's friction is read.
 pub fn support_grid(a: f64, b: f64) -> Vec<[f64; 2]> {
-    let nn = PATCH_GRID as f64;
-    let at = |i: usize| (i as f64 + 0.5) / nn - 0.5;
     (0..PATCH_GRID)
-        .flat_map(|i| (0..PATCH_GRID).map(move |j| [a * at(i), b * at(j)]))
+        .flat_map(|i| (0..PATCH_GRID).map(move |j| [a * grid_at(i), b * grid_at(j)]))
         .collect()
+}
+
+/// The `i`-th cell centre of the support grid across the footprint, in units of its side
+/// (−0.5 … 0.5).
+fn grid_at(i: usize) -> f64 {
+    (i as f64 + 0.5) / PATCH_GRID as f64 - 0.5
 }
 
 /// How sharply the flat pusher's touching corner switches sides as its turn against the face
@@ -476,19 +480,14 @@ fn support_points<R: Real>(
     field: Option<&dyn Fn(R, R) -> R>,
 ) -> (Vec<[R; 3]>, R) {
     let (st, ct) = (th.sin(), th.cos());
-    let nn = PATCH_GRID as f64;
     // ⟨x²⟩ of the grid in units of a², ⟨y²⟩ in units of b²
-    let m2: f64 = (0..PATCH_GRID)
-        .map(|i| ((i as f64 + 0.5) / nn - 0.5).powi(2))
-        .sum::<f64>()
-        / nn;
+    let m2: f64 = (0..PATCH_GRID).map(|i| grid_at(i).powi(2)).sum::<f64>() / PATCH_GRID as f64;
     let mut pts = Vec::with_capacity(PATCH_GRID * PATCH_GRID);
     let mut uniform = R::cst(0.0);
     let mut load = R::cst(0.0);
     for i in 0..PATCH_GRID {
         for j in 0..PATCH_GRID {
-            let fx = (i as f64 + 0.5) / nn - 0.5;
-            let fy = (j as f64 + 0.5) / nn - 0.5;
+            let (fx, fy) = (grid_at(i), grid_at(j));
             let lx = a * fx;
             let ly = b * fy;
             let mut wi = R::cst(1.0);
