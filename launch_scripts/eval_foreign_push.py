@@ -33,6 +33,7 @@ CASES = {
     "friction_patch + pusher_friction": ("friction_patch,pusher_friction", ("friction_patch", "pusher_friction")),
     "anisotropic*": ("anisotropic", None),
     "friction_band*": ("friction_band", None),
+    "slippery_band*": ("slippery_band", None),
 }
 TRUTH = {"com_offset.ox": OFFSET[0], "com_offset.oy": OFFSET[1],
          "table_tilt.gx": TILT[0] * math.cos(TILT[1]), "table_tilt.gy": TILT[0] * math.sin(TILT[1]),

@@ -26,7 +26,8 @@ on the table by a linear pressure whose centroid is (10, −6) mm off the block'
 its own), `pusher_friction` (μ_p = 0.3 at the pusher's contact); outside the library
 `anisotropic` (a table with a grain at 30°: friction across it 1.6 times that along it) and
 `friction_band` (a 0.2 m wide band through (0, 0.1) at 0.4 rad where the table's friction is 2.5
-times its own).
+times its own) and `slippery_band` (a 0.24 m wide band through (0.05, −0.1) at −0.7 rad where it is
+0.4 of its own: a low-friction region that is not a disc).
 
 The block's size and the pusher's radius are the datasheet's (0.1 × 0.1 m, r 1 cm) scaled by
 seeded factors in [1 − f, 1 + f] (`--perturb f`, default 0.1), the same for every bag of one
@@ -45,7 +46,8 @@ from pathlib import Path
 import numpy as np
 
 DATASHEET = dict(a=0.1, b=0.1, rp=0.01)
-EFFECTS = ("com_offset", "table_tilt", "friction_patch", "pusher_friction", "anisotropic", "friction_band")
+EFFECTS = ("com_offset", "table_tilt", "friction_patch", "pusher_friction", "anisotropic", "friction_band",
+           "slippery_band")
 GRID = 15  # support points per side
 KAPPA = 0.95  # usable share of the half face
 PUSH_M = 0.1  # metres of push at ℓ = 1
@@ -58,6 +60,7 @@ PATCH = ((0.1, 0.05), 0.2, 0.4)  # centre, radius, friction factor
 MU_P = 0.3  # pusher_friction
 GRAIN = (math.radians(30.0), 1.6)  # grain angle, across/along friction ratio
 BAND = ((0.0, 0.1), 0.4, 0.1, 2.5)  # a point on its centre line, angle, half width, factor
+SLIPPERY_BAND = ((0.05, -0.1), -0.7, 0.12, 0.4)  # likewise
 POSE_RATE = 10.0  # Hz
 PERIOD = 3.0  # s between push starts
 
@@ -101,10 +104,11 @@ class Block:
         if "friction_patch" in self.effects:
             (cx, cy), r, f = PATCH
             k = np.where((pts[:, 0] - cx) ** 2 + (pts[:, 1] - cy) ** 2 < r * r, k * f, k)
-        if "friction_band" in self.effects:
-            (px, py), ang, half, f = BAND
-            d = -(pts[:, 0] - px) * math.sin(ang) + (pts[:, 1] - py) * math.cos(ang)
-            k = np.where(np.abs(d) < half, k * f, k)
+        for name, band in (("friction_band", BAND), ("slippery_band", SLIPPERY_BAND)):
+            if name in self.effects:
+                (px, py), ang, half, f = band
+                d = -(pts[:, 0] - px) * math.sin(ang) + (pts[:, 1] - py) * math.cos(ang)
+                k = np.where(np.abs(d) < half, k * f, k)
         return k
 
 

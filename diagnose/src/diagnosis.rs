@@ -97,7 +97,7 @@ use dynlab_nn::parallel::in_n_blocks;
 
 use crate::discovery::{
     Discovery, DiscoveryConfig, DiscoveryError, area_of, discover_terms_split, grip_discs,
-    strip_through,
+    region_target, strip_through,
 };
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
@@ -1840,7 +1840,8 @@ impl<'a> Ctx<'a> {
             return Ok(None);
         };
         let (solver, time) = (self.model.physics_solver(), self.model.physics_time());
-        let shapes: Vec<(Feature, f64)> = if e == Effect::GripPatch {
+        let shapes: Vec<(Feature, f64)> = if matches!(e, Effect::GripPatch | Effect::FrictionPatch)
+        {
             let p = |n: &str| f.effect_param(e, n);
             let coefficient = p("k") - 1.0;
             // at the disc's coupled nominal parameters (its friction-ellipse weight): the
@@ -1867,46 +1868,53 @@ impl<'a> Ctx<'a> {
         } else {
             Vec::new()
         };
-        let dcfg = DiscoveryConfig {
-            steps: Some(self.d.k),
-            seed: self.cfg.seed,
-            max_terms: 1,
-            targets: Some(vec![target.name().to_string()]),
-            ..self.cfg.discovery.clone()
-        };
-        // the best term of the library's `among` and, apart, of the fitted shapes
-        let search = |among: &dyn Fn(&Feature) -> bool, shapes: &[(Feature, f64)]| {
-            discover_terms_split(
-                &cur.physics,
-                &solver,
-                time,
-                self.d.trajs,
-                &self.fit_trajs,
-                &self.fit_w,
-                &self.test_w,
-                self.d.k,
-                self.segments,
-                &dcfg,
-                among,
-                shapes,
-            )
-            .map(|d| d.terms.into_iter().next())
-        };
-        let mut best = search(&among, &[])?;
+        // the best term on `target` of the library's `among` and, apart, of the fitted shapes
+        let search =
+            |target: Target, among: &dyn Fn(&Feature) -> bool, shapes: &[(Feature, f64)]| {
+                let dcfg = DiscoveryConfig {
+                    steps: Some(self.d.k),
+                    seed: self.cfg.seed,
+                    max_terms: 1,
+                    targets: Some(vec![target.name().to_string()]),
+                    ..self.cfg.discovery.clone()
+                };
+                discover_terms_split(
+                    &cur.physics,
+                    &solver,
+                    time,
+                    self.d.trajs,
+                    &self.fit_trajs,
+                    &self.fit_w,
+                    &self.test_w,
+                    self.d.k,
+                    self.segments,
+                    &dcfg,
+                    among,
+                    shapes,
+                )
+                .map(|d| d.terms.into_iter().next())
+            };
+        let mut best = search(target, &among, &[])?.map(|t| (t, term, meaning));
+        let robot = self.model.world().robot();
         if !shapes.is_empty()
-            && let Some(t) = search(&|g| shapes.iter().any(|s| &s.0 == g), &shapes)?
+            && let Some(t) = search(
+                region_target(robot),
+                &|g| shapes.iter().any(|s| &s.0 == g),
+                &shapes,
+            )?
             && best
                 .as_ref()
-                .is_none_or(|b| t.error_reduction > b.error_reduction)
+                .is_none_or(|b| t.error_reduction > b.0.error_reduction)
         {
             if t.error_reduction >= reduction + self.cfg.min_reduction {
                 let mut strips = self.strips.lock().unwrap_or_else(|e| e.into_inner());
                 strips.extend(shapes.iter().filter(|s| s.0.name() == t.feature).cloned());
             }
-            best = Some(t);
+            let (term, meaning) = not_a_disc(robot);
+            best = Some((t, term, meaning));
         }
-        let best = best.filter(|t| t.error_reduction >= reduction + self.cfg.min_reduction);
-        Ok(best.map(|t| {
+        let best = best.filter(|b| b.0.error_reduction >= reduction + self.cfg.min_reduction);
+        Ok(best.map(|(t, term, meaning)| {
             (
                 format!(
                     "{term} term, {}, removes more of the held-out error ({:.1} % against {:.1} %): {meaning} (see the term search)",
@@ -3489,12 +3497,15 @@ const MAX_LOG_RATIO: f64 = 6.907_755_278_982_137; // ln 1000
 /// traction-limited car.
 fn rival(e: Effect) -> Option<Rival> {
     match e {
-        Effect::GripPatch => Some(Rival {
-            target: Target::Grip,
-            among: |_| true,
-            term: "a grip",
-            meaning: "the region of other grip is not a disc",
-        }),
+        Effect::GripPatch => {
+            let (term, meaning) = not_a_disc(Robot::Car);
+            Some(Rival {
+                target: Target::Grip,
+                among: |_| true,
+                term,
+                meaning,
+            })
+        }
         Effect::SteeringOffset => Some(Rival {
             target: Target::Delta,
             among: |f| f.factors().contains(&Atom::Delta),
@@ -3551,6 +3562,18 @@ fn acts_on(e: Effect) -> &'static [Target] {
             Target::BlockX,
             Target::BlockY,
         ],
+    }
+}
+
+/// The term and meaning of a region's rival to a library disc ([`Ctx::rival_term_note`]): the
+/// strip through the disc removes more.
+fn not_a_disc(robot: Robot) -> (&'static str, &'static str) {
+    match robot {
+        Robot::Car => ("a grip", "the region of other grip is not a disc"),
+        Robot::Pushing => (
+            "a table-friction",
+            "the region of other table friction is not a disc",
+        ),
     }
 }
 

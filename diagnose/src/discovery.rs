@@ -1122,7 +1122,8 @@ fn secant_gain(r0: &[f64], r1: &[f64], h: f64) -> Option<f64> {
     gain.is_finite().then_some(gain)
 }
 
-/// The strip of other grip through `centre` (a disc's, `r` its radius) whose term
+/// The strip of other grip (car) or table friction (pushing; [`region_target`]) through
+/// `centre` (a disc's, `r` its radius) whose term
 /// `μ += coefficient·s(a, d; w)` explains the most of the k-step error of `physics` on the fit
 /// windows `ws[0]` (each state dimension scaled over both halves `ws`; the Gauss–Newton gain the
 /// term search's forward selection scores its picks by):
@@ -1145,11 +1146,12 @@ pub fn strip_through(
     coefficient: f64,
 ) -> Result<Option<Feature>, DiscoveryError> {
     const ANGLES: usize = 36;
-    if physics.robot() != Robot::Car || !(r > 0.0 && coefficient != 0.0) {
+    if !(r > 0.0 && coefficient != 0.0) {
         return Ok(None);
     }
     let ctx = Ctx::new(physics.robot(), trajs, ws, k, solver, h);
-    let mut strips = StripGain::new(physics, &ctx, ws[0], Target::Grip, coefficient);
+    let target = region_target(physics.robot());
+    let mut strips = StripGain::new(physics, &ctx, ws[0], target, coefficient);
     let mut gain = |shape: [f64; 3]| strips.gain(shape);
     let mut best: Option<(f64, [f64; 3])> = None;
     let mut try_shape = |shape: [f64; 3], best: &mut Option<(f64, [f64; 3])>| {
@@ -1179,6 +1181,15 @@ pub fn strip_through(
         refine(shape, steps, 12, &mut gain)
     });
     strips.finish(refined)
+}
+
+/// The target whose regions a library's disc (`grip_patch`, `friction_patch`) is one of: the
+/// car's grip, the table's friction under a pushed block.
+pub fn region_target(robot: Robot) -> Target {
+    match robot {
+        Robot::Car => Target::Grip,
+        Robot::Pushing => Target::Friction,
+    }
 }
 
 /// The Gauss–Newton gain on the k-step error of the fit windows (the forward selection's
@@ -1533,8 +1544,8 @@ pub fn discover_terms(
 /// `physics` integrated by `solver` over `h` (car: the step in seconds, pushing: 1), trajectories
 /// `trajs`, the fit half's trajectories `fit_trajs` (one-step regression), k-step windows of the
 /// fit half `fit_w` and of the held-out half `test_w`; the library's features for which `among`
-/// holds are tried, and the regions `shapes` (a grip strip the caller fitted, [`strip_through`],
-/// with the coefficient to start from) on the grip.
+/// holds are tried, and the regions `shapes` (a strip the caller fitted, [`strip_through`],
+/// with the coefficient to start from) on the grip or the table's friction ([`region_target`]).
 #[allow(clippy::too_many_arguments)]
 pub fn discover_terms_split(
     physics: &PhysicsModel,
@@ -1640,6 +1651,12 @@ pub fn discover_terms_split(
             };
             if !feats.contains(&f) {
                 feats.push(f);
+                fitted_for.push(Target::Friction);
+            }
+        }
+        for (f, _) in shapes {
+            if !feats.contains(f) {
+                feats.push(f.clone());
                 fitted_for.push(Target::Friction);
             }
         }
@@ -1768,19 +1785,18 @@ pub fn discover_terms_split(
     picks.truncate(cfg.max_candidates);
     // the caller's shapes were chosen on the k-step error: tried whatever their one-step t,
     // from the caller's coefficient
-    if let Some(reg) = regs.iter().find(|r| r.target == Target::Grip) {
+    let region = region_target(robot);
+    if let Some(reg) = regs.iter().find(|r| r.target == region) {
         for (shape, coefficient) in shapes {
             let Some(f) = feats.iter().position(|g| g == shape) else {
                 continue;
             };
-            if tried(Target::Grip, f)
-                && !picks
-                    .iter()
-                    .any(|p| p.target == Target::Grip && p.feature == f)
+            if tried(region, f)
+                && !picks.iter().any(|p| p.target == region && p.feature == f)
                 && let Some((share, t, _)) = regress(reg, f)
             {
                 picks.push(Pick {
-                    target: Target::Grip,
+                    target: region,
                     feature: f,
                     share,
                     t,
@@ -3045,6 +3061,69 @@ mod grip_disc_tests {
         assert!((a - 0.5).abs() < 0.1, "{name}");
         assert!((d - 0.263).abs() < 0.1, "{name}");
         assert!((w - 0.8).abs() < 0.27, "{name}");
+    }
+
+    /// Pushing: the strip of table friction through a disc on a slippery band of the simulator's
+    /// table (0.4 of its friction within 6 cm of a line at 1.2 rad through (0.55, 0.05)), 2 cm
+    /// off its centre line, follows the band: its direction within 0.1 rad, its offset within
+    /// 2 cm, its width (0.12 m) within a third.
+    #[test]
+    fn the_strip_of_table_friction_through_a_disc_on_a_slippery_band_follows_the_band() {
+        use crate::diagnosis::simdata::{push_dataset, push_scenario};
+        use dynlab_sim::geometry::{Region, RegionShape};
+        use dynlab_sim::push::FrictionPatch;
+        let (angle, through, width) = (1.2f64, [0.55, 0.05], 0.12);
+        let mut scenario = push_scenario(None, 1.0);
+        scenario.effects.friction_patch = Some(FrictionPatch {
+            enabled: true,
+            mu: 0.4 * scenario.block.table_friction,
+            region: Region {
+                shape: RegionShape::Band,
+                centre: through,
+                angle,
+                width,
+                ..Region::default()
+            },
+        });
+        let data = push_dataset(&scenario, 40, 10, 3, 2).expect("simulated data");
+        let model = nominal_model(World::Push, data.pose_dt_s).expect("the nominal model");
+        let physics = model.physics().expect("a physics model");
+        let k = 3;
+        let ws: Vec<Window> = data
+            .trajectories
+            .iter()
+            .enumerate()
+            .flat_map(|(i, t)| {
+                (0..t.len().saturating_sub(k)).map(move |start| Window {
+                    trajectory: i,
+                    start,
+                })
+            })
+            .collect();
+        let (s, c) = angle.sin_cos();
+        let d = through[1] * c - through[0] * s;
+        let centre = [through[0] - 0.02 * s, through[1] + 0.02 * c];
+        let strip = strip_through(
+            physics,
+            &model.physics_solver(),
+            model.physics_time(),
+            &data.trajectories,
+            [&ws, &[]],
+            k,
+            centre,
+            0.08,
+            -0.6,
+        )
+        .expect("the search runs")
+        .expect("a strip");
+        let name = strip.name();
+        let Some(&Atom::Strip { a, d: found, w }) = strip.factors().first() else {
+            panic!("not a strip: {name}");
+        };
+        println!("{name} (truth s({angle}, {d:.3}; {width}))");
+        assert!((a - angle).abs() < 0.1, "{name}");
+        assert!((found - d).abs() < 0.02, "{name}");
+        assert!((w - width).abs() < width / 3.0, "{name}");
     }
 
     /// The screen's best disc on data with the simulator's `grip_patch` (half the grip within
