@@ -96,8 +96,8 @@ use dynlab_learn::{Dataset, LearnError, Model, World};
 use dynlab_nn::parallel::in_n_blocks;
 
 use crate::discovery::{
-    Discovery, DiscoveryConfig, DiscoveryError, area_of, discover_terms_split, grip_discs,
-    region_target, strip_through,
+    DiscoveredTerm, Discovery, DiscoveryConfig, DiscoveryError, area_of, discover_terms_split,
+    grip_discs, region_target, strip_through,
 };
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
@@ -1796,9 +1796,13 @@ impl<'a> Ctx<'a> {
             let across = (area.hi[0] - area.lo[0]).hypot(area.hi[1] - area.lo[1]);
             if r > across {
                 return Some(format!(
-                    "the patch (r = {} m) is wider than the data ({} m across): its edge is a straight boundary of other grip through them, not a patch (see the term search)",
+                    "the patch (r = {} m) is wider than the data ({} m across): its edge is a straight boundary of other {} through them, not a patch (see the term search)",
                     g4(r),
-                    g4(across)
+                    g4(across),
+                    match e {
+                        Effect::GripPatch => "grip",
+                        _ => "table friction",
+                    }
                 ));
             }
         }
@@ -1806,7 +1810,7 @@ impl<'a> Ctx<'a> {
     }
 
     /// Why library effect `e`, which removes `reduction` of the held-out error from `cur`, is
-    /// not counted: the term search's best term on the input the effect corrects ([`rival`])
+    /// not counted: the term search's best term on the input the effect corrects ([`rivals`])
     /// removes at least [`DiagnoseConfig::min_reduction`] more (the bar an effect itself must
     /// clear), so the effect only absorbs part of an error of another shape. A `grip_patch`
     /// against a grip term on the position (`μ` on `x`, `y`, a bump or a band): a low-grip band
@@ -1830,15 +1834,10 @@ impl<'a> Ctx<'a> {
         f: &Fitted,
         reduction: f64,
     ) -> Result<Option<(String, f64)>, DiagnosisError> {
-        let Some(Rival {
-            target,
-            among,
-            term,
-            meaning,
-        }) = rival(e)
-        else {
+        let rivals = rivals(e);
+        if rivals.is_empty() {
             return Ok(None);
-        };
+        }
         let (solver, time) = (self.model.physics_solver(), self.model.physics_time());
         let shapes: Vec<(Feature, f64)> = if matches!(e, Effect::GripPatch | Effect::FrictionPatch)
         {
@@ -1894,7 +1893,16 @@ impl<'a> Ctx<'a> {
                 )
                 .map(|d| d.terms.into_iter().next())
             };
-        let mut best = search(target, &among, &[])?.map(|t| (t, term, meaning));
+        let mut best: Option<(DiscoveredTerm, &str, &str)> = None;
+        for r in rivals {
+            if let Some(t) = search(r.target, &r.among, &[])?
+                && best
+                    .as_ref()
+                    .is_none_or(|b| t.error_reduction > b.0.error_reduction)
+            {
+                best = Some((t, r.term, r.meaning));
+            }
+        }
         let robot = self.model.world().robot();
         if !shapes.is_empty()
             && let Some(t) = search(
@@ -3495,48 +3503,52 @@ const MAX_LOG_RATIO: f64 = 6.907_755_278_982_137; // ln 1000
 /// acceleration at high throttle, which a drag (at 3 to 8 times a real one's coefficient) and a
 /// slow motor (τ 0.63 s) each follow in part; both were named on the independent generator's
 /// traction-limited car.
-fn rival(e: Effect) -> Option<Rival> {
-    match e {
-        Effect::GripPatch => {
-            let (term, meaning) = not_a_disc(Robot::Car);
-            Some(Rival {
-                target: Target::Grip,
-                among: |_| true,
-                term,
-                meaning,
-            })
+fn rivals(e: Effect) -> Vec<Rival> {
+    let region = |robot: Robot| {
+        let (term, meaning) = not_a_disc(robot);
+        Rival {
+            target: region_target(robot),
+            among: |_| true,
+            term,
+            meaning,
         }
-        Effect::SteeringOffset => Some(Rival {
+    };
+    match e {
+        Effect::GripPatch => vec![region(Robot::Car)],
+        Effect::FrictionPatch => vec![
+            Rival {
+                target: Target::BlockY,
+                among: |_| true,
+                term: "a sideways-drift",
+                meaning: "the block drifts across the push by another law than a region of other table friction (a table whose friction depends on the direction of sliding)",
+            },
+            region(Robot::Pushing),
+        ],
+        Effect::SteeringOffset => vec![Rival {
             target: Target::Delta,
             among: |f| f.factors().contains(&Atom::Delta),
             term: "a steering",
             meaning: "the steering error is not a constant offset",
-        }),
-        Effect::SteeringLag => Some(Rival {
+        }],
+        Effect::SteeringLag => vec![Rival {
             target: Target::Delta,
             among: Feature::uses_input_lags,
             term: "a lagged-steering",
             meaning: "the wheels follow the command late (a delay), not through a servo's lag",
-        }),
-        Effect::AeroDrag => Some(Rival {
+        }],
+        Effect::AeroDrag => vec![Rival {
             target: Target::Vx,
             among: Feature::beyond_a_level,
             term: "a drive-limit",
             meaning: "the drive force is capped (the tyres' traction, the motor's current limit), not opposed by a drag",
-        }),
-        Effect::MotorLag => Some(Rival {
+        }],
+        Effect::MotorLag => vec![Rival {
             target: Target::Vx,
             among: Feature::beyond_a_level,
             term: "a drive-limit",
             meaning: "the drive force is capped (the tyres' traction, the motor's current limit), not lagged",
-        }),
-        Effect::FrictionPatch => Some(Rival {
-            target: Target::BlockY,
-            among: |_| true,
-            term: "a sideways-drift",
-            meaning: "the block drifts across the push by another law than a region of other table friction (a table whose friction depends on the direction of sliding)",
-        }),
-        _ => None,
+        }],
+        _ => Vec::new(),
     }
 }
 
@@ -3577,7 +3589,7 @@ fn not_a_disc(robot: Robot) -> (&'static str, &'static str) {
     }
 }
 
-/// See [`rival`].
+/// See [`rivals`].
 struct Rival {
     /// The target searched.
     target: Target,
