@@ -1835,7 +1835,8 @@ impl<'a> Ctx<'a> {
         reduction: f64,
     ) -> Result<Option<(String, f64)>, DiagnosisError> {
         let rivals = rivals(e);
-        if rivals.is_empty() {
+        // (no term removes more than all of the error)
+        if rivals.is_empty() || reduction + self.cfg.min_reduction > 1.0 {
             return Ok(None);
         }
         let (solver, time) = (self.model.physics_solver(), self.model.physics_time());
@@ -1875,6 +1876,11 @@ impl<'a> Ctx<'a> {
                     seed: self.cfg.seed,
                     max_terms: 1,
                     targets: Some(vec![target.name().to_string()]),
+                    // the shapes alone: not the lattice's regions, which `among` leaves untried
+                    grid: match shapes.is_empty() {
+                        true => self.cfg.discovery.grid,
+                        false => 0,
+                    },
                     ..self.cfg.discovery.clone()
                 };
                 discover_terms_split(

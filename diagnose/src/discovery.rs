@@ -1610,14 +1610,16 @@ pub fn discover_terms_split(
     // on the grip, the speed scale on the steering, a command's level on what it drives
     let fitted_from = feats.len();
     let mut fitted_for: Vec<Target> = Vec::new();
-    if cfg.grid > 0
-        && let Some(reg) = regs.iter().find(|r| r.target == Target::Grip)
-    {
-        let sums = RowSums::of(reg, one.positions());
-        for f in fitted_regions(sums.area(), &|atom| sums.gain(atom))
-            .into_iter()
-            .chain(shapes.iter().map(|s| s.0.clone()))
-        {
+    // (the lattice's regions with `grid` > 0; the caller's shapes whatever it)
+    if let Some(reg) = regs.iter().find(|r| r.target == Target::Grip) {
+        let fitted = match cfg.grid {
+            0 => Vec::new(),
+            _ => {
+                let sums = RowSums::of(reg, one.positions());
+                fitted_regions(sums.area(), &|atom| sums.gain(atom))
+            }
+        };
+        for f in fitted.into_iter().chain(shapes.iter().map(|s| s.0.clone())) {
             if !feats.contains(&f) {
                 feats.push(f);
                 fitted_for.push(Target::Grip);
@@ -1625,16 +1627,18 @@ pub fn discover_terms_split(
         }
     }
     // the table's friction: its regions screened on their moments over the footprint
-    if cfg.grid > 0
-        && let (Some(reg), Some(field)) = (
-            regs.iter().find(|r| r.target == Target::Friction),
-            field.as_ref(),
-        )
-    {
+    if let (Some(reg), Some(field)) = (
+        regs.iter().find(|r| r.target == Target::Friction),
+        field.as_ref(),
+    ) {
         let fit = |atom: &Atom| FrictionField::fit(reg, &field.of_atom(atom, n));
         let area = area_of(&one.positions());
         let side = (area.hi[0] - area.lo[0]).max(area.hi[1] - area.lo[1]);
-        for f in fitted_regions(area, &|atom| fit(atom).map(|g| g.0)) {
+        let fitted = match cfg.grid {
+            0 => Vec::new(),
+            _ => fitted_regions(area, &|atom| fit(atom).map(|g| g.0)),
+        };
+        for f in fitted {
             // a strip's shape then refined on the fit half's k-step error: the moments are a
             // first order, and a stripe of 2.5 times the friction is not a small change (the
             // screen's direction was 0.2 rad off on one of five blocks)
