@@ -1823,7 +1823,9 @@ impl<'a> Ctx<'a> {
     /// traction. A pushing `friction_patch` against any term on the block's sideways rate
     /// `ẏ_b`: on a table with a grain the block drifts across the push by its heading, and a
     /// disc of low friction over part of the data took up 16 % of that (named beside the term
-    /// on one of five grain seeds before this check). (Without the
+    /// on one of five grain seeds before this check); and against any term on the table's
+    /// friction: a slippery band fits a disc on the stretch the pushes cross most (named on one
+    /// of five blocks of the independent generator's band before this check). (Without the
     /// margin a Gaussian bump of grip that removed 85.7 % refused a right-fitted disc's 85.1 %.)
     /// A disc's rivals include the strip through it fitted on the k-step error
     /// ([`strip_through`]): a band the data cross in two places, of which the disc covers one.
@@ -3497,8 +3499,11 @@ const MAX_RESAMPLES: usize = 400_000;
 /// per window, never zero on real data) weighs as a thousandfold change at most.
 const MAX_LOG_RATIO: f64 = 6.907_755_278_982_137; // ln 1000
 
-/// The term-search target and features whose best single term rivals library effect `e`, and
-/// what it means when that term removes `min_reduction` more (see `Ctx::rival_term_note`). A
+/// The term-search targets and features whose best single term rivals library effect `e`
+/// (each searched apart), and what it means when that term removes `min_reduction` more (see
+/// `Ctx::rival_term_note`). A disc of other grip or table friction against any term on the
+/// grip or the friction: the region is not a disc. A pushing disc also against any term on the
+/// block's sideways rate: a table whose friction depends on the direction of sliding. A
 /// steering offset's rivals have the commanded angle as a factor (`δ·vₓ`, `δ`, …): a steering term without it
 /// (`d`, `vₓ`, `|v|`) is positive wherever the car drives forward, so it is a constant offset
 /// in another guise (on a car with a true 0.03 rad offset, `δ += 0.12·d` removed 36 % against
@@ -3583,8 +3588,8 @@ fn acts_on(e: Effect) -> &'static [Target] {
     }
 }
 
-/// The term and meaning of a region's rival to a library disc ([`Ctx::rival_term_note`]): the
-/// strip through the disc removes more.
+/// The term and meaning of a region's rival to a library disc ([`Ctx::rival_term_note`]): a
+/// term on the grip or the table's friction ([`region_target`]) removes more than the disc.
 fn not_a_disc(robot: Robot) -> (&'static str, &'static str) {
     match robot {
         Robot::Car => ("a grip", "the region of other grip is not a disc"),
