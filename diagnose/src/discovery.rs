@@ -3016,6 +3016,51 @@ mod grip_disc_tests {
     use crate::diagnosis::simdata::{car_dataset, car_scenario, low_grip_band, nominal_model};
     use dynlab_learn::dynamics::physics::Effect;
 
+    /// The strip through the disc at `centre` of radius `r` ([`strip_through`]) on `data`, the
+    /// nominal model of `world`, k-step windows every `every` samples: its `[a, d, w]` and name.
+    fn strip_through_on(
+        data: &Dataset,
+        world: World,
+        (k, every): (usize, usize),
+        centre: [f64; 2],
+        r: f64,
+        coefficient: f64,
+    ) -> ([f64; 3], String) {
+        let model = nominal_model(world, data.pose_dt_s).expect("the nominal model");
+        let ws: Vec<Window> = data
+            .trajectories
+            .iter()
+            .enumerate()
+            .flat_map(|(i, t)| {
+                (0..t.len().saturating_sub(k))
+                    .step_by(every)
+                    .map(move |start| Window {
+                        trajectory: i,
+                        start,
+                    })
+            })
+            .collect();
+        let strip = strip_through(
+            model.physics().expect("a physics model"),
+            &model.physics_solver(),
+            model.physics_time(),
+            &data.trajectories,
+            [&ws, &[]],
+            k,
+            centre,
+            r,
+            coefficient,
+        )
+        .expect("the search runs")
+        .expect("a strip");
+        let name = strip.name();
+        let Some(&Atom::Strip { a, d, w }) = strip.factors().first() else {
+            panic!("not a strip: {name}");
+        };
+        println!("{name}");
+        ([a, d, w], name)
+    }
+
     /// The strip through a disc on the simulator's low-grip band (half the grip within 0.4 m of
     /// a line at 0.5 rad through (0, 0.3)), a third of the way off its centre line, follows the
     /// band: its direction within 0.1 rad, its offset (0.263 m) within 0.1 m, its width (0.8 m)
@@ -3025,43 +3070,10 @@ mod grip_disc_tests {
         let mut scenario = car_scenario(None, 1.0);
         scenario.effects.grip_patch = Some(low_grip_band());
         let data = car_dataset(&scenario, 4, 15.0, 1, 2).expect("simulated data");
-        let model = nominal_model(World::Car, data.pose_dt_s).expect("the nominal model");
-        let physics = model.physics().expect("a physics model");
-        let k = 50;
-        let ws: Vec<Window> = data
-            .trajectories
-            .iter()
-            .enumerate()
-            .flat_map(|(i, t)| {
-                (0..t.len().saturating_sub(k))
-                    .step_by(25)
-                    .map(move |start| Window {
-                        trajectory: i,
-                        start,
-                    })
-            })
-            .collect();
         // (0.5, 0.573) is on the centre line; the disc's centre 0.13 m across it
         let (s, c) = 0.5f64.sin_cos();
         let centre = [0.5 - 0.13 * s, 0.573 + 0.13 * c];
-        let strip = strip_through(
-            physics,
-            &model.physics_solver(),
-            model.physics_time(),
-            &data.trajectories,
-            [&ws, &[]],
-            k,
-            centre,
-            0.5,
-            -0.5,
-        )
-        .expect("the search runs")
-        .expect("a strip");
-        let name = strip.name();
-        let Some(&Atom::Strip { a, d, w }) = strip.factors().first() else {
-            panic!("not a strip: {name}");
-        };
-        println!("{name}");
+        let ([a, d, w], name) = strip_through_on(&data, World::Car, (50, 25), centre, 0.5, -0.5);
         assert!((a - 0.5).abs() < 0.1, "{name}");
         assert!((d - 0.263).abs() < 0.1, "{name}");
         assert!((w - 0.8).abs() < 0.27, "{name}");
@@ -3090,41 +3102,11 @@ mod grip_disc_tests {
             },
         });
         let data = push_dataset(&scenario, 40, 10, 3, 2).expect("simulated data");
-        let model = nominal_model(World::Push, data.pose_dt_s).expect("the nominal model");
-        let physics = model.physics().expect("a physics model");
-        let k = 3;
-        let ws: Vec<Window> = data
-            .trajectories
-            .iter()
-            .enumerate()
-            .flat_map(|(i, t)| {
-                (0..t.len().saturating_sub(k)).map(move |start| Window {
-                    trajectory: i,
-                    start,
-                })
-            })
-            .collect();
         let (s, c) = angle.sin_cos();
         let d = through[1] * c - through[0] * s;
         let centre = [through[0] - 0.02 * s, through[1] + 0.02 * c];
-        let strip = strip_through(
-            physics,
-            &model.physics_solver(),
-            model.physics_time(),
-            &data.trajectories,
-            [&ws, &[]],
-            k,
-            centre,
-            0.08,
-            -0.6,
-        )
-        .expect("the search runs")
-        .expect("a strip");
-        let name = strip.name();
-        let Some(&Atom::Strip { a, d: found, w }) = strip.factors().first() else {
-            panic!("not a strip: {name}");
-        };
-        println!("{name} (truth s({angle}, {d:.3}; {width}))");
+        let ([a, found, w], name) =
+            strip_through_on(&data, World::Push, (3, 1), centre, 0.08, -0.6);
         assert!((a - angle).abs() < 0.1, "{name}");
         assert!((found - d).abs() < 0.02, "{name}");
         assert!((w - width).abs() < width / 3.0, "{name}");
