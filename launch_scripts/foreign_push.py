@@ -24,7 +24,7 @@ on the table by a linear pressure whose centroid is (10, −6) mm off the block'
 `table_tilt` (the table slopes 1.7° down towards the world direction 2 rad, μ 0.3),
 `friction_patch` (a disc at (0.1, 0.05) m of radius 0.2 m where the table's friction is 0.4 of
 its own), `pusher_friction` (μ_p = 0.3 at the pusher's contact); outside the library
-`anisotropic` (a table with a grain at 30°: friction across it 1.6 times that along it) and
+`anisotropic` (a table with a grain at 30°: friction across it 1.6 times that along it),
 `friction_band` (a 0.2 m wide band through (0, 0.1) at 0.4 rad where the table's friction is 2.5
 times its own) and `slippery_band` (a 0.24 m wide band through (0.05, −0.1) at −0.7 rad where it is
 0.4 of its own: a low-friction region that is not a disc).

@@ -27,6 +27,16 @@ def generate(out, seed, effects="", episodes=40, block_seed=1):
     return out
 
 
+def significant_friction_strip(discovery):
+    """The first significant term of a diagnosis's term search, which must be a strip of table
+    friction, and the strip's direction, offset and width."""
+    terms = [t for t in discovery["terms"] if t["significant"]]
+    assert terms and terms[0]["state"] == "friction" and terms[0]["feature"].startswith("strip("), \
+        discovery["summary"]
+    a, off, w = (float(v) for v in terms[0]["feature"][len("strip("):-1].split(","))
+    return terms[0], a, off, w
+
+
 def test_the_generator_rejects_an_unknown_effect(tmp_path):
     p = subprocess.run([sys.executable, str(GENERATOR), str(tmp_path / "b"), "--effects", "com_offset,glue"],
                        capture_output=True, text=True, timeout=60)
@@ -119,17 +129,15 @@ def test_a_band_of_more_table_friction_is_a_friction_strip_beyond_the_library_an
     j = json.loads((out / "diagnosis.json").read_text())
     assert j["effects"] == [], proc.stdout
     disc = j["discovery"]
-    terms = [t for t in disc["terms"] if t["significant"]]
-    assert terms and terms[0]["state"] == "friction" and terms[0]["feature"].startswith("strip("), disc["summary"]
-    a, off, w = (float(v) for v in terms[0]["feature"][len("strip("):-1].split(","))
+    term, a, off, w = significant_friction_strip(disc)
     # the band: direction 0.4 rad, its centre line 0.1·cos 0.4 = 0.092 m from the origin, 0.2 m wide
-    assert abs(a - 0.4) < 0.1 and abs(off - 0.092) < 0.02 and abs(w - 0.2) < 0.03, terms[0]["feature"]
-    assert 1.0 < terms[0]["coefficient"] < 2.2, terms[0]["equation"]
+    assert abs(a - 0.4) < 0.1 and abs(off - 0.092) < 0.02 and abs(w - 0.2) < 0.03, term["feature"]
+    assert 1.0 < term["coefficient"] < 2.2, term["equation"]
     assert disc["error_reduction"] >= 0.5, disc["summary"]
     # trained with it: the term, refitted on the whole bag, keeps its strip and about its factor
     applied = json.loads((out / "model" / "model.json").read_text())
     [term] = [t for c in applied["physics"]["custom_effects"] for t in c["term"]]
-    assert term["state"] == "friction" and term["feature"] == terms[0]["feature"], applied["physics"]
+    assert term["state"] == "friction" and term["feature"] == term["feature"], applied["physics"]
     assert 1.0 < term["coefficient"] < 2.2, term
     for s_ in size:
         assert f"--set {s_}" in proc.stdout, proc.stdout
@@ -151,11 +159,13 @@ def test_a_slippery_band_is_not_named_a_disc_but_a_strip_of_less_table_friction(
     assert j["effects"] == [], proc.stdout
     notes = [c.get("note") or "" for s in j["selection"] for c in s["candidates"] if c["effect"] == "friction_patch"]
     assert any("table friction is not a disc" in n for n in notes), notes
-    terms = [t for t in j["discovery"]["terms"] if t["significant"]]
-    assert terms and terms[0]["state"] == "friction" and terms[0]["feature"].startswith("strip("), \
-        j["discovery"]["summary"]
-    a, off, w = (float(v) for v in terms[0]["feature"][len("strip("):-1].split(","))
-    # the band: direction π − 0.7 rad, its centre line −0.1·cos(π − 0.7) − 0.05·sin(π − 0.7) =
-    # 0.044 m from the origin, 0.24 m wide
-    assert abs(a - (math.pi - 0.7)) < 0.1 and abs(off - 0.044) < 0.02 and abs(w - 0.24) < 0.06, terms[0]["feature"]
-    assert -0.95 < terms[0]["coefficient"] < -0.2, terms[0]["equation"]
+    term, a, off, w = significant_friction_strip(j["discovery"])
+    # the band as the generator lays it: a strip's direction in [0, π), its centre line's
+    # signed distance from the origin along the direction's normal (0.044 m), its full width
+    sys.path.insert(0, str(REPO / "launch_scripts"))
+    import foreign_push as fp
+    (px, py), angle, half, _ = fp.SLIPPERY_BAND
+    angle %= math.pi
+    offset = py * math.cos(angle) - px * math.sin(angle)
+    assert abs(a - angle) < 0.1 and abs(off - offset) < 0.02 and abs(w - 2 * half) < 0.06, term["feature"]
+    assert -0.95 < term["coefficient"] < -0.2, term["equation"]
