@@ -88,8 +88,8 @@ use dynlab_learn::dynamics::physics::{
     Robot, Target,
 };
 use dynlab_learn::fit::{
-    SENSITIVITY_LIMIT, bounded_least_squares, calm_windows, cluster_jackknife_std,
-    forward_jacobian, initial_states_after, kept_rows,
+    ForwardDifferences, SENSITIVITY_LIMIT, bounded_least_squares, calm_windows,
+    cluster_jackknife_std, forward_jacobian, initial_states_after, kept_rows,
 };
 use dynlab_learn::train::{segment, segment_origins};
 use dynlab_learn::{Dataset, LearnError, Model, World};
@@ -1551,29 +1551,31 @@ impl<'a> Ctx<'a> {
         } else {
             self.cfg.iterations
         };
-        // residuals (normalised by their count), with the Jacobian in the free parameters
-        let eval_with = |ws: &[Window], free: &[bool], th: &[f64], with_j: bool| {
-            let nr = (ws.len() * k * ds) as f64;
-            let resid_of = |th: &[f64]| -> Vec<f64> {
-                let mut r = Vec::new();
-                match cost_of(th, ws, Some(&mut r)) {
-                    Some(_) => r.iter().map(|x| x / nr.sqrt()).collect(),
-                    None => vec![f64::INFINITY],
-                }
+        // residuals on windows `ws` (normalised by their count), with the Jacobian in the free
+        // parameters `free`: the fit from `th0`, and with `at_result` the residuals and Jacobian
+        // at its result (those of the fit's last evaluation there, mostly)
+        let lsq =
+            |ws: &[Window], th0: &[f64], free: &[bool], iterations: usize, at_result: bool| {
+                let nr = ((ws.len() * k * ds) as f64).sqrt();
+                let resid_of = |th: &[f64]| -> Vec<f64> {
+                    let mut r = Vec::new();
+                    match cost_of(th, ws, Some(&mut r)) {
+                        Some(_) => r.iter().map(|x| x / nr).collect(),
+                        None => vec![f64::INFINITY],
+                    }
+                };
+                let step = |th: &[f64], c: usize| if free[c] { fd_step(c, th) } else { 0.0 };
+                let mut fd = ForwardDifferences::new(&resid_of, &step);
+                let res =
+                    bounded_least_squares(th0, &lower, &upper, free, iterations, &mut |th, j| {
+                        fd.eval(th, j)
+                    });
+                let (r, jac) = match at_result {
+                    true => fd.eval(&res.theta, true),
+                    false => Default::default(),
+                };
+                (res, r, jac)
             };
-            let r = resid_of(th);
-            if !with_j {
-                return (r, Vec::new());
-            }
-            let step = |c: usize| if free[c] { fd_step(c, th) } else { 0.0 };
-            let jac = forward_jacobian(th, &r, &step, &resid_of);
-            (r, jac)
-        };
-        let lsq = |ws: &[Window], th0: &[f64], free: &[bool], iterations: usize| {
-            bounded_least_squares(th0, &lower, &upper, free, iterations, &mut |th, j| {
-                eval_with(ws, free, th, j)
-            })
-        };
         // a probed patch: each start fitted alone, the nominal parameters held, on every
         // `PROBE_STRIDE`th window, and the best two refitted with them on all (see
         // `PROBE_ITERATIONS`)
@@ -1584,7 +1586,7 @@ impl<'a> Ctx<'a> {
                 .collect();
             let some: Vec<Window> = fit_w.iter().step_by(PROBE_STRIDE).cloned().collect();
             for st in e.starts(lo, hi) {
-                let res = lsq(&some, &start_theta(&st), &own, PROBE_ITERATIONS);
+                let (res, ..) = lsq(&some, &start_theta(&st), &own, PROBE_ITERATIONS, false);
                 probes.push((res.cost, res.theta));
             }
         }
@@ -1595,12 +1597,11 @@ impl<'a> Ctx<'a> {
         let mut best: [Option<Run>; 2] = [None, None];
         for (th0, held) in runs {
             let free = if held { &held_free } else { &free };
-            let mut res = lsq(fit_w, &th0, free, iterations);
+            let (mut res, r, jac) = lsq(fit_w, &th0, free, iterations, true);
             // standard errors clustered by segment (overlapping windows are correlated), by
             // the jackknife: the sandwich gave a disc's centre ± 5·10⁻⁵ m, and the joint fit on
             // the same data put it 18 mm away; from the windows calm at the result
             // (`calm_std`); residual rows are step-major: (step j, window i, dimension c)
-            let (r, jac) = eval_with(fit_w, free, &res.theta, true);
             let cluster: Vec<usize> = (0..k)
                 .flat_map(|_| {
                     fit_w

@@ -87,7 +87,7 @@ use dynlab_learn::dynamics::physics::{
     support_grid,
 };
 use dynlab_learn::fit::{
-    SENSITIVITY_LIMIT, bounded_least_squares, cluster_std, forward_jacobian, initial_states,
+    ForwardDifferences, SENSITIVITY_LIMIT, bounded_least_squares, cluster_std, initial_states,
 };
 use dynlab_learn::train::segment;
 use dynlab_learn::{Dataset, LearnError, Model, World};
@@ -2416,14 +2416,9 @@ fn fit_effect(
                 None => vec![f64::INFINITY],
             }
         };
-        let mut eval = |th: &[f64], with_j: bool| -> (Vec<f64>, Vec<f64>) {
-            let r = resid_of(th);
-            if !with_j {
-                return (r, Vec::new());
-            }
-            let jac = forward_jacobian(th, &r, &|c: usize| 1e-4 * th[c].abs().max(1e-3), &resid_of);
-            (r, jac)
-        };
+        let step = |th: &[f64], c: usize| 1e-4 * th[c].abs().max(1e-3);
+        let mut fd = ForwardDifferences::new(&resid_of, &step);
+        let mut eval = |th: &[f64], with_j: bool| fd.eval(th, with_j);
         let theta = bounded_least_squares(start, lower, upper, free, iterations, &mut eval).theta;
         let (r, jac) = eval(&theta, true);
         let cluster: Vec<usize> = (0..ctx.k)

@@ -168,6 +168,67 @@ pub fn forward_jacobian(
     jac
 }
 
+/// [`bounded_least_squares`]'s `eval` by forward differences ([`forward_jacobian`]) of a
+/// residual function that is pure in `θ`, remembering its last evaluation with a Jacobian and its
+/// last without: Levenberg–Marquardt asks for the Jacobian at the point whose residuals its
+/// accepted trial has just evaluated, and a caller for the Jacobian at the result, which the fit
+/// has just evaluated; neither is integrated again. The values are those a fresh evaluation gives
+/// (a point is the same only bit for bit).
+pub struct ForwardDifferences<'a> {
+    resid: &'a dyn Fn(&[f64]) -> Vec<f64>,
+    step: &'a dyn Fn(&[f64], usize) -> f64,
+    /// `(θ, r)` of the last evaluation without a Jacobian.
+    last: Option<(Vec<f64>, Vec<f64>)>,
+    /// `(θ, r, J)` of the last evaluation with one.
+    last_jacobian: Option<(Vec<f64>, Vec<f64>, Vec<f64>)>,
+}
+
+impl<'a> ForwardDifferences<'a> {
+    /// Residuals `resid(θ)`, and column `c` of the Jacobian at `θ` from the step `step(θ, c)`
+    /// (0 for a fixed parameter).
+    pub fn new(
+        resid: &'a dyn Fn(&[f64]) -> Vec<f64>,
+        step: &'a dyn Fn(&[f64], usize) -> f64,
+    ) -> Self {
+        Self {
+            resid,
+            step,
+            last: None,
+            last_jacobian: None,
+        }
+    }
+
+    /// `(r, J)` at `theta` as [`ResidualFn`] gives them: `J` empty unless `with_jacobian`.
+    pub fn eval(&mut self, theta: &[f64], with_jacobian: bool) -> (Vec<f64>, Vec<f64>) {
+        let same = |t: &[f64]| {
+            t.len() == theta.len() && t.iter().zip(theta).all(|(a, b)| a.to_bits() == b.to_bits())
+        };
+        if let Some((t, r, jac)) = &self.last_jacobian
+            && same(t)
+        {
+            return (
+                r.clone(),
+                if with_jacobian {
+                    jac.clone()
+                } else {
+                    Vec::new()
+                },
+            );
+        }
+        let r = match &self.last {
+            Some((t, r)) if same(t) => r.clone(),
+            _ => (self.resid)(theta),
+        };
+        if !with_jacobian {
+            self.last = Some((theta.to_vec(), r.clone()));
+            return (r, Vec::new());
+        }
+        let jac = forward_jacobian(theta, &r, &|c| (self.step)(theta, c), self.resid);
+        self.last_jacobian = Some((theta.to_vec(), r.clone(), jac.clone()));
+        (r, jac)
+    }
+}
+
 /// How many times the median window's sensitivity a fit window may have by default (see
 /// [`calm_windows`]).
 pub const SENSITIVITY_LIMIT: f64 = 100.0;

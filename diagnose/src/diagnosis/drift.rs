@@ -357,14 +357,9 @@ impl Ctx<'_> {
                 false => vec![f64::INFINITY],
             }
         };
-        let mut eval = |th: &[f64], with_j: bool| -> (Vec<f64>, Vec<f64>) {
-            let r = resid_of(th);
-            if !with_j {
-                return (r, Vec::new());
-            }
-            let jac = forward_jacobian(th, &r, &|_| step(th), &resid_of);
-            (r, jac)
-        };
+        let step_of = |th: &[f64], _: usize| step(th);
+        let mut fd = ForwardDifferences::new(&resid_of, &step_of);
+        let mut eval = |th: &[f64], with_j: bool| fd.eval(th, with_j);
         let res = bounded_least_squares(
             &[start],
             &lower,
