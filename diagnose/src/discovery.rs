@@ -655,6 +655,11 @@ struct FrictionField {
     places: Vec<[f64; 2]>,
 }
 
+/// Where `tanh x` is ±1 in f64: `1 − tanh x ≈ 2e^(−2x)` is below half the spacing of the
+/// floats under 1 (2⁻⁵⁴) from `x ≈ 19.06`, and rounds to 1 (glibc's `tanh` computes it up to 22,
+/// and returns 1.0 from 19.06 on).
+const TANH_IS_ONE: f64 = 19.5;
+
 /// Simpson's weights of a push's start, middle and end.
 const ALONG_PUSH: [f64; 3] = [1.0 / 6.0, 4.0 / 6.0, 1.0 / 6.0];
 
@@ -716,7 +721,7 @@ impl FrictionField {
 
     /// The moments of a region `atom` at every transition (`n × 3`). A strip's value is the
     /// feature's own, its direction's sine and cosine taken once and `tanh` skipped where it
-    /// is ±1 in f64 (`|x| ≥ 22`; most of the screen's time went to both).
+    /// is ±1 in f64 (most of the screen's time went to both): from `|x| ≥` [`TANH_IS_ONE`].
     fn of_atom(&self, atom: &Atom, n: usize) -> Vec<f64> {
         let moments = |phi: &dyn Fn([f64; 2]) -> f64| -> Vec<f64> {
             (0..n).flat_map(|i| self.moments(i, phi)).collect()
@@ -726,8 +731,8 @@ impl FrictionField {
                 let (sa, ca) = (a.sin(), a.cos());
                 let eps = 0.05 * w;
                 let tanh = |x: f64| match x {
-                    x if x >= 22.0 => 1.0,
-                    x if x <= -22.0 => -1.0,
+                    x if x >= TANH_IS_ONE => 1.0,
+                    x if x <= -TANH_IS_ONE => -1.0,
                     x => x.tanh(),
                 };
                 moments(&|p: [f64; 2]| {
