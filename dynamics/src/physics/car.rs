@@ -240,7 +240,8 @@ pub(crate) fn rhs<R: Real>(
         ellipse,
     ] = [0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15].map(|i| p[i]);
     let (x, y, psi, vx, vy, om) = (s[0], s[1], s[2], s[3], s[4], s[5]);
-    let (mut delta, mut d) = commands_at_car(p, slots, active, s, u);
+    let commands = commands_at_car(p, slots, active, s, u);
+    let (mut delta, mut d) = commands;
     let mut grip = R::cst(1.0);
     for (sl, &on) in slots.iter().zip(active) {
         if !on {
@@ -296,7 +297,7 @@ pub(crate) fn rhs<R: Real>(
             out[4] = out[4] - c * speed * vy / m;
         }
     }
-    effect_state_rates(p, slots, active, s, u, out);
+    effect_state_rates_at(p, slots, active, s, u, commands, out);
 }
 
 /// The commanded front wheel angle: `δ`, plus `δ₀` with an active `steering_offset`.
@@ -334,11 +335,24 @@ pub(crate) fn effect_state_rates<R: Real>(
     u: &[R],
     out: &mut [R],
 ) {
+    let commands = commands_at_car(p, slots, active, s, u);
+    effect_state_rates_at(p, slots, active, s, u, commands, out);
+}
+
+/// [`effect_state_rates`] with the commands as they reach the car, `(target, throttle)`
+/// ([`commands_at_car`]), which the lags act on.
+fn effect_state_rates_at<R: Real>(
+    p: &[R],
+    slots: &[Slot],
+    active: &[bool],
+    s: &[R],
+    u: &[R],
+    (target, throttle): (R, R),
+    out: &mut [R],
+) {
     for o in out.iter_mut().skip(6) {
         *o = R::cst(0.0);
     }
-    // the lags act on the commands as they reach the car
-    let (target, throttle) = commands_at_car(p, slots, active, s, u);
     for (sl, &on) in slots.iter().zip(active) {
         if !on {
             continue;
