@@ -206,14 +206,11 @@ impl<'a> ForwardDifferences<'a> {
         if let Some((t, r, jac)) = &self.last_jacobian
             && same(t)
         {
-            return (
-                r.clone(),
-                if with_jacobian {
-                    jac.clone()
-                } else {
-                    Vec::new()
-                },
-            );
+            let jac = match with_jacobian {
+                true => jac.clone(),
+                false => Vec::new(),
+            };
+            return (r.clone(), jac);
         }
         let r = match &self.last {
             Some((t, r)) if same(t) => r.clone(),
