@@ -171,10 +171,10 @@ fn median(mut v: Vec<f64>) -> f64 {
     }
 }
 
-/// The line `s̄·(1 + β·(τ − ½))` through the points `[τ, s, …]` by Theil–Sen (the median of
-/// the pairwise slopes; one block of few windows fitted far off does not tilt it): `[s̄, β,
-/// σ_β]`, σ from the residuals' median absolute deviation (NaN with fewer than three points).
-fn trend(points: &[[f64; 3]]) -> [f64; 3] {
+/// The Theil–Sen line through the points `[τ, s, …]`: the median of the pairwise slopes and
+/// the median intercept at `τ = ½`, `[slope, s̄]` (one block of few windows fitted far off does
+/// not tilt it).
+fn theil_sen(points: &[[f64; 3]]) -> [f64; 2] {
     let n = points.len();
     let slopes: Vec<f64> = (0..n)
         .flat_map(|i| (i + 1..n).map(move |j| (i, j)))
@@ -187,6 +187,19 @@ fn trend(points: &[[f64; 3]]) -> [f64; 3] {
         median(slopes)
     };
     let mid = median(points.iter().map(|p| p[1] - slope * (p[0] - 0.5)).collect());
+    [slope, mid]
+}
+
+/// The line `s̄·(1 + β·(τ − ½))` through the points `[τ, s, …]` by Theil–Sen: `[s̄, β, σ_β]`
+/// (σ NaN with fewer than three points). σ is the larger of two estimates of the blocks'
+/// scatter about the line: the residuals' median absolute deviation, and the jackknife over
+/// the blocks (the line refitted without each in turn). The first alone collapses where three
+/// of five blocks lie on the line through them, as Theil–Sen's lines often do: on a car whose
+/// rolling resistance did not change, blocks at ×1.29, 1.15, 1.21, 1.43, 1.28 gave a rise of
+/// 15 % ± 1.8 % (the jackknife: ± 8.5 %).
+fn trend(points: &[[f64; 3]]) -> [f64; 3] {
+    let n = points.len();
+    let [slope, mid] = theil_sen(points);
     if n < 3 || !(mid.is_finite() && mid != 0.0) {
         return [mid, 0.0, f64::NAN];
     }
@@ -198,8 +211,23 @@ fn trend(points: &[[f64; 3]]) -> [f64; 3] {
     );
     let tm = points.iter().map(|p| p[0]).sum::<f64>() / n as f64;
     let sxx: f64 = points.iter().map(|p| (p[0] - tm).powi(2)).sum();
-    let sd = 1.4826 * mad / sxx.sqrt() * (n as f64 / (n as f64 - 2.0)).sqrt();
-    [mid, slope / mid, sd / mid.abs()]
+    let sd_mad = 1.4826 * mad / sxx.sqrt() * (n as f64 / (n as f64 - 2.0)).sqrt() / mid.abs();
+    let betas: Vec<f64> = (0..n)
+        .map(|i| {
+            let rest: Vec<[f64; 3]> = [&points[..i], &points[i + 1..]].concat();
+            let [s, m] = theil_sen(&rest);
+            s / m
+        })
+        .collect();
+    let mean = betas.iter().sum::<f64>() / n as f64;
+    let jack =
+        ((n - 1) as f64 / n as f64 * betas.iter().map(|b| (b - mean).powi(2)).sum::<f64>()).sqrt();
+    let sd = if jack.is_finite() {
+        sd_mad.max(jack)
+    } else {
+        sd_mad
+    };
+    [mid, slope / mid, sd]
 }
 
 /// A physical quantity of the nominal model: its name, its parameters, what changes it over a
@@ -602,6 +630,19 @@ mod tests {
         assert!(sd > 0.0 && beta.abs() > 2.0 * sd, "{beta} ± {sd}");
         // a scatter without a trend: the change is within two standard errors
         let [_, beta, sd] = trend(&blocks(&[1.02, 0.97, 1.03, 0.98, 1.01, 0.99]));
+        assert!(beta.abs() <= 2.0 * sd, "{beta} ± {sd}");
+        // five blocks of a car whose rolling resistance did not change (the third sixth of
+        // the recording without fit windows), three of them on one line: a rise of 15 % whose
+        // blocks' median deviation from the line is 0.7 %, within the jackknife's two σ
+        let pts = [
+            [centre(0), 1.289, 0.109],
+            [centre(1), 1.152, 0.007],
+            [centre(3), 1.209, 0.145],
+            [centre(4), 1.425, 0.003],
+            [centre(5), 1.276, 0.063],
+        ];
+        let [_, beta, sd] = trend(&pts);
+        assert!((0.1..0.2).contains(&beta), "{beta}");
         assert!(beta.abs() <= 2.0 * sd, "{beta} ± {sd}");
         // two blocks give a line but no standard error
         assert!(trend(&pts[..2])[2].is_nan());
