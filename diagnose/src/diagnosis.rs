@@ -1806,27 +1806,6 @@ impl<'a> Ctx<'a> {
                     }
                 ));
             }
-            // a disc the data do not place: its centre's σ (the jackknife over the fit
-            // segments) wider than half the data. On the independent generator's car with a
-            // low-grip band a disc on the band at (−0.73, −0.10) m, r 0.47, centre ± (3.1, 3.7) m,
-            // removed 32 % and was named where the band's strip did not rival it; the true
-            // patches of its other cars are placed within ± 0.63 m of 3.7 m across
-            let sd = |n: &str| {
-                (0..f.names.len())
-                    .find(|&i| f.owners[i] == Some(e) && f.names[i] == n)
-                    .map_or(-1.0, |i| f.reported_std(i))
-            };
-            let (sx, sy) = (sd("cx"), sd("cy"));
-            if sx >= 0.0 && sy >= 0.0 && sx.hypot(sy) > 0.5 * across {
-                return Some(format!(
-                    "the data do not place the patch: its centre ({}, {}) m is known to ± ({}, {}) m, more than half the data's {} m across, so the error it removes is not tied to a place (see the term search)",
-                    g4(cx),
-                    g4(cy),
-                    g4(sx),
-                    g4(sy),
-                    g4(across)
-                ));
-            }
         }
         None
     }
