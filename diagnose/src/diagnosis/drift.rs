@@ -219,15 +219,11 @@ fn trend(points: &[[f64; 3]]) -> [f64; 3] {
             s / m
         })
         .collect();
-    let mean = betas.iter().sum::<f64>() / n as f64;
+    let avg = betas.iter().sum::<f64>() / n as f64;
     let jack =
-        ((n - 1) as f64 / n as f64 * betas.iter().map(|b| (b - mean).powi(2)).sum::<f64>()).sqrt();
-    let sd = if jack.is_finite() {
-        sd_mad.max(jack)
-    } else {
-        sd_mad
-    };
-    [mid, slope / mid, sd]
+        ((n - 1) as f64 / n as f64 * betas.iter().map(|b| (b - avg).powi(2)).sum::<f64>()).sqrt();
+    // (`max` keeps the deviation's σ where a refit without a block has no line: NaN)
+    [mid, slope / mid, sd_mad.max(jack)]
 }
 
 /// A physical quantity of the nominal model: its name, its parameters, what changes it over a
