@@ -6,7 +6,9 @@
 //! library](dynlab_learn::dynamics::physics::features) for terms `ṡ_i += θ·feature(s, u)`:
 //!
 //! 1. **One-step residual of each state derivative** on the fit half: `r = (s_meas(t + h) −
-//!    Φ(s(t), u))/h` for the targets of the robot (car: `vx`, `vy`, `omega`; pushing: `x`, `y`,
+//!    Φ(s(t), u))/h` for the targets of the robot (car: `vx`, `vy`, `omega`, and `ax`, `ay`, the
+//!    velocity residual turned into the world frame, on the constant and the position alone: a
+//!    pull fixed in the world; pushing: `x`, `y`,
 //!    `theta` in the world frame and `bx`, `by` in the block frame, per push, and the table's
 //!    friction under the block, below). Two of the car's
 //!    tire-model inputs are targets too: the steering angle `delta`, a correction of the angle
@@ -843,6 +845,8 @@ impl OneStep {
             Target::Vx => d(3),
             Target::Vy => d(4),
             Target::Omega => d(5),
+            Target::WorldX => th.cos() * d(3) - th.sin() * d(4),
+            Target::WorldY => th.sin() * d(3) + th.cos() * d(4),
             Target::X => d(0),
             Target::Y => d(1),
             Target::Theta => d(2),

@@ -357,12 +357,25 @@ fn a_nominal_parameter_change_is_not_reported_as_a_term() {
         })
         .sum();
     assert_eq!(lagged_elsewhere, 3 + 6 + 6);
+    // the world-frame ẍ, ÿ take the constant and the position (`1`, `x`, `y`, each bump), a
+    // pull fixed in the world
+    let world: usize = [Target::WorldX, Target::WorldY]
+        .iter()
+        .map(|t| {
+            library(Robot::Car, None, 0)
+                .iter()
+                .filter(|f| t.searched_with(f))
+                .count()
+                + grid * grid
+        })
+        .sum();
+    assert_eq!(world, 2 * (3 + grid * grid));
     // each command beyond the level fitted to the residual of what it drives: the steering's
     // on δ, the throttle's on v̇ₓ
     let levels = 2;
     assert_eq!(
         d.pairs_tried,
-        3 * features - shaped.len() - lagged_elsewhere + steering + grip + levels,
+        3 * features - shaped.len() - lagged_elsewhere + steering + grip + world + levels,
         "{}",
         d.table()
     );

@@ -10,7 +10,10 @@
 //! ```
 //!
 //! **Targets.** Car (time in seconds): `vx`, `vy` (`v̇ₓ`, `v̇_y` in m/s²) and `omega` (`ω̇` in
-//! 1/s²); the pose kinematics stay as they are. `delta` (`δ` in rad) is not a derivative: it
+//! 1/s²); `ax`, `ay` (`ẍ`, `ÿ` in m/s²) add an acceleration in the **world frame**, rotated into
+//! the body frame by the heading `ψ`, so `ÿ += 0.23` is a floor that slopes down along `y` (or a
+//! steady wind) with one coefficient where the body frame needs a `cos ψ` and a `sin ψ` term on
+//! each of `v̇ₓ`, `v̇_y`; the pose kinematics stay as they are. `delta` (`δ` in rad) is not a derivative: it
 //! corrects the **effective steering angle** the tires see (after the servo's lag, when the model
 //! has one), so one term acts on `v̇_y` and `ω̇` through the tire model the way an input
 //! nonlinearity does (a steering gain that changes with speed, `δ += θ·δ·vₓ²`). `grip` (`μ`,
@@ -53,6 +56,11 @@ pub enum Target {
     Vy,
     /// Car: `ω̇`.
     Omega,
+    /// Car: the world-frame `ẍ`, rotated into the body frame by the heading `ψ` (a pull fixed
+    /// in the world: a sloping floor, a steady wind, a cable).
+    WorldX,
+    /// Car: the world-frame `ÿ`, rotated into the body frame by `ψ`.
+    WorldY,
     /// Car: the effective steering angle `δ` (an input correction, not a derivative).
     Delta,
     /// Car: the tires' grip `μ`, a scale `1 + μ` of both axles' peak forces (a correction
@@ -74,10 +82,12 @@ pub enum Target {
     Friction,
 }
 
-const TARGETS: [(Target, &str, &str, Unit, Robot); 11] = [
+const TARGETS: [(Target, &str, &str, Unit, Robot); 13] = [
     (Target::Vx, "vx", "v̇ₓ", Unit::new(1, -2), Robot::Car),
     (Target::Vy, "vy", "v̇_y", Unit::new(1, -2), Robot::Car),
     (Target::Omega, "omega", "ω̇", Unit::new(0, -2), Robot::Car),
+    (Target::WorldX, "ax", "ẍ", Unit::new(1, -2), Robot::Car),
+    (Target::WorldY, "ay", "ÿ", Unit::new(1, -2), Robot::Car),
     (Target::Delta, "delta", "δ", Unit::new(0, 0), Robot::Car),
     (Target::Grip, "grip", "μ", Unit::new(0, 0), Robot::Car),
     (Target::X, "x", "ẋ", Unit::new(1, -1), Robot::Pushing),
@@ -185,7 +195,10 @@ impl Target {
     /// custom effect file may still put any feature on `δ`. On the grip `μ` only features of the position (`x`,
     /// `y`, the bumps and bands): a grip that changes everywhere alike is the tires' own
     /// parameters, a grip that changes with the motion is a tire model's shape. The bands are
-    /// tried on `μ` only (a strip of other grip across a floor). On the table's friction only
+    /// tried on `μ` only (a strip of other grip across a floor). On the world-frame `ẍ`, `ÿ`
+    /// only the constant and features of the position but the bands: a pull fixed in the world
+    /// (a slope, a wind), everywhere or over a region; the heading features on `v̇ₓ`, `v̇_y` give
+    /// the same pull one body-frame component at a time. On the table's friction only
     /// regions (bumps, bands, strips): a friction that changes everywhere alike does not move
     /// a quasi-static block at all.
     pub fn searched_with(self, feature: &Feature) -> bool {
@@ -217,6 +230,10 @@ impl Target {
                     })
             }
             Target::Grip => all(Atom::is_position),
+            Target::WorldX | Target::WorldY => all(|a| {
+                matches!(a, Atom::One)
+                    || a.is_position() && !matches!(a, Atom::Band { .. } | Atom::Strip { .. })
+            }),
             Target::Friction => !feature.factors().is_empty() && all(Atom::is_region),
             Target::Vx => {
                 lagged(1) && all(|a| !matches!(a, Atom::Band { .. } | Atom::Strip { .. }))
@@ -258,7 +275,7 @@ impl Target {
             .ok_or_else(|| CustomError::UnknownState {
                 name: name.to_string(),
                 known:
-                    "car: vx, vy, omega, delta (the effective steering angle), grip (a scale of the tires' peak forces); pushing: x, y, theta (world frame), bx, by (block frame), friction (a scale of the table's friction under the block)"
+                    "car: vx, vy, omega (body frame), ax, ay (world-frame acceleration), delta (the effective steering angle), grip (a scale of the tires' peak forces); pushing: x, y, theta (world frame), bx, by (block frame), friction (a scale of the table's friction under the block)"
                         .into(),
             })
     }
@@ -632,6 +649,17 @@ impl CustomEffect {
                 Target::Vx => out[3] = out[3] + v,
                 Target::Vy => out[4] = out[4] + v,
                 Target::Omega => out[5] = out[5] + v,
+                Target::WorldX | Target::WorldY => {
+                    // the world-frame acceleration in the body frame: `R(ψ)ᵀ·a`
+                    let (sp, cp) = (s[2].sin(), s[2].cos());
+                    let (ax, ay) = if t.target == Target::WorldX {
+                        (cp, -sp)
+                    } else {
+                        (sp, cp)
+                    };
+                    out[3] = out[3] + v * ax;
+                    out[4] = out[4] + v * ay;
+                }
                 Target::X => out[0] = out[0] + v,
                 Target::Y => out[1] = out[1] + v,
                 Target::Theta => out[2] = out[2] + v,
@@ -745,6 +773,36 @@ coefficient = -3.2
             "{e}"
         );
         assert!(e.to_string().contains("[-0.95, 3]"), "{e}");
+    }
+
+    #[test]
+    fn a_world_frame_term_is_the_same_pull_at_every_heading() {
+        let c = CustomEffect::from_toml(
+            "name = \"slope\"\n[[term]]\nstate = \"ay\"\nfeature = \"1\"\ncoefficient = 0.2\n",
+        )
+        .unwrap();
+        assert_eq!(c.terms()[0].target, Target::WorldY);
+        assert_eq!(c.terms()[0].coefficient_unit().format("s"), "m/s²");
+        // the constant needs no nominal parameter
+        let p: [f64; 0] = [];
+        for psi in [0.0, 0.7, 2.0, -2.5] {
+            let s = [0.3, -0.1, psi, 1.2, 0.1, 0.5];
+            let mut out = [0.0; 6];
+            c.add_to(&[0.2], &p, &s, &[0.1, 0.4], &mut out);
+            // back in the world frame: 0.2 along y, nothing along x, whatever the heading
+            let (sp, cp) = (f64::sin(psi), f64::cos(psi));
+            let world = [cp * out[3] - sp * out[4], sp * out[3] + cp * out[4]];
+            assert!(
+                world[0].abs() < 1e-12 && (world[1] - 0.2).abs() < 1e-12,
+                "{psi}: {world:?}"
+            );
+            assert_eq!([out[0], out[1], out[2], out[5]], [0.0; 4]);
+        }
+        let f = |n: &str| Feature::parse(n).unwrap();
+        assert!(Target::WorldY.searched_with(&f("1")));
+        assert!(Target::WorldX.searched_with(&f("gauss(0.5,0.2,0.4)")));
+        assert!(!Target::WorldX.searched_with(&f("sin_psi")));
+        assert!(!Target::WorldX.searched_with(&f("band(0.785,0.2,0.3)")));
     }
 
     #[test]

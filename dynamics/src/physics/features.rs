@@ -21,7 +21,7 @@
 //! | `sat_alpha_f`, `sat_alpha_r` | `tanh(α_f/α₀)` | - | saturating slip, `α₀` = [`SLIP_SCALE_RAD`] |
 //! | `beta` | `β` | rad | sideslip `atan(vy/√(vx² + v_reg²))` |
 //! | `sat_vx2(v0)` | `vₓ²/(vₓ² + v₀²)` | - | saturating speed with the scale `v₀` \[m/s\] (> 0): `δ·(1 − vₓ²/(vₓ² + v₀²))` is the steady-state steering gain `1/(1 + vₓ²/v₀²)` of a car that understeers with the characteristic speed `v₀` |
-//! | `cos_psi`, `sin_psi` | `cos ψ`, `sin ψ` | - | heading; on a velocity derivative a pull fixed in the world frame (a sloping floor, a steady wind): `v̇ₓ += a·cos(ψ − φ)` for a pull `a` towards `φ` is `a·cos φ·cos ψ + a·sin φ·sin ψ` |
+//! | `cos_psi`, `sin_psi` | `cos ψ`, `sin ψ` | - | heading; on a velocity derivative a pull fixed in the world frame (a sloping floor, a steady wind): `v̇ₓ += a·cos(ψ − φ)` for a pull `a` towards `φ` is `a·cos φ·cos ψ + a·sin φ·sin ψ` (the world-frame targets `ax`, `ay` take the whole pull, on both velocities, as `ẍ += a·cos φ`, `ÿ += a·sin φ` on `1`) |
 //! | `delta_beyond(l)`, `d_beyond(l)` | `δ_{>l}`, `d_{>l}` | - | the part of a command beyond the level `l` (> 0), with its sign: `sgn(u)·max(\|u\| − l, 0)`, the shape of an actuator's hard limit: `δ += −1·δ_{>l}` is a steering end stop at `l` rad, a negative `v̇ₓ` term on `d_{>l}` a drive force capped by the tyres' traction or the motor's current limit |
 //!
 //! Atoms of the pusher (state `(x, y, θ)`, action `(p, φ, ℓ)`): `p`, `phi` (`φ`, rad), `l`
