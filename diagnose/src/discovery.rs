@@ -296,17 +296,23 @@ pub struct Bin {
 }
 
 /// The plot that shows a term: the one-step residual of its target derivative against its
-/// feature, binned by quantiles, with the fitted line `θ·feature`.
+/// feature, binned by quantiles, with the fitted line `θ·feature`. A constant term (`ÿ += θ`,
+/// a pull fixed in the world) is plotted against the heading instead, with the level `θ`: the
+/// same residual at every heading is what shows it.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct TermPlot {
-    /// Horizontal axis (`δ·vₓ [m/s]`).
+    /// Horizontal axis (`δ·vₓ [m/s]`; a constant term's: `heading ψ [rad]`).
     pub x_label: String,
     /// Vertical axis (`ω̇ residual [1/s²]`).
     pub y_label: String,
-    /// Bins, by increasing feature.
+    /// Bins, by increasing feature (heading).
     pub bins: Vec<Bin>,
-    /// Slope of the one-step regression (the line through the origin).
+    /// Slope of the one-step regression (the line through the origin; a constant term's
+    /// level).
     pub slope: f64,
+    /// Whether the term is a constant, plotted against the heading.
+    #[serde(default)]
+    pub constant: bool,
 }
 
 /// A term tried by the search.
@@ -2134,9 +2140,14 @@ pub fn discover_terms_split(
                     },
                     pick.target,
                     &feature,
-                    &x,
-                    nf,
-                    pick.feature,
+                    PlotAxis {
+                        x: &x,
+                        nf,
+                        f: pick.feature,
+                        heading: &(0..n)
+                            .map(|i| wrap_angle(s0[i * dp + 2]))
+                            .collect::<Vec<_>>(),
+                    },
                     pick.slope,
                     cfg.bins,
                     unit_time,
@@ -2608,21 +2619,36 @@ fn erfc(x: f64) -> f64 {
     if x >= 0.0 { r } else { 2.0 - r }
 }
 
-/// The binned residual of `target` against feature column `f`.
-#[allow(clippy::too_many_arguments)]
+/// What a term's plot puts along its horizontal axis: column `f` of the feature matrix `x`
+/// (`nf` columns, a row per point), or, for a constant, the heading at each point.
+struct PlotAxis<'a> {
+    x: &'a [f64],
+    nf: usize,
+    f: usize,
+    heading: &'a [f64],
+}
+
+/// The binned residual of `target` against `axis`.
 fn term_plot(
     pts: &[(f64, f64)],
     target: Target,
     feature: &Feature,
-    x: &[f64],
-    nf: usize,
-    f: usize,
+    axis: PlotAxis,
     slope: f64,
     bins: usize,
     time: &str,
 ) -> TermPlot {
+    let constant =
+        feature.factors().iter().all(|a| matches!(a, Atom::One)) && axis.heading.len() == pts.len();
+    let at = |i: usize| {
+        if constant {
+            axis.heading[i]
+        } else {
+            axis.x[i * axis.nf + axis.f]
+        }
+    };
     let mut idx: Vec<usize> = (0..pts.len()).collect();
-    idx.sort_by(|&a, &b| x[a * nf + f].total_cmp(&x[b * nf + f]));
+    idx.sort_by(|&a, &b| at(a).total_cmp(&at(b)));
     let nb = bins.max(1).min(idx.len().max(1));
     let mut out = Vec::new();
     for b in 0..nb {
@@ -2636,7 +2662,7 @@ fn term_plot(
         if sw.is_nan() || sw <= 0.0 {
             continue;
         }
-        let xm = chunk.iter().map(|&i| pts[i].1 * x[i * nf + f]).sum::<f64>() / sw;
+        let xm = chunk.iter().map(|&i| pts[i].1 * at(i)).sum::<f64>() / sw;
         let ym = chunk.iter().map(|&i| pts[i].1 * pts[i].0).sum::<f64>() / sw;
         let var = chunk
             .iter()
@@ -2653,8 +2679,16 @@ fn term_plot(
             n: chunk.len(),
         });
     }
+    let heading = match target.robot() {
+        Robot::Car => "ψ",
+        Robot::Pushing => "θ",
+    };
     TermPlot {
-        x_label: format!("{} [{}]", feature.symbol(), feature.unit().format(time)),
+        x_label: if constant {
+            format!("heading {heading} [rad] (the term is a constant)")
+        } else {
+            format!("{} [{}]", feature.symbol(), feature.unit().format(time))
+        },
         y_label: format!(
             "{} residual [{}]",
             target.symbol(),
@@ -2662,6 +2696,7 @@ fn term_plot(
         ),
         bins: out,
         slope,
+        constant,
     }
 }
 
@@ -2832,10 +2867,17 @@ pub fn discovery_html(d: &Discovery) -> String {
         )
         .series(Series::points("binned residual (mean)", pts.clone()));
         if x0.is_finite() && x1.is_finite() {
-            chart = chart.series(Series::line(
-                "one-step fit θ·feature",
-                vec![(x0, t.plot.slope * x0), (x1, t.plot.slope * x1)],
-            ));
+            chart = chart.series(if t.plot.constant {
+                Series::line(
+                    "one-step fit θ",
+                    vec![(x0, t.plot.slope), (x1, t.plot.slope)],
+                )
+            } else {
+                Series::line(
+                    "one-step fit θ·feature",
+                    vec![(x0, t.plot.slope * x0), (x1, t.plot.slope * x1)],
+                )
+            });
         }
         match chart.render_svg() {
             Ok(svg) => {
@@ -2985,6 +3027,44 @@ mod tests {
         // a gain that reverses only at the top speed, on 1 of 10 speeds: beyond the share
         let top = reversed_steering(samples.iter().map(|&(d, v)| (d, -0.41 * d * v)));
         assert!(top.is_some_and(|w| w.contains("10 %")));
+    }
+
+    /// A constant term is plotted against the heading with its level; any other against its
+    /// feature with the line through the origin.
+    #[test]
+    fn a_constant_term_is_plotted_against_the_heading() {
+        let n = 60;
+        let heading: Vec<f64> = (0..n).map(|i| -3.0 + 0.1 * i as f64).collect();
+        // residuals of a pull 0.2 whatever the heading; the feature matrix: `1`, `vx`
+        let pts: Vec<(f64, f64)> = (0..n).map(|i| (0.2 + 0.01 * (i % 3) as f64, 1.0)).collect();
+        let x: Vec<f64> = (0..n).flat_map(|i| [1.0, 0.5 + 0.01 * i as f64]).collect();
+        let plot = |f: usize, feature: &str| {
+            term_plot(
+                &pts,
+                Target::WorldY,
+                &Feature::parse(feature).unwrap(),
+                PlotAxis {
+                    x: &x,
+                    nf: 2,
+                    f,
+                    heading: &heading,
+                },
+                0.21,
+                6,
+                "s",
+            )
+        };
+        let c = plot(0, "1");
+        assert!(c.constant && c.x_label.starts_with("heading ψ"), "{c:?}");
+        let xs: Vec<f64> = c.bins.iter().map(|b| b.x).collect();
+        assert!(
+            (xs[0] + 2.55).abs() < 1e-9 && (xs[5] - 2.45).abs() < 1e-9,
+            "{xs:?}"
+        );
+        assert!(c.bins.iter().all(|b| (b.mean - 0.21).abs() < 0.011));
+        let v = plot(1, "vx");
+        assert!(!v.constant && v.x_label.starts_with("vₓ"), "{v:?}");
+        assert!((v.bins[0].x - 0.545).abs() < 1e-9, "{v:?}");
     }
 
     #[test]

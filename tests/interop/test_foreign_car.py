@@ -214,6 +214,8 @@ def test_a_sloping_floor_is_a_heading_term(foreign):
     assert abs(first["coefficient"] - truth[key]) < 0.3 * a, (first["coefficient"], truth[key])
     assert j["discovery"]["error_reduction"] >= 0.15, j["discovery"]["summary"]
     assert any(s in proc.stdout for s in ("sin ψ", "cos ψ", "ẍ +=", "ÿ +=")), proc.stdout
+    # a pull in the world frame is a constant: its plot is the residual against the heading
+    assert first["plot"]["constant"] == (first["feature"] == "1"), first["plot"]["x_label"]
 
 
 def test_a_drive_force_capped_by_traction_is_a_throttle_limit_term_not_a_drag(foreign):
