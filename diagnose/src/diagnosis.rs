@@ -1626,6 +1626,7 @@ impl<'a> Ctx<'a> {
                 ds,
                 fit_w.len(),
                 regional,
+                SENSITIVITY_LIMIT,
                 cluster_jackknife_std,
             );
             if cs.iter().all(|v| !v.is_nan()) {
@@ -3346,11 +3347,12 @@ fn folds_of(
 }
 
 /// How many times the median window's sensitivity a window of an effect fit may have: 10⁴,
-/// looser than training's and the term search's 100×. A region's effect (a patch) uses 100×
+/// looser than training's 100× (the term search's too, for a term that holds everywhere, after
+/// the spins are left out). A region's effect (a patch) uses 100×
 /// over the windows it reaches ([`robust_windows`]): with 10⁴ there, spins stayed in the fit
 /// and a 50 % low-grip disc removed 47 % of the held-out error where it removes more than
 /// half at 100×.
-const EFFECT_FIT_SENSITIVITY_LIMIT: f64 = 1e4;
+pub(crate) const EFFECT_FIT_SENSITIVITY_LIMIT: f64 = 1e4;
 
 /// The mean of the values of `v` whose `keep` is set.
 fn mean_where(v: &[f64], keep: &[bool]) -> f64 {
@@ -3469,9 +3471,9 @@ pub(crate) fn calm_mask(
 pub(crate) type StdEstimate = fn(&[f64], &[f64], usize, &[bool], &[usize]) -> Vec<f64>;
 
 /// Standard errors clustered by `cluster` (one id per residual row, rows step-major as in
-/// [`calm_mask`]) from the windows calm at the fitted parameters ([`calm_mask`] at
-/// [`SENSITIVITY_LIMIT`]), by `estimate` (`cluster_std` or `cluster_jackknife_std`): a window
-/// calm where a fit started can roll out through a spin where it ended, and its Jacobian
+/// [`calm_mask`]) from the windows calm at the fitted parameters ([`calm_mask`] at `limit`
+/// times the median window's sensitivity), by `estimate` (`cluster_std` or
+/// `cluster_jackknife_std`): a window calm where a fit started can roll out through a spin where it ended, and its Jacobian
 /// dwarfs the rest's — the standard errors shrank to 10⁻⁴ of the values, or, with such windows
 /// in a few clusters, the jackknife's swung to 100 % — so the spinning windows are left out.
 #[allow(clippy::too_many_arguments)]
@@ -3484,12 +3486,13 @@ pub(crate) fn calm_std(
     ds: usize,
     n: usize,
     regional: bool,
+    limit: f64,
     estimate: StdEstimate,
 ) -> Vec<f64> {
     if r.len() != cluster.len() || jac.len() != r.len() * np || n == 0 {
         return estimate(jac, r, np, free, cluster);
     }
-    let keep = calm_mask(jac, np, ds, n, SENSITIVITY_LIMIT, regional);
+    let keep = calm_mask(jac, np, ds, n, limit, regional);
     let kept = |row: usize| keep[(row / ds) % n];
     let (r, jac) = kept_rows(r, jac, np, kept);
     let cluster: Vec<usize> = (0..cluster.len())
@@ -4437,11 +4440,33 @@ mod tests {
         };
         let honest = calm(&|i| !spins(i))[0];
         let all = cluster_std(&jac, &r, 1, &[true], &cluster)[0];
-        let got = calm_std(&jac, &r, 1, &[true], &cluster, ds, n, false, cluster_std)[0];
+        let got = calm_std(
+            &jac,
+            &r,
+            1,
+            &[true],
+            &cluster,
+            ds,
+            n,
+            false,
+            SENSITIVITY_LIMIT,
+            cluster_std,
+        )[0];
         assert!(honest > 1e-3 && all < 0.05 * honest, "{honest} {all}");
         assert!((got - honest).abs() < 1e-12 * honest, "{got} {honest}");
         // as a region's fit: the windows the parameter does not reach stay, the spins go
-        let got = calm_std(&jac, &r, 1, &[true], &cluster, ds, n, true, cluster_std)[0];
+        let got = calm_std(
+            &jac,
+            &r,
+            1,
+            &[true],
+            &cluster,
+            ds,
+            n,
+            true,
+            SENSITIVITY_LIMIT,
+            cluster_std,
+        )[0];
         assert!((got - honest).abs() < 1e-12 * honest, "{got} {honest}");
     }
 

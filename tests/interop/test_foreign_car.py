@@ -4,8 +4,8 @@ jitter, noise and dropouts, written by `rosbags` under other topic names) makes 
 bag of the same car, its parameters 10 % off the datasheet, with aero drag and a steering offset.
 `dynlab train` on the first, `dynlab diagnose --apply` on the second: only hidden effects named,
 with their strengths, nothing beyond the library, and the applied model predicts the bag better.
-Bags with an effect outside the library (a yaw damper, a sloping floor, a drive force capped by
-traction) get no library name and the term that models it.
+Bags with an effect outside the library (a yaw damper, a steering gain falling with speed, a sloping
+floor, a drive force capped by traction) get no library name and the term that models it.
 (The evaluation's own cars, `eval_foreign.py`'s seeds 0 and 5: `test_foreign_car_eval.py`.)
 """
 import json
@@ -180,6 +180,35 @@ def test_a_yaw_damper_is_a_yaw_term_and_the_drag_it_passed_as_is_dropped(tmp_pat
     assert "backward check" in proc.stdout and "dropped by the backward check: aero_drag" in proc.stdout
     terms = [t for t in j["discovery"]["terms"] if t["significant"]]
     assert terms and all(t["state"] == "omega" and t["coefficient"] < 0 for t in terms), j["discovery"]["summary"]
+    assert j["discovery"]["error_reduction"] >= 0.4, j["discovery"]["summary"]
+
+
+def test_a_steering_gain_that_acts_at_speed_is_fitted_on_the_windows_it_acts_on(tmp_path):
+    """Car seed 7 of `eval_foreign.py`'s `steering_gain_speed*` case, outside the library: the
+    wheels turn `δ/(1 + vₓ²/4)`. The term search's best term, a gain falling with speed, acts
+    on the fast windows alone, a small share of the fit half; against 100 times the median
+    window's sensitivity those were taken for spins and dropped fit after fit, and what was
+    left could not fix the coefficient (σ 65 % of it, not significant although it removed 44 %
+    of the held-out error). Fitted on the fit half without its spins, at the effect fits'
+    limit, the term is significant, with a tight σ, and removes more than 40 %."""
+    gen = [sys.executable, str(REPO / "launch_scripts" / "foreign_car.py")]
+    nominal, bag = tmp_path / "nominal", tmp_path / "gain"
+    # the evaluation's seeds: 1000·car + 1 for the nominal drive, 1000·car + 2 + the case's index
+    subprocess.run([*gen, str(nominal), "--car-seed", "7", "--seed", "7001"], check=True,
+                   capture_output=True, timeout=300)
+    subprocess.run([*gen, str(bag), "--car-seed", "7", "--seed", "7009", "--effects",
+                    "steering_gain_speed"], check=True, capture_output=True, timeout=300)
+    model, out = tmp_path / "model", tmp_path / "diagnosis"
+    run("dynlab", "train", "--world", "car", "--kind", "physics", "--bag", nominal, "--out", model,
+        *TOPICS, timeout=600)
+    # (the drag alone among the candidates, for time: with the whole library none is named)
+    proc, j = diagnose(model, bag, out, "--seed", "7", "--effects", "aero_drag")
+    assert j["effects"] == [], proc.stdout
+    terms = [t for t in j["discovery"]["terms"] if t["significant"]]
+    assert terms, j["discovery"]["summary"]
+    gain = terms[0]
+    assert gain["state"] == "delta" and gain["feature"].startswith("delta*"), gain["equation"]
+    assert gain["coefficient"] < 0 and gain["std"] < 0.1 * abs(gain["coefficient"]), gain["equation"]
     assert j["discovery"]["error_reduction"] >= 0.4, j["discovery"]["summary"]
 
 
