@@ -4440,33 +4440,25 @@ mod tests {
         };
         let honest = calm(&|i| !spins(i))[0];
         let all = cluster_std(&jac, &r, 1, &[true], &cluster)[0];
-        let got = calm_std(
-            &jac,
-            &r,
-            1,
-            &[true],
-            &cluster,
-            ds,
-            n,
-            false,
-            SENSITIVITY_LIMIT,
-            cluster_std,
-        )[0];
+        let calm_std_of = |regional: bool| {
+            calm_std(
+                &jac,
+                &r,
+                1,
+                &[true],
+                &cluster,
+                ds,
+                n,
+                regional,
+                SENSITIVITY_LIMIT,
+                cluster_std,
+            )[0]
+        };
+        let got = calm_std_of(false);
         assert!(honest > 1e-3 && all < 0.05 * honest, "{honest} {all}");
         assert!((got - honest).abs() < 1e-12 * honest, "{got} {honest}");
         // as a region's fit: the windows the parameter does not reach stay, the spins go
-        let got = calm_std(
-            &jac,
-            &r,
-            1,
-            &[true],
-            &cluster,
-            ds,
-            n,
-            true,
-            SENSITIVITY_LIMIT,
-            cluster_std,
-        )[0];
+        let got = calm_std_of(true);
         assert!((got - honest).abs() < 1e-12 * honest, "{got} {honest}");
     }
 
