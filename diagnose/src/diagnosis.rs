@@ -3348,10 +3348,9 @@ fn folds_of(
 
 /// How many times the median window's sensitivity a window of an effect fit may have: 10⁴,
 /// looser than training's 100× (the term search's too, for a term that holds everywhere, after
-/// the spins are left out). A region's effect (a patch) uses 100×
-/// over the windows it reaches ([`robust_windows`]): with 10⁴ there, spins stayed in the fit
-/// and a 50 % low-grip disc removed 47 % of the held-out error where it removes more than
-/// half at 100×.
+/// the spins are left out). A region's effect (a patch) uses 100× over the windows it reaches
+/// ([`robust_windows`]): with 10⁴ there, spins stayed in the fit and a 50 % low-grip disc
+/// removed 47 % of the held-out error where it removes more than half at 100×.
 pub(crate) const EFFECT_FIT_SENSITIVITY_LIMIT: f64 = 1e4;
 
 /// The mean of the values of `v` whose `keep` is set.
@@ -3473,8 +3472,8 @@ pub(crate) type StdEstimate = fn(&[f64], &[f64], usize, &[bool], &[usize]) -> Ve
 /// Standard errors clustered by `cluster` (one id per residual row, rows step-major as in
 /// [`calm_mask`]) from the windows calm at the fitted parameters ([`calm_mask`] at `limit`
 /// times the median window's sensitivity), by `estimate` (`cluster_std` or
-/// `cluster_jackknife_std`): a window calm where a fit started can roll out through a spin where it ended, and its Jacobian
-/// dwarfs the rest's — the standard errors shrank to 10⁻⁴ of the values, or, with such windows
+/// `cluster_jackknife_std`): a window calm where a fit started can roll out through a spin
+/// where it ended, and its Jacobian dwarfs the rest's — the standard errors shrank to 10⁻⁴ of the values, or, with such windows
 /// in a few clusters, the jackknife's swung to 100 % — so the spinning windows are left out.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn calm_std(

@@ -39,6 +39,22 @@ def assert_no_drift(j):
     assert j["drift"] is not None and not j["drift"]["significant"], j["drift"]
 
 
+def eval_car(d, car, case_index, effects, *train_args):
+    """`eval_foreign.py`'s car `car` on its case `case_index` with the generator's `effects`:
+    the nominal drive, `dynlab train` on it (more options in `train_args`), and the case's bag,
+    all under `d`; returns the model and the bag. The evaluation's seeds: 1000·car + 1 for the
+    nominal drive, 1000·car + 2 + the case's index for the case."""
+    gen = [sys.executable, str(REPO / "launch_scripts" / "foreign_car.py"), "--car-seed", str(car)]
+    nominal, bag, model = d / "nominal", d / "case", d / "model"
+    subprocess.run([*gen, str(nominal), "--seed", str(1000 * car + 1)], check=True,
+                   capture_output=True, timeout=300)
+    subprocess.run([*gen, str(bag), "--seed", str(1000 * car + 2 + case_index), "--effects", effects],
+                   check=True, capture_output=True, timeout=300)
+    run("dynlab", "train", "--world", "car", "--kind", "physics", "--bag", nominal, "--out", model,
+        *train_args, *TOPICS, timeout=600)
+    return model, bag
+
+
 @pytest.fixture(scope="module")
 def foreign(tmp_path_factory):
     d = tmp_path_factory.mktemp("foreign")
@@ -157,16 +173,8 @@ def test_a_yaw_damper_is_a_yaw_term_and_the_drag_it_passed_as_is_dropped(tmp_pat
     default fit no drag passes on cars 0–4). The term search then finds a yaw term, and the
     backward check scores the drag again against it: the drag no longer counts and is dropped.
     No library name is left, and a yaw term that damps ω is."""
-    gen = [sys.executable, str(REPO / "launch_scripts" / "foreign_car.py")]
-    nominal, bag = tmp_path / "nominal", tmp_path / "yaw"
-    # the evaluation's seeds: 1000·car + 1 for the nominal drive, 1000·car + 2 + the case's index
-    subprocess.run([*gen, str(nominal), "--car-seed", "2", "--seed", "2001"], check=True,
-                   capture_output=True, timeout=300)
-    subprocess.run([*gen, str(bag), "--car-seed", "2", "--seed", "2012", "--effects", "yaw_damping"],
-                   check=True, capture_output=True, timeout=300)
-    model, out = tmp_path / "model", tmp_path / "diagnosis"
-    run("dynlab", "train", "--world", "car", "--kind", "physics", "--bag", nominal, "--out", model,
-        "--steps", 20, "--gamma", 0.9, *TOPICS, timeout=600)
+    model, bag = eval_car(tmp_path, 2, 10, "yaw_damping", "--steps", 20, "--gamma", 0.9)
+    out = tmp_path / "diagnosis"
     # (the drag alone among the candidates, for time: with the whole library it is the same)
     proc, j = diagnose(model, bag, out, "--seed", "2", "--effects", "aero_drag")
     assert j["effects"] == [] and j["joint"] is None, proc.stdout
@@ -191,16 +199,8 @@ def test_a_steering_gain_that_acts_at_speed_is_fitted_on_the_windows_it_acts_on(
     left could not fix the coefficient (σ 65 % of it, not significant although it removed 44 %
     of the held-out error). Fitted on the fit half without its spins, at the effect fits'
     limit, the term is significant, with a tight σ, and removes more than 40 %."""
-    gen = [sys.executable, str(REPO / "launch_scripts" / "foreign_car.py")]
-    nominal, bag = tmp_path / "nominal", tmp_path / "gain"
-    # the evaluation's seeds: 1000·car + 1 for the nominal drive, 1000·car + 2 + the case's index
-    subprocess.run([*gen, str(nominal), "--car-seed", "7", "--seed", "7001"], check=True,
-                   capture_output=True, timeout=300)
-    subprocess.run([*gen, str(bag), "--car-seed", "7", "--seed", "7009", "--effects",
-                    "steering_gain_speed"], check=True, capture_output=True, timeout=300)
-    model, out = tmp_path / "model", tmp_path / "diagnosis"
-    run("dynlab", "train", "--world", "car", "--kind", "physics", "--bag", nominal, "--out", model,
-        *TOPICS, timeout=600)
+    model, bag = eval_car(tmp_path, 7, 7, "steering_gain_speed")
+    out = tmp_path / "diagnosis"
     # (the drag alone among the candidates, for time: with the whole library none is named)
     proc, j = diagnose(model, bag, out, "--seed", "7", "--effects", "aero_drag")
     assert j["effects"] == [], proc.stdout
