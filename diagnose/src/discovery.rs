@@ -51,8 +51,12 @@
 //!    term (a feature of the position, [`Feature::depends_on_position`]) only when the best of
 //!    those is not significant. The best becomes, with those, a [`CustomEffect`]
 //!    whose coefficients are refitted on the fit half (bounded Levenberg–Marquardt) and scored
-//!    on the held-out half. It is **significant** when it removes at least
-//!    [`DiscoveryConfig::min_reduction`] of the baseline error, the lower end of a one-sided
+//!    on the held-out half. (A term that holds everywhere is fitted with its rivals, the terms
+//!    whose gain is within [`RIVAL_GAIN_SHARE`] of its own; of those whose fit-half error is not
+//!    significantly above the best fit's, [`paired_t`], the simplest is kept, [`simplicity`],
+//!    and the others are listed with it, [`DiscoveredTerm::alternatives`].) It is
+//!    **significant** when it removes at least [`DiscoveryConfig::min_reduction`] of the
+//!    baseline error, the lower end of a one-sided
 //!    bootstrap interval over held-out segments (resampled whole; of the total error's and of
 //!    the typical segment's improvement, the larger) of its improvement is above
 //!    zero at error probability `(1 − confidence)/M` (Bonferroni; with enough resamples that ten
@@ -354,12 +358,52 @@ pub struct DiscoveredTerm {
     /// tries the next term of its kind in the same round).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub implausible: Option<String>,
+    /// Terms that hold everywhere which the fit half does not tell apart from this one (their
+    /// k-step error there is not significantly above the best's; see [`simplicity`] for which
+    /// of them is kept).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub alternatives: Vec<TermAlternative>,
     /// `|θ|/σ` of the one-step regression that selected the term.
     pub one_step_t: f64,
     /// Share of the target's one-step residual (sum of squares) the term explains.
     pub one_step_share: f64,
     /// Residual against feature.
     pub plot: TermPlot,
+}
+
+impl DiscoveredTerm {
+    /// The terms the fit half does not tell apart from this one, as a line (`None` without).
+    pub fn alternatives_text(&self) -> Option<String> {
+        (!self.alternatives.is_empty()).then(|| {
+            format!(
+                "the fit half does not tell it from {} (this one kept: the simplest; the held-out score is this one's)",
+                self.alternatives
+                    .iter()
+                    .map(|a| format!(
+                        "{} (fit-half error {:+.1} %)",
+                        a.equation,
+                        100.0 * a.fit_error_change
+                    ))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )
+        })
+    }
+}
+
+/// A term the fit half does not tell apart from the one the search kept.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TermAlternative {
+    /// Target state derivative (`omega`).
+    pub state: String,
+    /// Feature name (`delta`).
+    pub feature: String,
+    /// Coefficient fitted on the fit half's k-step error, with the terms before it.
+    pub coefficient: f64,
+    /// `ω̇ += −52 ± 1.2 · δ   [θ: 1/s²]`.
+    pub equation: String,
+    /// Its fit-half k-step error relative to the kept term's, minus 1 (−0.008: 0.8 % lower).
+    pub fit_error_change: f64,
 }
 
 /// The result of [`discover_terms`].
@@ -1922,13 +1966,13 @@ pub fn discover_terms_split(
             Ok(out)
         };
         let cost0: f64 = r0.iter().map(|v| v * v).sum();
-        // the screened pair of the given kind with the largest Gauss–Newton gain on the fit
-        // half: secant column J = (r(h) − r(0))/h, gain (Jᵀr₀)²/(JᵀJ)
-        let best_pick = |positional: bool,
-                         used: &[usize],
-                         accepted: &[CustomTerm]|
-         -> Result<Option<usize>, DiscoveryError> {
-            let mut best: Option<(f64, usize)> = None;
+        // the screened pairs of the given kind with a Gauss–Newton gain on the fit half, the
+        // largest first: secant column J = (r(h) − r(0))/h, gain (Jᵀr₀)²/(JᵀJ); (gain, pick)
+        let ranked_picks = |positional: bool,
+                            used: &[usize],
+                            accepted: &[CustomTerm]|
+         -> Result<Vec<(f64, usize)>, DiscoveryError> {
+            let mut ranked: Vec<(f64, usize)> = Vec::new();
             for (pi, pick) in picks.iter().enumerate() {
                 if used.contains(&pi)
                     || feats[pick.feature].depends_on_position() != positional
@@ -1963,26 +2007,22 @@ pub fn discover_terms_split(
                         gain = gain.max(g.min(g + alone));
                     }
                 }
-                if gain > best.map_or(0.0, |b| b.0) {
-                    best = Some((gain, pi));
+                if gain > 0.0 {
+                    ranked.push((gain, pi));
                 }
             }
-            Ok(best.map(|b| b.1))
+            ranked.sort_by(|a, b| b.0.total_cmp(&a.0));
+            Ok(ranked)
         };
-        let mut added = false;
-        // 0: the terms that hold everywhere, 1: the region's
-        let mut kind = 0;
-        while kind < 2 {
-            let positional = kind == 1;
-            let Some(pi) = best_pick(positional, &used, &accepted)? else {
-                kind += 1;
-                continue;
-            };
-            used.push(pi);
+        // the term of pick `pi` added to the accepted ones, fitted on the fit half
+        let fit_pick = |pi: usize| -> Result<(CustomEffect, EffectFit), DiscoveryError> {
             let pick = &picks[pi];
-            let feature = feats[pick.feature].clone();
             let mut trial = accepted.clone();
-            trial.push(bounded_term(pick.target, feature.clone(), pick.slope));
+            trial.push(bounded_term(
+                pick.target,
+                feats[pick.feature].clone(),
+                pick.slope,
+            ));
             let effect = CustomEffect::new(&name, trial)
                 .map_err(|e| DiscoveryError::Physics(ModelError::Custom(e)))?;
             let fit = fit_effect(
@@ -1992,6 +2032,124 @@ pub fn discover_terms_split(
                 [fit_w, &spin_free_fit],
                 cfg.iterations,
             )?;
+            Ok((effect, fit))
+        };
+        let mut added = false;
+        // 0: the terms that hold everywhere, 1: the region's
+        let mut kind = 0;
+        while kind < 2 {
+            let positional = kind == 1;
+            let ranked = ranked_picks(positional, &used, &accepted)?;
+            let Some(&(top, first)) = ranked.first() else {
+                kind += 1;
+                continue;
+            };
+            used.push(first);
+            // terms that hold everywhere and score within a few per cent of the best are fitted
+            // too: where the fit half does not tell them apart, the simplest is kept
+            // (a region's term or a command's beyond a level reaches only part of the data: a
+            // claim of where the effect acts, not a simpler or more complex law; such a term
+            // neither has rivals nor is one — a steering end stop `δ_{>0.25}` gave way to a
+            // gain `δ` on one car, where few commands passed the stop)
+            let everywhere = |pi: usize| {
+                let f = &feats[picks[pi].feature];
+                !f.depends_on_position() && !f.beyond_a_level()
+            };
+            let rivals: Vec<usize> = match everywhere(first) {
+                false => Vec::new(),
+                true => ranked[1..]
+                    .iter()
+                    .take_while(|r| r.0 >= (1.0 - RIVAL_GAIN_SHARE) * top)
+                    .filter(|r| everywhere(r.1))
+                    .take(MAX_RIVALS)
+                    .map(|r| r.1)
+                    .collect(),
+            };
+            let (pi, effect, fit, alternatives) =
+                match rivals.is_empty() {
+                    true => {
+                        let (effect, fit) = fit_pick(first)?;
+                        (first, effect, fit, Vec::new())
+                    }
+                    false => {
+                        let mut fitted = Vec::new();
+                        for pi in std::iter::once(first).chain(rivals) {
+                            let tried = fit_pick(pi).and_then(|(effect, fit)| {
+                                let m = fit.model(physics, &effect)?;
+                                Ok((effect, fit, m))
+                            });
+                            match tried {
+                                Ok((effect, fit, m)) => {
+                                    let errors = ctx.errors(&m, &spin_free_fit, None);
+                                    fitted.push((pi, effect, fit, errors));
+                                }
+                                // a rival that cannot be fitted is no rival; the best's error is
+                                // the search's
+                                Err(_) if pi != first => {}
+                                Err(e) => return Err(e),
+                            }
+                        }
+                        let best = (0..fitted.len())
+                            .min_by(|&a, &b| sum(&fitted[a].3).total_cmp(&sum(&fitted[b].3)))
+                            .unwrap_or(0);
+                        // (multiple comparisons with the best: the best is the smallest of
+                        // several noisy errors, so each rival is compared at the Bonferroni share
+                        // of the error probability)
+                        let z_tie = normal_quantile(
+                            1.0 - (1.0 - cfg.confidence) / (fitted.len().max(2) - 1) as f64,
+                        );
+                        let tied: Vec<usize> = (0..fitted.len())
+                            .filter(|&c| {
+                                c == best
+                                    || paired_t(&spin_free_fit, &fitted[best].3, &fitted[c].3)
+                                        .is_some_and(|t| t < z_tie)
+                            })
+                            .collect();
+                        let simplest = |c: &usize| {
+                            let p = &picks[fitted[*c].0];
+                            simplicity(p.target, &feats[p.feature])
+                        };
+                        let chosen = tied
+                            .iter()
+                            .copied()
+                            .min_by(|a, b| {
+                                simplest(a)
+                                    .cmp(&simplest(b))
+                                    .then(sum(&fitted[*a].3).total_cmp(&sum(&fitted[*b].3)))
+                            })
+                            .unwrap_or(best);
+                        let e_chosen = sum(&fitted[chosen].3);
+                        let alternatives: Vec<TermAlternative> =
+                            tied.iter()
+                                .filter(|&&c| c != chosen)
+                                .map(|&c| {
+                                    let (pi, effect, fit, errors) = &fitted[c];
+                                    let j = fit.theta.len() - 1;
+                                    let p = &picks[*pi];
+                                    TermAlternative {
+                                        state: p.target.name().to_string(),
+                                        feature: feats[p.feature].name(),
+                                        coefficient: fit.theta[j],
+                                        equation: effect
+                                            .with_coefficients(&fit.theta)
+                                            .term_equation(j, fit.theta[j], Some(fit.std[j])),
+                                        fit_error_change: if e_chosen > 0.0 {
+                                            sum(errors) / e_chosen - 1.0
+                                        } else {
+                                            0.0
+                                        },
+                                    }
+                                })
+                                .collect();
+                        let (pi, effect, fit, _) = fitted.swap_remove(chosen);
+                        (pi, effect, fit, alternatives)
+                    }
+                };
+            if pi != first {
+                used.push(pi);
+            }
+            let pick = &picks[pi];
+            let feature = feats[pick.feature].clone();
             let (theta, std) = (&fit.theta, &fit.std);
             let fitted = effect.with_coefficients(theta);
             let m = fit.model(physics, &effect)?;
@@ -2130,6 +2288,7 @@ pub fn discover_terms_split(
                 significant,
                 cross_fit,
                 implausible: implausible.clone(),
+                alternatives,
                 one_step_t: pick.t,
                 one_step_share: pick.share,
                 plot: term_plot(
@@ -2237,6 +2396,51 @@ pub fn discover_terms_split(
         summary,
         config: cfg.clone(),
     })
+}
+
+/// Terms that hold everywhere whose Gauss–Newton gain on the fit half is within this share of a
+/// round's best are fitted too, as its rivals (on the independent generator's cars with a yaw
+/// damper `ω̇ = … − 4·ω`, `δ`, `tanh(α_f/α₀)` and `ω` on `ω̇` scored within 1 % of each other).
+const RIVAL_GAIN_SHARE: f64 = 0.05;
+
+/// Most rivals fitted per round.
+const MAX_RIVALS: usize = 3;
+
+/// The t-value of the fit-half k-step errors `b` against `a` (per window of `ws`), paired by
+/// trajectory: the mean of the trajectories' summed differences `b − a` over its standard error
+/// (`None` with fewer than two trajectories; 0 where they all agree).
+fn paired_t(ws: &[Window], a: &[f64], b: &[f64]) -> Option<f64> {
+    let mut by: BTreeMap<usize, f64> = BTreeMap::new();
+    for ((w, x), y) in ws.iter().zip(a).zip(b) {
+        *by.entry(w.trajectory).or_default() += y - x;
+    }
+    let d: Vec<f64> = by.into_values().collect();
+    let n = d.len() as f64;
+    if d.len() < 2 {
+        return None;
+    }
+    let mean = d.iter().sum::<f64>() / n;
+    let var = d.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0);
+    let se = (var / n).sqrt();
+    Some(if se > 0.0 { mean / se } else { 0.0 })
+}
+
+/// The order in which the term search keeps one of several terms the fit half does not tell
+/// apart: fewer derived atoms ([`Atom::is_elementary`]: a slip angle, a speed, a saturation
+/// are functions of the states the term could use directly), then fewer factors, then a rate's
+/// own state (`ω̇` on `ω`: a derivative damped by its own state, the first term of any ODE's
+/// expansion) before the others; the smallest key is the simplest.
+fn simplicity(target: Target, feature: &Feature) -> (usize, usize, bool) {
+    let f = feature.factors();
+    let own = matches!(
+        (target, f),
+        (Target::Vx, [Atom::Vx]) | (Target::Vy, [Atom::Vy]) | (Target::Omega, [Atom::Omega])
+    );
+    (
+        f.iter().filter(|a| !a.is_elementary()).count(),
+        f.len(),
+        !own,
+    )
 }
 
 /// Smallest steering command `|δ|` \[rad\] whose direction [`reversed_steering`] checks.
@@ -2790,6 +2994,9 @@ impl Discovery {
                 if let Some(why) = &t.implausible {
                     let _ = writeln!(o, "    not physical: {why}");
                 }
+                if let Some(a) = t.alternatives_text() {
+                    let _ = writeln!(o, "    {a}");
+                }
             }
         }
         let _ = writeln!(o, "{}", self.summary);
@@ -2872,6 +3079,9 @@ pub fn discovery_html(d: &Discovery) -> String {
                 "<tr><td></td><td colspan=3>not physical: {}</td></tr>",
                 escape(why)
             );
+        }
+        if let Some(a) = t.alternatives_text() {
+            let _ = writeln!(o, "<tr><td></td><td colspan=3>{}</td></tr>", escape(&a));
         }
     }
     let _ = writeln!(o, "</table>");
@@ -3087,6 +3297,48 @@ mod tests {
         let v = plot(1, "vx");
         assert!(!v.constant && v.x_label.starts_with("vₓ"), "{v:?}");
         assert!((v.bins[0].x - 0.545).abs() < 1e-9, "{v:?}");
+    }
+
+    /// The paired t-value sums each trajectory's windows first: a rival whose error is higher
+    /// on every trajectory is told apart, one higher on some and lower on others is not.
+    #[test]
+    fn rivals_are_compared_by_trajectory() {
+        let ws: Vec<Window> = (0..12)
+            .map(|i| Window {
+                trajectory: i / 3,
+                start: i,
+            })
+            .collect();
+        let best = vec![1.0; 12];
+        let worse: Vec<f64> = (0..12).map(|i| 1.05 + 0.01 * (i % 2) as f64).collect();
+        let t = paired_t(&ws, &best, &worse).expect("4 trajectories");
+        assert!(t > 10.0, "{t}");
+        // +0.2 on two trajectories, −0.2 and +0.1 on the others: mean 0.075, not apart
+        let mixed: Vec<f64> = (0..12)
+            .map(|i| 1.0 + [0.2, 0.2, -0.2, 0.1][i / 3] / 3.0)
+            .collect();
+        let t = paired_t(&ws, &best, &mixed).expect("4 trajectories");
+        assert!(t > 0.0 && t < 1.645, "{t}");
+        assert_eq!(paired_t(&ws, &best, &best), Some(0.0));
+        assert_eq!(paired_t(&ws[..3], &best[..3], &worse[..3]), None);
+    }
+
+    /// Of terms the data do not tell apart, the one of the states and commands themselves is
+    /// kept before a slip angle's saturation, a single factor before a product, and on `ω̇` the
+    /// yaw rate (a damping) before the steering angle.
+    #[test]
+    fn the_simplest_term_is_of_the_states_themselves() {
+        let key = |t: Target, f: &str| simplicity(t, &Feature::parse(f).unwrap());
+        let mut on_yaw = ["sat_alpha_f", "delta*vx", "delta", "omega", "omega*vx"];
+        on_yaw.sort_by_key(|f| key(Target::Omega, f));
+        assert_eq!(
+            on_yaw,
+            ["omega", "delta", "delta*vx", "omega*vx", "sat_alpha_f"]
+        );
+        assert!(key(Target::Delta, "delta*vx*vx") < key(Target::Delta, "delta*sat_vx2(3.1)"));
+        // the own state is the target's: `ω` on `v̇_y` is one state among the others
+        assert_eq!(key(Target::Vy, "omega"), key(Target::Vy, "delta"));
+        assert!(key(Target::Vy, "vy") < key(Target::Vy, "omega"));
     }
 
     #[test]

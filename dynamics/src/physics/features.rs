@@ -562,6 +562,28 @@ impl Atom {
         matches!(self, Atom::LaggedInput { .. } | Atom::InputRate { .. })
     }
 
+    /// Whether the atom is a state, a command, a position or the constant itself rather than a
+    /// quantity derived from them (a speed, a slip angle, a saturation, a lagged command, a
+    /// region): of two terms the data do not tell apart, the term search keeps the one with
+    /// fewer derived atoms.
+    pub fn is_elementary(&self) -> bool {
+        matches!(
+            self,
+            Atom::Vx
+                | Atom::Vy
+                | Atom::Omega
+                | Atom::Delta
+                | Atom::Throttle
+                | Atom::PushLocation
+                | Atom::PushAngle
+                | Atom::PushLength
+                | Atom::Theta
+                | Atom::X
+                | Atom::Y
+                | Atom::One
+        )
+    }
+
     /// Whether the atom is a region of the floor or table (a bump, a band, a strip).
     pub fn is_region(&self) -> bool {
         matches!(
