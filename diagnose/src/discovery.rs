@@ -2065,86 +2065,75 @@ pub fn discover_terms_split(
                     .map(|r| r.1)
                     .collect(),
             };
-            let (pi, effect, fit, alternatives) =
-                match rivals.is_empty() {
-                    true => {
-                        let (effect, fit) = fit_pick(first)?;
-                        (first, effect, fit, Vec::new())
+            // (pick, effect, fit, fit-half errors without spins) of the best and its rivals
+            let mut fitted = Vec::new();
+            for pi in std::iter::once(first).chain(rivals) {
+                let tried = fit_pick(pi).and_then(|(effect, fit)| {
+                    let m = fit.model(physics, &effect)?;
+                    Ok((effect, fit, m))
+                });
+                match tried {
+                    Ok((effect, fit, m)) => {
+                        let errors = ctx.errors(&m, &spin_free_fit, None);
+                        fitted.push((pi, effect, fit, errors));
                     }
-                    false => {
-                        let mut fitted = Vec::new();
-                        for pi in std::iter::once(first).chain(rivals) {
-                            let tried = fit_pick(pi).and_then(|(effect, fit)| {
-                                let m = fit.model(physics, &effect)?;
-                                Ok((effect, fit, m))
-                            });
-                            match tried {
-                                Ok((effect, fit, m)) => {
-                                    let errors = ctx.errors(&m, &spin_free_fit, None);
-                                    fitted.push((pi, effect, fit, errors));
-                                }
-                                // a rival that cannot be fitted is no rival; the best's error is
-                                // the search's
-                                Err(_) if pi != first => {}
-                                Err(e) => return Err(e),
-                            }
-                        }
-                        let best = (0..fitted.len())
-                            .min_by(|&a, &b| sum(&fitted[a].3).total_cmp(&sum(&fitted[b].3)))
-                            .unwrap_or(0);
-                        // (multiple comparisons with the best: the best is the smallest of
-                        // several noisy errors, so each rival is compared at the Bonferroni share
-                        // of the error probability)
-                        let z_tie = normal_quantile(
-                            1.0 - (1.0 - cfg.confidence) / (fitted.len().max(2) - 1) as f64,
-                        );
-                        let tied: Vec<usize> = (0..fitted.len())
-                            .filter(|&c| {
-                                c == best
-                                    || paired_t(&spin_free_fit, &fitted[best].3, &fitted[c].3)
-                                        .is_some_and(|t| t < z_tie)
-                            })
-                            .collect();
-                        let simplest = |c: &usize| {
-                            let p = &picks[fitted[*c].0];
-                            simplicity(p.target, &feats[p.feature])
-                        };
-                        let chosen = tied
-                            .iter()
-                            .copied()
-                            .min_by(|a, b| {
-                                simplest(a)
-                                    .cmp(&simplest(b))
-                                    .then(sum(&fitted[*a].3).total_cmp(&sum(&fitted[*b].3)))
-                            })
-                            .unwrap_or(best);
-                        let e_chosen = sum(&fitted[chosen].3);
-                        let alternatives: Vec<TermAlternative> =
-                            tied.iter()
-                                .filter(|&&c| c != chosen)
-                                .map(|&c| {
-                                    let (pi, effect, fit, errors) = &fitted[c];
-                                    let j = fit.theta.len() - 1;
-                                    let p = &picks[*pi];
-                                    TermAlternative {
-                                        state: p.target.name().to_string(),
-                                        feature: feats[p.feature].name(),
-                                        coefficient: fit.theta[j],
-                                        equation: effect
-                                            .with_coefficients(&fit.theta)
-                                            .term_equation(j, fit.theta[j], Some(fit.std[j])),
-                                        fit_error_change: if e_chosen > 0.0 {
-                                            sum(errors) / e_chosen - 1.0
-                                        } else {
-                                            0.0
-                                        },
-                                    }
-                                })
-                                .collect();
-                        let (pi, effect, fit, _) = fitted.swap_remove(chosen);
-                        (pi, effect, fit, alternatives)
+                    // a rival that cannot be fitted is no rival; the best's error is the search's
+                    Err(_) if pi != first => {}
+                    Err(e) => return Err(e),
+                }
+            }
+            let cost = |c: usize| sum(&fitted[c].3);
+            let best = (0..fitted.len())
+                .min_by(|&a, &b| cost(a).total_cmp(&cost(b)))
+                .unwrap_or(0);
+            // (multiple comparisons with the best: the best is the smallest of several noisy
+            // errors, so each rival is compared at the Bonferroni share of the error probability)
+            let z_tie =
+                normal_quantile(1.0 - (1.0 - cfg.confidence) / (fitted.len().max(2) - 1) as f64);
+            let tied: Vec<usize> = (0..fitted.len())
+                .filter(|&c| {
+                    c == best
+                        || paired_t(&spin_free_fit, &fitted[best].3, &fitted[c].3)
+                            .is_some_and(|t| t < z_tie)
+                })
+                .collect();
+            let simplest = |c: usize| {
+                let p = &picks[fitted[c].0];
+                simplicity(p.target, &feats[p.feature])
+            };
+            let chosen = tied
+                .iter()
+                .copied()
+                .min_by(|&a, &b| {
+                    simplest(a)
+                        .cmp(&simplest(b))
+                        .then(cost(a).total_cmp(&cost(b)))
+                })
+                .unwrap_or(best);
+            let alternatives: Vec<TermAlternative> = tied
+                .iter()
+                .filter(|&&c| c != chosen)
+                .map(|&c| {
+                    let (pi, effect, fit, _) = &fitted[c];
+                    let j = fit.theta.len() - 1;
+                    let p = &picks[*pi];
+                    TermAlternative {
+                        state: p.target.name().to_string(),
+                        feature: feats[p.feature].name(),
+                        coefficient: fit.theta[j],
+                        equation: effect.with_coefficients(&fit.theta).term_equation(
+                            j,
+                            fit.theta[j],
+                            Some(fit.std[j]),
+                        ),
+                        fit_error_change: match cost(chosen) > 0.0 {
+                            true => cost(c) / cost(chosen) - 1.0,
+                            false => 0.0,
+                        },
                     }
-                };
+                })
+                .collect();
+            let (pi, effect, fit, _) = fitted.swap_remove(chosen);
             if pi != first {
                 used.push(pi);
             }

@@ -55,6 +55,18 @@ def eval_car(d, car, case_index, effects, *train_args):
     return model, bag
 
 
+def first_term_found(d, car, case_index, effects):
+    """`eval_car`'s car and case diagnosed (seeded by the car) with the drag alone among the
+    candidates, for time (with the whole library none is named on these cases): no library
+    effect named, and the output, `diagnosis.json` and the first significant term found."""
+    model, bag = eval_car(d, car, case_index, effects)
+    proc, j = diagnose(model, bag, d / "diagnosis", "--seed", str(car), "--effects", "aero_drag")
+    assert j["effects"] == [], proc.stdout
+    terms = [t for t in j["discovery"]["terms"] if t["significant"]]
+    assert terms, j["discovery"]["summary"]
+    return proc, j, terms[0]
+
+
 @pytest.fixture(scope="module")
 def foreign(tmp_path_factory):
     d = tmp_path_factory.mktemp("foreign")
@@ -197,14 +209,7 @@ def test_a_yaw_damper_is_damping_when_the_data_do_not_tell_it_from_a_steering_te
     and the best by a hair was `ω̇ += −52·δ`, a steering term. Fitted side by side, none is
     significantly better than the others; the simplest, the yaw rate damping itself, is kept,
     and the steering term is listed beside it as one the data do not tell apart."""
-    model, bag = eval_car(tmp_path, 5, 10, "yaw_damping")
-    out = tmp_path / "diagnosis"
-    # (the drag alone among the candidates, for time: with the whole library none is named)
-    proc, j = diagnose(model, bag, out, "--seed", "5", "--effects", "aero_drag")
-    assert j["effects"] == [], proc.stdout
-    terms = [t for t in j["discovery"]["terms"] if t["significant"]]
-    assert terms, j["discovery"]["summary"]
-    damper = terms[0]
+    proc, j, damper = first_term_found(tmp_path, 5, 10, "yaw_damping")
     assert (damper["state"], damper["feature"]) == ("omega", "omega"), damper["equation"]
     assert -6.0 < damper["coefficient"] < -3.0, damper["equation"]
     others = {(a["state"], a["feature"]): a for a in damper["alternatives"]}
@@ -222,14 +227,7 @@ def test_a_steering_gain_that_acts_at_speed_is_fitted_on_the_windows_it_acts_on(
     left could not fix the coefficient (σ 65 % of it, not significant although it removed 44 %
     of the held-out error). Fitted on the fit half without its spins, at the effect fits'
     limit, the term is significant, with a tight σ, and removes more than 40 %."""
-    model, bag = eval_car(tmp_path, 7, 7, "steering_gain_speed")
-    out = tmp_path / "diagnosis"
-    # (the drag alone among the candidates, for time: with the whole library none is named)
-    proc, j = diagnose(model, bag, out, "--seed", "7", "--effects", "aero_drag")
-    assert j["effects"] == [], proc.stdout
-    terms = [t for t in j["discovery"]["terms"] if t["significant"]]
-    assert terms, j["discovery"]["summary"]
-    gain = terms[0]
+    _, j, gain = first_term_found(tmp_path, 7, 7, "steering_gain_speed")
     assert gain["state"] == "delta" and gain["feature"].startswith("delta*"), gain["equation"]
     assert gain["coefficient"] < 0 and gain["std"] < 0.1 * abs(gain["coefficient"]), gain["equation"]
     assert j["discovery"]["error_reduction"] >= 0.4, j["discovery"]["summary"]
