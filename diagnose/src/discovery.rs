@@ -2065,7 +2065,9 @@ pub fn discover_terms_split(
                     .map(|r| r.1)
                     .collect(),
             };
-            // (pick, effect, fit, fit-half errors without spins) of the best and its rivals
+            // (pick, effect, fit, model, fit-half errors without spins) of the best and its
+            // rivals (the errors only where there are rivals to compare)
+            let compared = !rivals.is_empty();
             let mut fitted = Vec::new();
             for pi in std::iter::once(first).chain(rivals) {
                 let tried = fit_pick(pi).and_then(|(effect, fit)| {
@@ -2074,15 +2076,18 @@ pub fn discover_terms_split(
                 });
                 match tried {
                     Ok((effect, fit, m)) => {
-                        let errors = ctx.errors(&m, &spin_free_fit, None);
-                        fitted.push((pi, effect, fit, errors));
+                        let errors = match compared {
+                            true => ctx.errors(&m, &spin_free_fit, None),
+                            false => Vec::new(),
+                        };
+                        fitted.push((pi, effect, fit, m, errors));
                     }
                     // a rival that cannot be fitted is no rival; the best's error is the search's
                     Err(_) if pi != first => {}
                     Err(e) => return Err(e),
                 }
             }
-            let cost = |c: usize| sum(&fitted[c].3);
+            let cost = |c: usize| sum(&fitted[c].4);
             let best = (0..fitted.len())
                 .min_by(|&a, &b| cost(a).total_cmp(&cost(b)))
                 .unwrap_or(0);
@@ -2093,7 +2098,7 @@ pub fn discover_terms_split(
             let tied: Vec<usize> = (0..fitted.len())
                 .filter(|&c| {
                     c == best
-                        || paired_t(&spin_free_fit, &fitted[best].3, &fitted[c].3)
+                        || paired_t(&spin_free_fit, &fitted[best].4, &fitted[c].4)
                             .is_some_and(|t| t < z_tie)
                 })
                 .collect();
@@ -2114,7 +2119,7 @@ pub fn discover_terms_split(
                 .iter()
                 .filter(|&&c| c != chosen)
                 .map(|&c| {
-                    let (pi, effect, fit, _) = &fitted[c];
+                    let (pi, effect, fit, ..) = &fitted[c];
                     let j = fit.theta.len() - 1;
                     let p = &picks[*pi];
                     TermAlternative {
@@ -2133,7 +2138,7 @@ pub fn discover_terms_split(
                     }
                 })
                 .collect();
-            let (pi, effect, fit, _) = fitted.swap_remove(chosen);
+            let (pi, effect, fit, m, _) = fitted.swap_remove(chosen);
             if pi != first {
                 used.push(pi);
             }
@@ -2141,7 +2146,6 @@ pub fn discover_terms_split(
             let feature = feats[pick.feature].clone();
             let (theta, std) = (&fit.theta, &fit.std);
             let fitted = effect.with_coefficients(theta);
-            let m = fit.model(physics, &effect)?;
             let test = ctx.errors(&m, test_w, None);
             // with coupled nominal parameters freed, the term counts for what it adds to their
             // change alone, where that alone predicts the held-out half better
