@@ -151,6 +151,7 @@ def one(root, case, car_seed, floor):
         "params": joint.get("params", {}),
         "terms": terms, "terms_removed": disc.get("error_reduction") if terms else None,
         "floor": best,
+        "noise": (j.get("noise_floor") or {}).get("share"),
         "drift": (f"{drift['quantity']} {100 * drift['change']:+.0f} % ({100 * drift['error_reduction']:.0f} % removed)"
                   if drift.get("significant") else None),
     }
@@ -202,7 +203,7 @@ def main():
             return "—"
         return f"{100 * (r['before'] - r['after']) / (r['before'] - f):.0f} %"
 
-    print(f"{'case':30} {'seed':>4}  {'named':32} {'removed':>8} {'excess':>7} {'of true':>7}  "
+    print(f"{'case':30} {'seed':>4}  {'named':32} {'removed':>8} {'excess':>7} {'of true':>7} {'noise':>6}  "
           "fitted (truth) / terms beyond the library")
     for r in results:
         fitted = ", ".join(f"{k.split('.')[1]} {v:.4g} ({TRUTH[k]:g})" for k, v in r["params"].items()
@@ -212,11 +213,13 @@ def main():
             terms += f" ({100 * r['terms_removed']:.0f} % removed)"
         removed = f"{100 * r['removed']:.0f} %" if r["removed"] is not None else "—"
         print(f"{r['case']:30} {r['seed']:>4}  {','.join(r['named']) or 'none':32} {removed:>8} "
-              f"{share(r, floor.get(r['seed'])):>7} {share(r, r['floor']):>7}  "
+              f"{share(r, floor.get(r['seed'])):>7} {share(r, r['floor']):>7} "
+              f"{'—' if r['noise'] is None else format(100 * r['noise'], '.0f') + ' %':>6}  "
               f"{' / '.join(x for x in (fitted, terms, r['drift'] and 'drift ' + r['drift']) if x)}")
     print("\nremoved: of the held-out 50-step error; excess: of what the error exceeds the nominal "
           "model's on the nominal drive of the same car (the case nominal; — without it); of true: of what it "
-          "exceeds the generator's own car's error with its fitted effects on the same windows (--floor)")
+          "exceeds the generator's own car's error with its fitted effects on the same windows (--floor); "
+          "noise: the share of the baseline's held-out error the poses' noise alone gives (the diagnosis' estimate)")
     for c in cases:
         rs = [r for r in results if r["case"] == c]
         print(f"{c:30} right {sum(r['right'] for r in rs)}/{len(rs)}, "

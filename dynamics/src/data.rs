@@ -291,6 +291,15 @@ pub struct PipelineReport {
     pub trajectories: usize,
     /// Poses in the produced trajectories.
     pub poses_out: usize,
+    /// Standard deviations of the poses' noise about a smooth path (`x`, `y` \[m\], yaw
+    /// \[rad\]), estimated from the poses as given (before resampling); `None` with too few
+    /// poses.
+    #[serde(default)]
+    pub pose_std: Option<[f64; 3]>,
+    /// The Savitzky–Golay settings car states were estimated with (set by the loader of car
+    /// data).
+    #[serde(default)]
+    pub savgol: Option<SavGol>,
 }
 
 /// One uninterrupted run of poses, each with the command held from it to the next pose.
@@ -550,6 +559,7 @@ pub fn build_trajectories(
     }
 
     let mut out = Vec::new();
+    let mut noise = NoiseResiduals::default();
     for piece in pieces {
         let mut t: Vec<i64> = piece.iter().map(|p| p.t_ns).collect();
         let mut yaw: Vec<f64> = piece.iter().map(|p| p.yaw).collect();
@@ -574,6 +584,7 @@ pub fn build_trajectories(
             Resample::Auto { max_jitter } => (jitter > max_jitter && med_i > 0).then_some(med_i),
             Resample::Fixed { dt_ns } => (dt_ns > 0).then_some(dt_ns),
         };
+        noise.add(&t, &pose);
         let mut resampled = false;
         if let Some(step) = step
             && t.len() >= 2
@@ -635,6 +646,7 @@ pub fn build_trajectories(
     }
     rep.trajectories = out.len();
     rep.poses_out = out.iter().map(|t| t.len()).sum();
+    rep.pose_std = noise.std();
     Ok((out, rep))
 }
 
@@ -784,6 +796,142 @@ pub fn savgol(t: &[f64], y: &[f64], sg: &SavGol) -> Result<(Vec<f64>, Vec<f64>),
         der[i] = c[1] / scale;
     }
     Ok((val, der))
+}
+
+/// The noise of a trajectory set's poses about a smooth path, and the Savitzky–Golay settings
+/// their car states were estimated with: what [`car_state_noise`] needs to draw the noise of
+/// those states.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct PoseNoise {
+    /// Standard deviations of `x`, `y` \[m\] and the yaw \[rad\] ([`PipelineReport::pose_std`]).
+    pub std: [f64; 3],
+    /// The settings the states were smoothed with.
+    pub savgol: SavGol,
+}
+
+/// Samples of the local fits [`NoiseResiduals`] standardises residuals with, and their degree.
+const NOISE_FIT: SavGol = SavGol {
+    window: 9,
+    order: 3,
+};
+
+/// Smallest number of residuals [`NoiseResiduals::std`] estimates from.
+const MIN_NOISE_SAMPLES: usize = 50;
+
+/// The poses' residuals about local cubic fits on their own stamps, standardised by their
+/// leverage (`r/√(1 − h)`, which has the noise's variance for white noise about a path the
+/// cubic follows): from these [`NoiseResiduals::std`] estimates the noise. Taken before any
+/// resampling, whose interpolation averages neighbouring poses and hides part of the noise
+/// from anything that looks from one pose to the next, but not from a velocity estimated over
+/// a window of them.
+#[derive(Default)]
+struct NoiseResiduals([Vec<f64>; 3]);
+
+impl NoiseResiduals {
+    /// Adds the residuals of one run of poses at stamps `t` \[ns\].
+    fn add(&mut self, t: &[i64], pose: &[[f64; 3]]) {
+        let (w, k) = (NOISE_FIT.window, NOISE_FIT.order + 1);
+        let h = w / 2;
+        if t.len() < w {
+            return;
+        }
+        let mut a = vec![0.0; w * k];
+        let mut unit = vec![0.0; w];
+        unit[h] = 1.0;
+        for i in h..t.len() - h {
+            let lo = i - h;
+            let scale = (t[lo + w - 1] - t[lo]) as f64 / 2.0;
+            if scale <= 0.0 {
+                continue;
+            }
+            for r in 0..w {
+                let tau = (t[lo + r] - t[i]) as f64 / scale;
+                let mut p = 1.0;
+                for c in 0..k {
+                    a[r * k + c] = p;
+                    p *= tau;
+                }
+            }
+            // the leverage of the centre sample: its own weight in its fitted value
+            let Some(lev) = lstsq(&a, w, k, &unit).map(|c| c[0]) else {
+                continue;
+            };
+            if lev.is_nan() || lev >= 1.0 - 1e-9 {
+                continue;
+            }
+            for (c, out) in self.0.iter_mut().enumerate() {
+                let y: Vec<f64> = pose[lo..lo + w].iter().map(|p| p[c]).collect();
+                if let Some(fit) = lstsq(&a, w, k, &y) {
+                    let z = (pose[i][c] - fit[0]) / (1.0 - lev).sqrt();
+                    if z.is_finite() {
+                        out.push(z);
+                    }
+                }
+            }
+        }
+    }
+
+    /// The noise's standard deviation per `x`, `y`, yaw: 1.4826 × the median absolute
+    /// standardised residual (robust to the few residuals at a jump of the path); `None` with
+    /// fewer than [`MIN_NOISE_SAMPLES`] of them.
+    fn std(mut self) -> Option<[f64; 3]> {
+        let mut out = [0.0; 3];
+        for (o, z) in out.iter_mut().zip(self.0.iter_mut()) {
+            if z.len() < MIN_NOISE_SAMPLES {
+                return None;
+            }
+            let mut dev: Vec<f64> = z.iter().map(|v| v.abs()).collect();
+            *o = 1.4826 * median_f64(&mut dev);
+        }
+        Some(out)
+    }
+}
+
+fn median_f64(v: &mut [f64]) -> f64 {
+    v.sort_by(|a, b| a.total_cmp(b));
+    let n = v.len();
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
+}
+
+/// Car states `s` (`len × 6`, as [`car_states`] gives them, on the equidistant step `dt`) with
+/// one draw of pose noise of `noise` passed through the same estimation: white noise on `x`,
+/// `y`, yaw (`normal` draws standard normals), smoothed and differentiated with
+/// `noise.savgol` over the whole trajectory, added to the pose and to the
+/// world-frame velocity, which is rotated into the body frame by the noisy yaw. The noise of
+/// the states the data already hold has this structure to first order: estimated states plus a
+/// second draw hold twice their noise.
+pub fn car_state_noise(
+    s: &[f64],
+    dt: f64,
+    noise: &PoseNoise,
+    normal: &mut dyn FnMut() -> f64,
+) -> Result<Vec<f64>, DataError> {
+    let n = s.len() / 6;
+    let t: Vec<f64> = (0..n).map(|i| i as f64 * dt).collect();
+    let mut smoothed = Vec::with_capacity(3);
+    for c in 0..3 {
+        let w: Vec<f64> = (0..n).map(|_| noise.std[c] * normal()).collect();
+        smoothed.push(savgol(&t, &w, &noise.savgol)?);
+    }
+    let mut out = s.to_vec();
+    for i in 0..n {
+        let r = &mut out[i * 6..(i + 1) * 6];
+        let (sn, cs) = r[2].sin_cos();
+        let xd = cs * r[3] - sn * r[4] + smoothed[0].1[i];
+        let yd = sn * r[3] + cs * r[4] + smoothed[1].1[i];
+        r[0] += smoothed[0].0[i];
+        r[1] += smoothed[1].0[i];
+        r[2] += smoothed[2].0[i];
+        r[5] += smoothed[2].1[i];
+        let (sn, cs) = r[2].sin_cos();
+        r[3] = cs * xd + sn * yd;
+        r[4] = -sn * xd + cs * yd;
+    }
+    Ok(out)
 }
 
 /// Car states `[x, y, ψ, vx, vy, ω]` along a trajectory (Kohler et al.): x, y and the unwrapped

@@ -215,7 +215,10 @@ fn trajectories_with_stamps(
             ..Default::default()
         },
     };
-    let (mut trajs, report) = build_trajectories(poses, commands, &cfg)?;
+    let (mut trajs, mut report) = build_trajectories(poses, commands, &cfg)?;
+    if world == World::Car {
+        report.savgol = Some(*sg);
+    }
     if world == World::Push {
         let mut cmd_t: Vec<i64> = commands.iter().map(|c| c.t_ns).collect();
         cmd_t.sort_unstable();

@@ -49,6 +49,13 @@ pub fn diagnosis_html(d: &Diagnosis) -> String {
         d.segments[0],
         g4(d.baseline_error)
     );
+    if let Some(f) = &d.noise_floor {
+        let _ = writeln!(
+            o,
+            "<p>Of that error, {}: the velocities estimated from noisy poses are noisy themselves, at the start of every window and in every state it is compared with. Read the error each effect removes against it.</p>",
+            esc(&f.text())
+        );
+    }
     if !d.nominal_refit.is_empty() {
         let p: Vec<String> = d
             .nominal_refit
