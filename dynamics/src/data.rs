@@ -201,6 +201,9 @@ pub struct PipelineConfig {
     /// naming the message (default `false`: skip them, count them and split the trajectory at
     /// each skipped pose).
     pub strict: bool,
+    /// Estimate the poses' noise ([`PipelineReport::pose_std`]; default `true`): for poses
+    /// streamed along a motion, not for poses a push apart.
+    pub estimate_noise: bool,
 }
 
 impl Default for PipelineConfig {
@@ -212,6 +215,7 @@ impl Default for PipelineConfig {
             min_poses: 2,
             resample: Resample::Auto { max_jitter: 0.1 },
             strict: false,
+            estimate_noise: true,
         }
     }
 }
@@ -293,7 +297,7 @@ pub struct PipelineReport {
     pub poses_out: usize,
     /// Standard deviations of the poses' noise about a smooth path (`x`, `y` \[m\], yaw
     /// \[rad\]), estimated from the poses as given (before resampling); `None` with too few
-    /// poses.
+    /// poses or without [`PipelineConfig::estimate_noise`].
     #[serde(default)]
     pub pose_std: Option<[f64; 3]>,
     /// The Savitzky–Golay settings car states were estimated with (set by the loader of car
@@ -646,7 +650,7 @@ pub fn build_trajectories(
     }
     rep.trajectories = out.len();
     rep.poses_out = out.iter().map(|t| t.len()).sum();
-    rep.pose_std = noise.std();
+    rep.pose_std = cfg.estimate_noise.then(|| noise.std()).flatten();
     Ok((out, rep))
 }
 

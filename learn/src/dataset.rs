@@ -201,6 +201,7 @@ fn trajectories_with_stamps(
         World::Push => PipelineConfig {
             hold: CommandHold::BeforeNextPose,
             resample: dynlab_dynamics::data::Resample::Off,
+            estimate_noise: false,
             strict,
             ..Default::default()
         },
