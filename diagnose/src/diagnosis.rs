@@ -576,7 +576,7 @@ impl SurfaceStep {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct NoiseFloor {
     /// The poses' noise estimated from the data (standard deviations of `x`, `y` \[m\] and the
-    /// yaw \[rad\] about a smooth path; [`pose_noise_std`](dynlab_learn::dynamics::data::PipelineReport::pose_std)).
+    /// yaw \[rad\] about a smooth path; `PipelineReport::pose_std`).
     pub pose_std: [f64; 3],
     /// Mean held-out error the noise gives the baseline ([`Ctx::noise_floor`]).
     pub error: f64,
