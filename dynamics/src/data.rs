@@ -752,6 +752,23 @@ fn lstsq(a: &[f64], m: usize, k: usize, b: &[f64]) -> Option<Vec<f64>> {
     Some(c)
 }
 
+/// The design matrix of a local polynomial of `k` coefficients over the stamps `t` (row-major
+/// into `a`, `t.len() × k`), in `τ = (t − centre)/scale` with `scale` half the stamps' span,
+/// which it returns; `None` (and `scale` 1) when the stamps do not span any time.
+fn local_design(t: &[f64], centre: f64, k: usize, a: &mut [f64]) -> Option<f64> {
+    let span = (t[t.len() - 1] - t[0]) / 2.0;
+    let scale = if span > 0.0 { span } else { 1.0 };
+    for (r, &tr) in t.iter().enumerate() {
+        let tau = (tr - centre) / scale;
+        let mut p = 1.0;
+        for c in 0..k {
+            a[r * k + c] = p;
+            p *= tau;
+        }
+    }
+    (span > 0.0).then_some(scale)
+}
+
 /// Savitzky–Golay smoothing and first derivative of `y(t)` on arbitrary increasing stamps `t`
 /// \[s\]: at each sample, a polynomial of degree `order` is fitted by least squares to the
 /// `window` samples centred on it (in `t`, so irregular stamps are handled exactly), and its value
@@ -780,16 +797,7 @@ pub fn savgol(t: &[f64], y: &[f64], sg: &SavGol) -> Result<(Vec<f64>, Vec<f64>),
     let mut a = vec![0.0; sg.window * k];
     for i in 0..n {
         let lo = i.saturating_sub(h).min(n - sg.window);
-        let span = (t[lo + sg.window - 1] - t[lo]) / 2.0;
-        let scale = if span > 0.0 { span } else { 1.0 };
-        for r in 0..sg.window {
-            let tau = (t[lo + r] - t[i]) / scale;
-            let mut p = 1.0;
-            for c in 0..k {
-                a[r * k + c] = p;
-                p *= tau;
-            }
-        }
+        let scale = local_design(&t[lo..lo + sg.window], t[i], k, &mut a).unwrap_or(1.0);
         let c =
             lstsq(&a, sg.window, k, &y[lo..lo + sg.window]).ok_or(DataError::InvalidSetting {
                 name: "stamps",
@@ -805,7 +813,7 @@ pub fn savgol(t: &[f64], y: &[f64], sg: &SavGol) -> Result<(Vec<f64>, Vec<f64>),
 /// The noise of a trajectory set's poses about a smooth path, and the Savitzky–Golay settings
 /// their car states were estimated with: what [`car_state_noise`] needs to draw the noise of
 /// those states.
-#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PoseNoise {
     /// Standard deviations of `x`, `y` \[m\] and the yaw \[rad\] ([`PipelineReport::pose_std`]).
     pub std: [f64; 3],
@@ -839,37 +847,33 @@ impl NoiseResiduals {
         if t.len() < w {
             return;
         }
+        let ts: Vec<f64> = t.iter().map(|&v| (v - t[0]) as f64 * 1e-9).collect();
         let mut a = vec![0.0; w * k];
         let mut unit = vec![0.0; w];
         unit[h] = 1.0;
         for i in h..t.len() - h {
             let lo = i - h;
-            let scale = (t[lo + w - 1] - t[lo]) as f64 / 2.0;
-            if scale <= 0.0 {
+            if local_design(&ts[lo..lo + w], ts[i], k, &mut a).is_none() {
                 continue;
             }
-            for r in 0..w {
-                let tau = (t[lo + r] - t[i]) as f64 / scale;
-                let mut p = 1.0;
-                for c in 0..k {
-                    a[r * k + c] = p;
-                    p *= tau;
-                }
-            }
-            // the leverage of the centre sample: its own weight in its fitted value
-            let Some(lev) = lstsq(&a, w, k, &unit).map(|c| c[0]) else {
+            // the fit's weights of the centre's fitted value: the hat matrix is symmetric, so
+            // they are the fit of the centre's unit vector, evaluated at every sample
+            let Some(c) = lstsq(&a, w, k, &unit) else {
                 continue;
             };
+            let g: Vec<f64> = (0..w)
+                .map(|r| (0..k).map(|j| a[r * k + j] * c[j]).sum())
+                .collect();
+            // the leverage of the centre sample: its own weight in its fitted value
+            let lev = g[h];
             if lev.is_nan() || lev >= 1.0 - 1e-9 {
                 continue;
             }
             for (c, out) in self.0.iter_mut().enumerate() {
-                let y: Vec<f64> = pose[lo..lo + w].iter().map(|p| p[c]).collect();
-                if let Some(fit) = lstsq(&a, w, k, &y) {
-                    let z = (pose[i][c] - fit[0]) / (1.0 - lev).sqrt();
-                    if z.is_finite() {
-                        out.push(z);
-                    }
+                let fit: f64 = (0..w).map(|r| g[r] * pose[lo + r][c]).sum();
+                let z = (pose[i][c] - fit) / (1.0 - lev).sqrt();
+                if z.is_finite() {
+                    out.push(z);
                 }
             }
         }
