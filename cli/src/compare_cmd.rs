@@ -7,7 +7,6 @@ use std::path::PathBuf;
 use anyhow::{Context, bail};
 use clap::Args;
 use dynlab_diagnose::compare::{CompareConfig, compare_with_baseline, html};
-use dynlab_learn::dynamics::data::SavGol;
 use dynlab_learn::{LoadOptions, load_bags_with, load_model};
 
 /// `dynlab compare …`
@@ -116,7 +115,7 @@ pub fn run(args: CompareArgs) -> anyhow::Result<()> {
         }
     }
     let opts = args.source.options()?;
-    let mut data = load_bags_with(&args.bags, Some(world), &opts, &SavGol::default(), None)?;
+    let mut data = load_bags_with(&args.bags, Some(world), &opts, &args.source.savgol(), None)?;
     // a car model steps a fixed dt: poses at another rate (a 240 Hz motion capture) are
     // resampled to it
     if world == dynlab_learn::World::Car
@@ -132,7 +131,7 @@ pub fn run(args: CompareArgs) -> anyhow::Result<()> {
             &args.bags,
             Some(world),
             &opts,
-            &SavGol::default(),
+            &args.source.savgol(),
             Some(model.dt()),
         )?;
     }

@@ -7,7 +7,6 @@ use std::path::PathBuf;
 use anyhow::Context;
 use clap::{Args, Parser};
 use dynlab_diagnose::diagnosis::{DiagnoseConfig, diagnose, diagnosis_page};
-use dynlab_learn::dynamics::data::SavGol;
 use dynlab_learn::dynamics::physics::{LimitSurface, PhysicsModel};
 use dynlab_learn::{load_bags_with, load_model, pipeline_notes};
 
@@ -71,7 +70,7 @@ pub fn run(args: DiagnoseArgs) -> anyhow::Result<()> {
         &args.bags,
         Some(model.world()),
         &opts,
-        &SavGol::default(),
+        &args.source.savgol(),
         None,
     )?
     .data;
@@ -88,7 +87,7 @@ pub fn run(args: DiagnoseArgs) -> anyhow::Result<()> {
             &args.bags,
             Some(model.world()),
             &opts,
-            &SavGol::default(),
+            &args.source.savgol(),
             Some(model.dt()),
         )?
         .data;
@@ -247,6 +246,7 @@ pub fn run(args: DiagnoseArgs) -> anyhow::Result<()> {
     if src.strict {
         train.push("--strict".into());
     }
+    train.extend(src.savgol_flags());
     train.extend(["--out".into(), args.out.join("model").display().to_string()]);
     let shown = train.join(" ");
     if !args.apply {

@@ -4,7 +4,6 @@
 use std::path::PathBuf;
 
 use clap::Args;
-use dynlab_learn::dynamics::data::SavGol;
 use dynlab_learn::{evaluate, load_bags_with, load_model};
 
 /// `dynlab eval-model …`
@@ -36,7 +35,7 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
         &args.bags,
         Some(model.world()),
         &opts,
-        &SavGol::default(),
+        &args.source.savgol(),
         None,
     )?
     .data;

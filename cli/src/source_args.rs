@@ -2,7 +2,8 @@
 //! (a `PoseStamped` or `Odometry` topic, or a tf frame pair), the command topic, and `--strict`.
 
 use clap::Args;
-use dynlab_learn::{Dataset, LoadOptions, TfFrames, Topics, data_warnings};
+use dynlab_learn::dynamics::data::SavGol;
+use dynlab_learn::{Dataset, LoadOptions, TfFrames, Topics, data_warnings, smoothing_note};
 
 /// Pose source, command topic and strictness.
 #[derive(Debug, Clone, Args)]
@@ -22,6 +23,13 @@ pub struct SourceArgs {
     /// default they are skipped, counted, and the trajectory is split there).
     #[arg(long)]
     pub strict: bool,
+    /// Car velocities from Savitzky–Golay fits over this many poses (odd; default: 15, widened
+    /// where the poses' noise leaves more than a quarter of the velocities' spread).
+    #[arg(long, value_name = "POSES")]
+    pub savgol_window: Option<usize>,
+    /// The fits' polynomial degree.
+    #[arg(long, default_value_t = 3, value_name = "DEGREE")]
+    pub savgol_order: usize,
 }
 
 impl SourceArgs {
@@ -37,6 +45,33 @@ impl SourceArgs {
         })
     }
 
+    /// The car's smoothing: the window given, or the default widened for the poses' noise.
+    pub fn savgol(&self) -> SavGol {
+        match self.savgol_window {
+            Some(window) => SavGol {
+                window,
+                order: self.savgol_order,
+                ..SavGol::default()
+            },
+            None => SavGol {
+                order: self.savgol_order,
+                ..SavGol::adaptive()
+            },
+        }
+    }
+
+    /// The command-line flags that give these settings again (where not the defaults).
+    pub fn savgol_flags(&self) -> Vec<String> {
+        let mut flags = Vec::new();
+        if let Some(w) = self.savgol_window {
+            flags.extend(["--savgol-window".to_string(), w.to_string()]);
+        }
+        if self.savgol_order != SavGol::default().order {
+            flags.extend(["--savgol-order".to_string(), self.savgol_order.to_string()]);
+        }
+        flags
+    }
+
     /// Whether the pose source was named (so the world's default pose topic is not expected).
     pub fn names_pose_source(&self) -> bool {
         self.pose_topic.is_some() || self.pose_tf.is_some()
@@ -44,9 +79,15 @@ impl SourceArgs {
 }
 
 /// Prints what must not go unnoticed about how the data were read — a damaged bag's recovery,
-/// skipped poses — as warnings on standard error.
+/// skipped poses — as warnings on standard error, and, as notes, car velocities estimated with
+/// other than the default smoothing.
 pub fn warn_about_data(data: &Dataset) {
     for w in data_warnings(data) {
         eprintln!("warning: {w}");
+    }
+    for (source, report) in data.sources.iter().zip(&data.reports) {
+        if let Some(note) = smoothing_note(report) {
+            eprintln!("note: {}: {note}", source.path);
+        }
     }
 }

@@ -8,7 +8,6 @@ use std::time::Instant;
 use anyhow::{Context, bail};
 use clap::{Args, ValueEnum};
 use dynlab_learn::dynamics::conventions::LossNorm;
-use dynlab_learn::dynamics::data::SavGol;
 use dynlab_learn::dynamics::ode::Solver;
 use dynlab_learn::dynamics::physics::LimitSurface;
 use dynlab_learn::file::TrainingMeta;
@@ -180,7 +179,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         .map(|f| dynlab_learn::train::read_custom_effect(f))
         .collect::<Result<Vec<_>, _>>()?;
     let opts = args.source.options()?;
-    let data = load_bags_with(&args.bags, world, &opts, &SavGol::default(), None)?.data;
+    let data = load_bags_with(&args.bags, world, &opts, &args.source.savgol(), None)?.data;
     crate::source_args::warn_about_data(&data);
     if data.transitions() < 10 {
         bail!(
@@ -329,6 +328,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         best_epoch: out.best_epoch,
         epochs_run: out.curve.len(),
         windows: out.windows,
+        savgol: data.reports.iter().filter_map(|r| r.savgol).collect(),
     };
     save_model(&out.model, &args.out, Some(training), metrics)?;
     write_curve_csv(&args.out.join("curve.csv"), &out.curve)?;

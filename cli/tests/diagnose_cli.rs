@@ -122,6 +122,7 @@ fn the_train_command_keeps_the_models_custom_effect_and_training_settings() {
         best_epoch: 1,
         epochs_run: 1,
         windows: (100, 20),
+        savgol: Vec::new(),
     };
     save_physics(&model, World::Car, Some(drag), Some(training));
     let out = tmp.path().join("diag");

@@ -684,10 +684,18 @@ fn resample_linear(t: &[i64], pose: &[[f64; 3]], step: i64) -> (Vec<i64>, Vec<[f
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(default)]
 pub struct SavGol {
-    /// Samples per window (odd, > `order`; default 15: ≈ 60 ms at 240 Hz).
+    /// Samples per window (odd, > `order`; default 15: ≈ 60 ms at 240 Hz): the position's
+    /// (x, y), and the yaw's unless `yaw_window` is set.
     pub window: usize,
     /// Polynomial degree (default 3).
     pub order: usize,
+    /// Samples per window for the yaw (odd, > `order`; default: `window`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub yaw_window: Option<usize>,
+    /// Whether the car's loader widens the windows where the poses' noise is large
+    /// ([`SavGol::adapted`]); the settings it records are the ones it took.
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub adaptive: bool,
 }
 
 impl Default for SavGol {
@@ -695,13 +703,116 @@ impl Default for SavGol {
         Self {
             window: 15,
             order: 3,
+            yaw_window: None,
+            adaptive: false,
         }
     }
 }
 
+/// [`SavGol::adapted`] widens a window until the velocity noise it leaves is at most this
+/// share of the spread of the velocities it gives.
+pub const NOISE_TO_SPREAD: f64 = 0.25;
+
 impl SavGol {
+    /// The default windows, widened where the poses' noise is large ([`SavGol::adapted`]).
+    pub fn adaptive() -> Self {
+        Self {
+            adaptive: true,
+            ..Self::default()
+        }
+    }
+
+    /// The settings for pose component `c` (0 x, 1 y, 2 yaw), with the window shortened to
+    /// the largest odd one of at most `n` samples (never below `order + 2`).
+    fn for_component(&self, c: usize, n: usize) -> SavGol {
+        let w = match c {
+            2 => self.yaw_window.unwrap_or(self.window),
+            _ => self.window,
+        };
+        let fit = if n.is_multiple_of(2) {
+            n.saturating_sub(1)
+        } else {
+            n
+        };
+        SavGol {
+            window: w.min(fit).max((self.order + 2) | 1),
+            yaw_window: None,
+            adaptive: false,
+            ..*self
+        }
+    }
+
+    /// The windows the poses' noise asks for, for car trajectories on an equidistant step.
+    /// From `window`, the position's window (then the yaw's) is widened in steps of 6 samples,
+    /// to at most three times `window`, until the noise it leaves in the velocities —
+    /// `σ · ‖derivative weights‖` for white pose noise of `pose_std` — is at most
+    /// [`NOISE_TO_SPREAD`] of their spread (the standard deviation of `vx` and of `vy` for the
+    /// position, of `ω` for the yaw, as the `window` fits give them, net of their noise); the
+    /// smallest window that does, or the widest tried. Poses resampled by interpolation hold a
+    /// little less noise than `pose_std`: the choice errs wide. Without trajectories, or
+    /// without noise, the settings stay.
+    pub fn adapted(&self, trajs: &[Trajectory], pose_std: [f64; 3]) -> SavGol {
+        let fixed = SavGol {
+            adaptive: false,
+            ..*self
+        };
+        let dt = match trajs.iter().find(|t| t.len() > 1) {
+            Some(t) if t.dt > 0.0 => t.dt,
+            _ => return fixed,
+        };
+        // the velocities' spread as the settings give them
+        let mut sum = [0.0; 3];
+        let mut sq = [0.0; 3];
+        let mut n = 0.0;
+        for t in trajs {
+            let Ok(states) = car_states(t, &fixed) else {
+                continue;
+            };
+            for s in states {
+                for c in 0..3 {
+                    sum[c] += s[3 + c];
+                    sq[c] += s[3 + c] * s[3 + c];
+                }
+                n += 1.0;
+            }
+        }
+        if n < 2.0 {
+            return fixed;
+        }
+        let var = |c: usize| (sq[c] / n - (sum[c] / n).powi(2)).max(0.0);
+        let sigma_xy = ((pose_std[0].powi(2) + pose_std[1].powi(2)) / 2.0).sqrt();
+        // (component's σ, the velocities' smallest variance, the window it starts from)
+        let groups = [
+            (sigma_xy, var(0).min(var(1)), self.window),
+            (pose_std[2], var(2), self.yaw_window.unwrap_or(self.window)),
+        ];
+        let mut chosen = [self.window, self.yaw_window.unwrap_or(self.window)];
+        for (g, &(sigma, v, w0)) in groups.iter().enumerate() {
+            let noise = |w: usize| sigma * derivative_gain(w, self.order, dt);
+            let spread = (v - noise(w0).powi(2)).max(0.0).sqrt();
+            let mut w = w0;
+            while noise(w) > NOISE_TO_SPREAD * spread && w + 6 <= 3 * w0 {
+                w += 6;
+            }
+            chosen[g] = w;
+        }
+        SavGol {
+            window: chosen[0],
+            yaw_window: (chosen[1] != chosen[0]).then_some(chosen[1]),
+            ..fixed
+        }
+    }
+
     /// Checks the settings.
     pub fn validate(&self) -> Result<(), DataError> {
+        if let Some(w) = self.yaw_window {
+            SavGol {
+                window: w,
+                yaw_window: None,
+                ..*self
+            }
+            .validate()?;
+        }
         if self.window.is_multiple_of(2) || self.window < 3 {
             return Err(DataError::InvalidSetting {
                 name: "savgol.window",
@@ -769,6 +880,27 @@ fn local_design(t: &[f64], centre: f64, k: usize, a: &mut [f64]) -> Option<f64> 
     (span > 0.0).then_some(scale)
 }
 
+/// `‖c‖` of the derivative weights `c` at the centre of a Savitzky–Golay window of `window`
+/// samples and degree `order` on the step `dt`: white noise of σ gives the slope a noise of
+/// `σ · ‖c‖`.
+fn derivative_gain(window: usize, order: usize, dt: f64) -> f64 {
+    let k = order + 1;
+    let t: Vec<f64> = (0..window).map(|i| i as f64 * dt).collect();
+    let mut a = vec![0.0; window * k];
+    let scale = local_design(&t, t[window / 2], k, &mut a).unwrap_or(1.0);
+    // the fit is linear in y: the centre's slope weights are the slopes of the unit vectors
+    let mut e = vec![0.0; window];
+    let mut sum = 0.0;
+    for j in 0..window {
+        e[j] = 1.0;
+        if let Some(c) = lstsq(&a, window, k, &e) {
+            sum += (c[1] / scale).powi(2);
+        }
+        e[j] = 0.0;
+    }
+    sum.sqrt()
+}
+
 /// Savitzky–Golay smoothing and first derivative of `y(t)` on arbitrary increasing stamps `t`
 /// \[s\]: at each sample, a polynomial of degree `order` is fitted by least squares to the
 /// `window` samples centred on it (in `t`, so irregular stamps are handled exactly), and its value
@@ -825,6 +957,8 @@ pub struct PoseNoise {
 const NOISE_FIT: SavGol = SavGol {
     window: 9,
     order: 3,
+    yaw_window: None,
+    adaptive: false,
 };
 
 /// Smallest number of residuals [`NoiseResiduals::std`] estimates from.
@@ -923,7 +1057,7 @@ pub fn car_state_noise(
     let mut smoothed = Vec::with_capacity(3);
     for c in 0..3 {
         let w: Vec<f64> = (0..n).map(|_| noise.std[c] * normal()).collect();
-        smoothed.push(savgol(&t, &w, &noise.savgol)?);
+        smoothed.push(savgol(&t, &w, &noise.savgol.for_component(c, n))?);
     }
     let mut out = s.to_vec();
     for i in 0..n {
@@ -946,12 +1080,15 @@ pub fn car_state_noise(
 /// yaw are smoothed with [`savgol`], their time derivatives come from the same fits, and the
 /// world velocity is rotated into the body frame: `vx = cos ψ·ẋ + sin ψ·ẏ`,
 /// `vy = −sin ψ·ẋ + cos ψ·ẏ`, `ω = ψ̇`. The pose in the state is the smoothed pose (ψ unwrapped).
+/// x and y take `sg.window`, the yaw `sg.yaw_window` (if set); a window longer than the
+/// trajectory is shortened to it.
 pub fn car_states(traj: &Trajectory, sg: &SavGol) -> Result<Vec<[f64; 6]>, DataError> {
     let t = traj.times_s();
     let col = |c: usize| traj.pose.iter().map(|p| p[c]).collect::<Vec<_>>();
-    let (x, xd) = savgol(&t, &col(0), sg)?;
-    let (y, yd) = savgol(&t, &col(1), sg)?;
-    let (psi, psid) = savgol(&t, &col(2), sg)?;
+    let n = t.len();
+    let (x, xd) = savgol(&t, &col(0), &sg.for_component(0, n))?;
+    let (y, yd) = savgol(&t, &col(1), &sg.for_component(1, n))?;
+    let (psi, psid) = savgol(&t, &col(2), &sg.for_component(2, n))?;
     Ok((0..t.len())
         .map(|i| {
             let (s, c) = psi[i].sin_cos();

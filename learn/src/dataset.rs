@@ -217,6 +217,12 @@ fn trajectories_with_stamps(
         },
     };
     let (mut trajs, mut report) = build_trajectories(poses, commands, &cfg)?;
+    // the car's smoothing: as given, or widened where the poses' noise is large
+    let sg = match report.pose_std {
+        Some(std) if sg.adaptive && world == World::Car => sg.adapted(&trajs, std),
+        _ => *sg,
+    };
+    let sg = &sg;
     if world == World::Car {
         report.savgol = Some(*sg);
     }
@@ -761,6 +767,27 @@ fn in_bag(e: LearnError, path: &Path, pose_topic: &str, cmd_topic: &str) -> Lear
     }
 }
 
+/// How the car's velocities were estimated, where not with the default smoothing (widened for
+/// the poses' noise, or as given): the windows and the noise estimated.
+pub fn smoothing_note(report: &PipelineReport) -> Option<String> {
+    let sg = report.savgol.filter(|s| *s != SavGol::default())?;
+    let noise = match report.pose_std {
+        Some([x, y, yaw]) => format!(
+            " (the poses' noise: σ {:.2} mm, {:.2} mm, {:.4} rad)",
+            x * 1e3,
+            y * 1e3,
+            yaw
+        ),
+        None => String::new(),
+    };
+    Some(format!(
+        "car velocities from Savitzky–Golay fits of degree {} over {} poses (x, y) and {} (yaw){noise}; --savgol-window sets them",
+        sg.order,
+        sg.window,
+        sg.yaw_window.unwrap_or(sg.window)
+    ))
+}
+
 /// What the data pipeline did to one bag, in sentences for a person: commands held at pose
 /// stamps, gaps that split trajectories, resampling, dropped poses.
 pub fn pipeline_notes(report: &PipelineReport) -> Vec<String> {
@@ -867,6 +894,7 @@ pub fn pipeline_notes(report: &PipelineReport) -> Vec<String> {
             report.short_trajectories_dropped, report.short_trajectory_poses
         ));
     }
+    notes.extend(smoothing_note(report));
     notes.push(format!(
         "{} trajectories, {} poses used",
         report.trajectories, report.poses_out

@@ -88,6 +88,10 @@ pub struct TrainingMeta {
     pub epochs_run: usize,
     /// Training and validation windows.
     pub windows: (usize, usize),
+    /// Car data: the Savitzky–Golay settings each bag's velocities were estimated with (in the
+    /// order of `bags`).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub savgol: Vec<dynlab_dynamics::data::SavGol>,
 }
 
 /// Everything in `model.json`.

@@ -30,7 +30,7 @@ pub mod world;
 pub use dataset::{
     BagSource, Dataset, LoadOptions, Stamps, TfFrames, TimedDataset, Topics, data_warnings,
     excitation_warnings, load_bags, load_bags_timed, load_bags_timed_at, load_bags_with,
-    pipeline_notes,
+    pipeline_notes, smoothing_note,
 };
 pub use dynlab_dynamics as dynamics;
 pub use error::LearnError;

@@ -47,6 +47,9 @@ use crate::real::Real;
 /// Bound `|θ| ≤` of a custom term's coefficient (any unit): wide, only to keep a fit finite.
 pub const COEFFICIENT_BOUND: f64 = 1e6;
 
+/// The library's steering offset, as a parameter name.
+const STEERING_OFFSET: &str = "steering_offset.delta0";
+
 /// Which state derivative a custom term adds to.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Target {
@@ -176,7 +179,7 @@ impl Target {
             (Target::Vx, "d*vx" | "d*|vx|") => Some("Cm2"),
             (Target::Vx, "1") => Some("Cr0"),
             (Target::Vx, "vx*vx" | "vx*|vx|") => Some("Cr2"),
-            (Target::Delta, "1") => Some("steering_offset.delta0"),
+            (Target::Delta, "1") => Some(STEERING_OFFSET),
             (Target::Grip, "1") => Some("Df"),
             (Target::BlockX, "l" | "l*cos_phi") => Some("L"),
             (Target::Theta, "l*sin_phi" | "l*phi" | "l*p") => Some("c"),
@@ -244,13 +247,24 @@ impl Target {
         }
     }
 
-    /// The nominal parameters a term on the target is fitted with
-    /// ([`CustomEffect::coupled_nominal`]): the grip's, the car's friction-ellipse weight.
+    /// The parameters a term on the target is fitted with ([`CustomEffect::coupled_nominal`]):
+    /// the grip's, the car's friction-ellipse weight; the steering angle's, the library's
+    /// steering offset (where the model has it: a `δ` term on an input that is near a constant
+    /// while the car drives, the throttle `d` or the speed, otherwise takes the part of the
+    /// offset's value the selection got wrong).
     pub fn coupled_nominal(self) -> &'static [&'static str] {
         match self {
             Target::Grip => &["ellipse"],
+            Target::Delta => &[STEERING_OFFSET],
             _ => &[],
         }
+    }
+
+    /// Whether the coupled parameter `name` is refitted with every term on the target, not
+    /// only where that fits better: an effect's own parameter (the steering offset), which the
+    /// term stands in for.
+    pub fn always_refits(self, name: &str) -> bool {
+        name == STEERING_OFFSET
     }
 
     /// Whether the target corrects an input of the tire or friction model (`δ`, `μ`) rather
