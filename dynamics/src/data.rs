@@ -746,8 +746,8 @@ impl SavGol {
     /// From `window`, the position's window (then the yaw's) is widened in steps of 6 samples,
     /// to at most three times `window`, until the noise it leaves in the velocities —
     /// `σ · ‖derivative weights‖` for white pose noise of `pose_std` — is at most
-    /// [`NOISE_TO_SPREAD`] of their spread (the standard deviation of `vx` and of `vy` for the
-    /// position, of `ω` for the yaw, as the `window` fits give them, net of their noise); the
+    /// [`NOISE_TO_SPREAD`] of their spread (the smaller standard deviation of `vx`'s and `vy`'s
+    /// for the position, `ω`'s for the yaw, as the `window` fits give them, net of their noise); the
     /// smallest window that does, or the widest tried. Poses resampled by interpolation hold a
     /// little less noise than `pose_std`: the choice errs wide. Without trajectories, or
     /// without noise, the settings stay.
