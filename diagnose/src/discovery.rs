@@ -2750,11 +2750,7 @@ fn fit_effect(
     // with it whatever the gain: the term then counts for what it adds to that refit alone
     // (a throttle term `δ += −0.047·d` beside an offset the selection put at 0.046 where the
     // generator's is 0.03 removed 21 % of the held-out error)
-    let always = effect
-        .coupled_nominal()
-        .iter()
-        .any(|n| effect.terms().iter().any(|t| t.target.always_refits(n)));
-    if !lower_enough && !always {
+    if !lower_enough && !effect.always_refits_coupled() {
         return Ok(held);
     }
     let mut without = theta0.clone();

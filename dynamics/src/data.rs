@@ -882,23 +882,27 @@ fn local_design(t: &[f64], centre: f64, k: usize, a: &mut [f64]) -> Option<f64> 
 
 /// `‖c‖` of the derivative weights `c` at the centre of a Savitzky–Golay window of `window`
 /// samples and degree `order` on the step `dt`: white noise of σ gives the slope a noise of
-/// `σ · ‖c‖`.
+/// `σ · ‖c‖`. The filter is linear and alike at every interior sample, so the slopes it gives
+/// a unit impulse, at the samples whose window holds it, are those weights (reversed); 0 for
+/// settings [`savgol`] refuses.
 fn derivative_gain(window: usize, order: usize, dt: f64) -> f64 {
-    let k = order + 1;
-    let t: Vec<f64> = (0..window).map(|i| i as f64 * dt).collect();
-    let mut a = vec![0.0; window * k];
-    let scale = local_design(&t, t[window / 2], k, &mut a).unwrap_or(1.0);
-    // the fit is linear in y: the centre's slope weights are the slopes of the unit vectors
-    let mut e = vec![0.0; window];
-    let mut sum = 0.0;
-    for j in 0..window {
-        e[j] = 1.0;
-        if let Some(c) = lstsq(&a, window, k, &e) {
-            sum += (c[1] / scale).powi(2);
-        }
-        e[j] = 0.0;
-    }
-    sum.sqrt()
+    let n = 2 * window + 1;
+    let t: Vec<f64> = (0..n).map(|i| i as f64 * dt).collect();
+    let mut impulse = vec![0.0; n];
+    impulse[window] = 1.0;
+    let sg = SavGol {
+        window,
+        order,
+        ..SavGol::default()
+    };
+    let h = window / 2;
+    savgol(&t, &impulse, &sg).map_or(0.0, |(_, slope)| {
+        slope[window - h..=window + h]
+            .iter()
+            .map(|c| c * c)
+            .sum::<f64>()
+            .sqrt()
+    })
 }
 
 /// Savitzky–Golay smoothing and first derivative of `y(t)` on arbitrary increasing stamps `t`

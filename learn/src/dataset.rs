@@ -218,11 +218,10 @@ fn trajectories_with_stamps(
     };
     let (mut trajs, mut report) = build_trajectories(poses, commands, &cfg)?;
     // the car's smoothing: as given, or widened where the poses' noise is large
-    let sg = match report.pose_std {
+    let sg = &match report.pose_std {
         Some(std) if sg.adaptive && world == World::Car => sg.adapted(&trajs, std),
         _ => *sg,
     };
-    let sg = &sg;
     if world == World::Car {
         report.savgol = Some(*sg);
     }

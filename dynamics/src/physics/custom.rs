@@ -260,11 +260,11 @@ impl Target {
         }
     }
 
-    /// Whether the coupled parameter `name` is refitted with every term on the target, not
-    /// only where that fits better: an effect's own parameter (the steering offset), which the
-    /// term stands in for.
-    pub fn always_refits(self, name: &str) -> bool {
-        name == STEERING_OFFSET
+    /// Whether the coupled parameters are refitted with every term on the target, not only
+    /// where that fits better: the steering angle's, an effect's own parameter (the steering
+    /// offset) the term stands in for.
+    pub fn always_refits(self) -> bool {
+        self == Target::Delta
     }
 
     /// Whether the target corrects an input of the tire or friction model (`δ`, `μ`) rather
@@ -593,11 +593,21 @@ impl CustomEffect {
     /// with the full one, the right low-grip strip removed 6.5 % of the held-out error, with the
     /// weight at 0 85 %).
     pub fn coupled_nominal(&self) -> &'static [&'static str] {
+        self.coupling_target().map_or(&[], |t| t.coupled_nominal())
+    }
+
+    /// Whether [`CustomEffect::coupled_nominal`] is refitted with the terms whatever the gain
+    /// ([`Target::always_refits`]).
+    pub fn always_refits_coupled(&self) -> bool {
+        self.coupling_target().is_some_and(Target::always_refits)
+    }
+
+    /// The first term's target with coupled parameters.
+    fn coupling_target(&self) -> Option<Target> {
         self.terms
             .iter()
-            .map(|t| t.target.coupled_nominal())
-            .find(|c| !c.is_empty())
-            .unwrap_or(&[])
+            .map(|t| t.target)
+            .find(|t| !t.coupled_nominal().is_empty())
     }
 
     /// The same effect with new coefficients (one per term; fitted values).
