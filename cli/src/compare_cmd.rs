@@ -51,6 +51,7 @@ pub struct CompareArgs {
 fn write_online(
     args: &CompareArgs,
     model: &dynlab_learn::Model,
+    fit: dynlab_learn::dynamics::data::SavGol,
     opts: &LoadOptions,
 ) -> anyhow::Result<()> {
     use dynlab_diagnose::compare::online::{OnlineConfig, OnlinePredictor, replay};
@@ -68,6 +69,7 @@ fn write_online(
             model.clone(),
             OnlineConfig {
                 steps: args.online_steps,
+                savgol: fit,
                 ..Default::default()
             },
         )?;
@@ -84,7 +86,7 @@ fn write_online(
 }
 
 pub fn run(args: CompareArgs) -> anyhow::Result<()> {
-    let (model, _) = load_model(&args.model, None, None)
+    let (model, meta) = load_model(&args.model, None, None)
         .with_context(|| format!("loading the model {}", args.model.display()))?;
     let baseline = match &args.baseline {
         Some(p) => Some(
@@ -161,7 +163,7 @@ pub fn run(args: CompareArgs) -> anyhow::Result<()> {
     std::fs::write(&json, serde_json::to_string_pretty(&report)?)
         .with_context(|| format!("writing {}", json.display()))?;
     let page = html::report(&report).write(&args.out)?;
-    write_online(&args, &model, &opts)?;
+    write_online(&args, &model, meta.state_fit(), &opts)?;
     print!("{}", report.summary());
     println!("report: {} and {}", page.display(), json.display());
     Ok(())

@@ -709,6 +709,19 @@ impl Default for SavGol {
     }
 }
 
+impl std::fmt::Display for SavGol {
+    /// `Savitzky–Golay fits of degree 3 over 27 poses (x, y) and 15 (yaw)`.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "Savitzky–Golay fits of degree {} over {} poses (x, y) and {} (yaw)",
+            self.order,
+            self.window,
+            self.yaw_window.unwrap_or(self.window)
+        )
+    }
+}
+
 /// [`SavGol::adapted`] widens a window until the velocity noise it leaves is at most this
 /// share of the spread of the velocities it gives.
 pub const NOISE_TO_SPREAD: f64 = 0.25;
@@ -722,9 +735,14 @@ impl SavGol {
         }
     }
 
+    /// The samples one estimate of every component needs: the longer of the two windows.
+    pub fn span(&self) -> usize {
+        self.window.max(self.yaw_window.unwrap_or(self.window))
+    }
+
     /// The settings for pose component `c` (0 x, 1 y, 2 yaw), with the window shortened to
     /// the largest odd one of at most `n` samples (never below `order + 2`).
-    fn for_component(&self, c: usize, n: usize) -> SavGol {
+    pub fn for_component(&self, c: usize, n: usize) -> SavGol {
         let w = match c {
             2 => self.yaw_window.unwrap_or(self.window),
             _ => self.window,

@@ -780,10 +780,7 @@ pub fn smoothing_note(report: &PipelineReport) -> Option<String> {
         None => String::new(),
     };
     Some(format!(
-        "car velocities from Savitzky–Golay fits of degree {} over {} poses (x, y) and {} (yaw){noise}; --savgol-window sets them",
-        sg.order,
-        sg.window,
-        sg.yaw_window.unwrap_or(sg.window)
+        "car velocities from {sg}{noise}; --savgol-window sets them"
     ))
 }
 

@@ -5,6 +5,7 @@
 
 use std::path::{Path, PathBuf};
 
+use dynlab_dynamics::data::SavGol;
 use dynlab_dynamics::ode::Solver;
 use dynlab_dynamics::physics::{CustomEffect, LimitSurface, PhysicsModel};
 use dynlab_nn::Mlp;
@@ -91,7 +92,7 @@ pub struct TrainingMeta {
     /// Car data: the Savitzky–Golay settings each bag's velocities were estimated with (in the
     /// order of `bags`).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
-    pub savgol: Vec<dynlab_dynamics::data::SavGol>,
+    pub savgol: Vec<SavGol>,
 }
 
 /// Everything in `model.json`.
@@ -127,6 +128,30 @@ pub struct ModelFile {
 }
 
 impl ModelFile {
+    /// The Savitzky–Golay fit a live state estimate for this model should use: the one its
+    /// training data's velocities came from (per window, the median over its bags), so the
+    /// model sees states as noisy as those it learned from; the default (15 poses) for a model
+    /// without that record.
+    pub fn state_fit(&self) -> SavGol {
+        let fits = self.training.as_ref().map_or(&[][..], |t| &t.savgol[..]);
+        if fits.is_empty() {
+            return SavGol::default();
+        }
+        let median = |f: &dyn Fn(&SavGol) -> usize| {
+            let mut v: Vec<usize> = fits.iter().map(f).collect();
+            v.sort_unstable();
+            v[v.len() / 2]
+        };
+        let window = median(&|s| s.window);
+        let yaw = median(&|s| s.yaw_window.unwrap_or(s.window));
+        SavGol {
+            window,
+            order: median(&|s| s.order),
+            yaw_window: (yaw != window).then_some(yaw),
+            adaptive: false,
+        }
+    }
+
     /// The metadata of `model` (training record and metrics empty).
     pub fn describe(model: &Model) -> Self {
         let world = model.world();
@@ -436,4 +461,65 @@ pub fn load_model(
     )
     .map_err(|e| corrupt(e.to_string()))?;
     Ok((model, meta))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn with_fits(fits: &[SavGol]) -> ModelFile {
+        let p = crate::train::physics_model(World::Car, &[]).unwrap();
+        let model = Model::new(
+            ModelKind::Physics,
+            World::Car,
+            0.01,
+            None,
+            None,
+            Some(p),
+            Solver::Rk4 { substeps: 1 },
+        )
+        .unwrap();
+        let mut meta = ModelFile::describe(&model);
+        meta.training = Some(TrainingMeta {
+            bags: Vec::new(),
+            config: TrainConfig::default(),
+            best_epoch: 0,
+            epochs_run: 0,
+            windows: (0, 0),
+            savgol: fits.to_vec(),
+        });
+        meta
+    }
+
+    #[test]
+    fn the_live_fit_is_the_training_datas_median_window_per_component() {
+        let fit = |window, yaw: Option<usize>| SavGol {
+            window,
+            yaw_window: yaw,
+            adaptive: true,
+            ..SavGol::default()
+        };
+        assert_eq!(with_fits(&[]).state_fit(), SavGol::default());
+        let mut none = with_fits(&[]);
+        none.training = None;
+        assert_eq!(none.state_fit(), SavGol::default());
+        // three bags: x/y 27, 21, 33 → 27; yaw 15, 21, 15 → 15; recorded as fixed settings
+        let three = with_fits(&[fit(27, Some(15)), fit(21, None), fit(33, Some(15))]);
+        assert_eq!(
+            three.state_fit(),
+            SavGol {
+                window: 27,
+                yaw_window: Some(15),
+                ..SavGol::default()
+            }
+        );
+        let same = with_fits(&[fit(21, None), fit(15, Some(21)), fit(21, None)]);
+        assert_eq!(
+            same.state_fit(),
+            SavGol {
+                window: 21,
+                ..SavGol::default()
+            }
+        );
+    }
 }

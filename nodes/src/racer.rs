@@ -16,6 +16,7 @@ use std::collections::VecDeque;
 use dynlab_control::racing::{
     CarDynamics, CarStateEstimator, Input, Plant, RaceStep, Racer, RacingError, State,
 };
+use dynlab_learn::dynamics::data::SavGol;
 
 /// Time tolerance for stamp comparisons \[s\] (stamps are whole nanoseconds).
 const EPS: f64 = 1e-6;
@@ -69,6 +70,13 @@ impl<'a> RaceClock<'a> {
             next_solve: None,
             overruns: 0,
         })
+    }
+
+    /// The same clock with its state estimate fitted as `fit` says (default: 15 poses); give it
+    /// the fit the model's training data had ([`dynlab_learn::ModelFile::state_fit`]).
+    pub fn with_state_fit(mut self, fit: SavGol) -> Self {
+        self.est = CarStateEstimator::new(fit);
+        self
     }
 
     /// The command delay \[s\].

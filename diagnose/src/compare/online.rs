@@ -4,7 +4,8 @@
 //! [`OnlinePredictor`] takes poses and commands as they arrive. At each pose (with a command
 //! held, zero-order, from the latest command at or before the pose stamp) it estimates the model
 //! state causally — the car's body velocities by the same Savitzky–Golay fit as the offline
-//! pipeline, over the last `window` poses and evaluated at the newest one — and predicts:
+//! pipeline, over the last `window` poses (the yaw: `yaw_window`) and evaluated at the newest
+//! one — and predicts:
 //!
 //! - the state one model step ahead, stamped at `t + dt` (`/model/prediction`);
 //! - the k-step path with the command held (`/model/predicted_path`);
@@ -35,7 +36,8 @@ use serde::{Deserialize, Serialize};
 pub struct OnlineConfig {
     /// Steps of the predicted path (default 10).
     pub steps: usize,
-    /// Savitzky–Golay settings of the car's velocity estimate (default: the offline pipeline's).
+    /// Savitzky–Golay settings of the car's velocity estimate (default: the offline pipeline's
+    /// default; for a trained model, the fit its data had: [`dynlab_learn::ModelFile::state_fit`]).
     pub savgol: SavGol,
     /// A command older than this at a pose stamp is stale: no prediction \[s\] (default 0.5).
     pub max_command_age_s: f64,
@@ -205,8 +207,7 @@ impl OnlinePredictor {
         match self.model.world() {
             World::Push => Ok(self.poses.back().map(|(_, p)| p.to_vec())),
             World::Car => {
-                let w = self.cfg.savgol.window;
-                if self.poses.len() < w {
+                if self.poses.len() < self.cfg.savgol.span() {
                     return Ok(None);
                 }
                 let mut pose: Vec<[f64; 3]> = self.poses.iter().map(|(_, p)| *p).collect();
@@ -263,7 +264,7 @@ impl OnlinePredictor {
         self.poses.push_back((t_ns, [x, y, yaw]));
         self.track_extra(t_ns);
         let keep = match self.model.world() {
-            World::Car => self.cfg.savgol.window,
+            World::Car => self.cfg.savgol.span(),
             World::Push => 1,
         };
         while self.poses.len() > keep {
@@ -424,6 +425,58 @@ mod tests {
         }
         assert_eq!(predictions, 26);
         assert_eq!(errors, 25);
+    }
+
+    #[test]
+    fn a_wider_fit_warms_up_over_its_span_and_gives_the_offline_state() {
+        let savgol = SavGol {
+            window: 21,
+            yaw_window: Some(11),
+            ..SavGol::default()
+        };
+        let cfg = OnlineConfig {
+            savgol,
+            ..OnlineConfig::default()
+        };
+        let mut p = OnlinePredictor::new(car(), cfg).unwrap();
+        p.on_command(0, vec![0.1, 0.3]);
+        let pose = |i: i64| {
+            let t = i as f64 * 0.01;
+            [t.cos(), 0.5 * t.sin() + 0.1 * t * t, 0.3 + 0.8 * t]
+        };
+        let mut poses = Vec::new();
+        for i in 0..50i64 {
+            poses.push(pose(i));
+            let [x, y, yaw] = pose(i);
+            let o = p.on_pose(i * 10_000_000, x, y, yaw);
+            if poses.len() < 21 {
+                assert!(
+                    o.prediction.is_none(),
+                    "a prediction from {} poses",
+                    poses.len()
+                );
+                continue;
+            }
+            let traj = Trajectory {
+                t_ns: (0..21).map(|k| k * 10_000_000).collect(),
+                pose: poses[poses.len() - 21..].to_vec(),
+                u: Vec::new(),
+                dim_u: 0,
+                dt: 0.01,
+                resampled: false,
+            };
+            let want = *car_states(&traj, &savgol).unwrap().last().unwrap();
+            let got = o
+                .prediction
+                .expect("a prediction once 21 poses are in")
+                .state;
+            for c in 0..6 {
+                assert!(
+                    (got[c] - want[c]).abs() < 1e-7,
+                    "state {c}: {got:?} vs {want:?}"
+                );
+            }
+        }
     }
 
     #[test]

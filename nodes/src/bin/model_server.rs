@@ -118,7 +118,7 @@ fn main() -> anyhow::Result<()> {
         "reliable" | "default" => qos::default_profile(),
         other => bail!("parameter pose_qos: `{other}` is not a QoS; use sensor_data or reliable"),
     };
-    let (model, _) = load_model(std::path::Path::new(&model_dir), None, None)
+    let (model, meta) = load_model(std::path::Path::new(&model_dir), None, None)
         .with_context(|| format!("parameter model: loading {model_dir}"))?;
     let world = model.world();
     if model.dim_extra() > 0 {
@@ -128,11 +128,16 @@ fn main() -> anyhow::Result<()> {
             world.default_cmd_topic()
         );
     }
+    let fit = meta.state_fit();
+    if world == World::Car && fit != Default::default() {
+        tracing::info!("car velocities from {fit}, as in the model's training data");
+    }
     let mut predictor = OnlinePredictor::new(
         model,
         OnlineConfig {
             steps: steps as usize,
             max_command_age_s: max_age,
+            savgol: fit,
             ..Default::default()
         },
     )?;

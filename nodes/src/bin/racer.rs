@@ -76,7 +76,7 @@ fn main() -> anyhow::Result<()> {
     let hold: i64 = p.get_or("hold", 5)?;
     let delay: f64 = p.get_or("delay", 0.03)?;
     let stale_timeout: f64 = p.get_or("stale_timeout", 0.2)?;
-    let (model, _) = dynlab_learn::load_model(std::path::Path::new(&model_dir), None, None)
+    let (model, meta) = dynlab_learn::load_model(std::path::Path::new(&model_dir), None, None)
         .with_context(|| format!("parameter model: {model_dir}"))?;
     let track =
         Track::from_file(&track_path).with_context(|| format!("parameter track: {track_path}"))?;
@@ -115,7 +115,11 @@ fn main() -> anyhow::Result<()> {
             "parameter delay: {delay} s is not a whole number (≥ 0) of model steps of {dt} s; use e.g. 0.03"
         );
     }
-    let mut rc = RaceClock::new(racer, &model, delay_steps as usize)?;
+    let fit = meta.state_fit();
+    if fit != Default::default() {
+        tracing::info!("car velocities from {fit}, as in the model's training data");
+    }
+    let mut rc = RaceClock::new(racer, &model, delay_steps as usize)?.with_state_fit(fit);
     let mut hold = StaleHold::new(stale_timeout, rc.period())?;
     let steady0 = Instant::now();
     tracing::info!(
