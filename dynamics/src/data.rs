@@ -722,9 +722,10 @@ impl std::fmt::Display for SavGol {
     }
 }
 
-/// [`SavGol::adapted`] widens a window until the velocity noise it leaves is at most this
-/// share of the spread of the velocities it gives.
-pub const NOISE_TO_SPREAD: f64 = 0.25;
+/// [`SavGol::adapted`] tries windows from the given one in steps of this many samples…
+const WIDEN_STEP: usize = 6;
+/// … up to this many times the given one.
+const WIDEN_MAX: usize = 3;
 
 impl SavGol {
     /// The default windows, widened where the poses' noise is large ([`SavGol::adapted`]).
@@ -760,59 +761,125 @@ impl SavGol {
         }
     }
 
-    /// The windows the poses' noise asks for, for car trajectories on an equidistant step.
-    /// From `window`, the position's window (then the yaw's) is widened in steps of 6 samples,
-    /// to at most three times `window`, until the noise it leaves in the velocities —
-    /// `σ · ‖derivative weights‖` for white pose noise of `pose_std` — is at most
-    /// [`NOISE_TO_SPREAD`] of their spread (the smaller standard deviation of `vx`'s and `vy`'s
-    /// for the position, `ω`'s for the yaw, as the `window` fits give them, net of their noise); the
-    /// smallest window that does, or the widest tried. Poses resampled by interpolation hold a
-    /// little less noise than `pose_std`: the choice errs wide. Without trajectories, or
-    /// without noise, the settings stay.
+    /// The windows that give the car's velocities the smallest error, for car trajectories on
+    /// an equidistant step with white pose noise of `pose_std` (σ of x, y \[m\] and the yaw
+    /// \[rad\]). A wider window leaves less noise in a slope and bends it more where the motion
+    /// changes within the window; the error is the sum of both. For each window `w` tried (from
+    /// `window` in steps of 6 samples, to three times `window`), the noise follows from the
+    /// filter's weights (`σ² ‖c_w‖²`), and the bend from the data: the mean square difference
+    /// between the slopes of `w` and of `window`, less the part of it the noise gives
+    /// (`σ² ‖c_w − c_window‖²`). The position's window minimises the error of `vx` and `vy`
+    /// (body frame), each relative to its spread, the yaw's that of `ω`; the given window's
+    /// own bend counts as nothing, which errs narrow. Only samples a window of every width
+    /// fits centred on count. Without trajectories long enough, or without noise, the settings
+    /// stay.
     pub fn adapted(&self, trajs: &[Trajectory], pose_std: [f64; 3]) -> SavGol {
         let fixed = SavGol {
             adaptive: false,
             ..*self
         };
-        let dt = match trajs.iter().find(|t| t.len() > 1) {
-            Some(t) if t.dt > 0.0 => t.dt,
-            _ => return fixed,
+        let w0 = [self.window, self.yaw_window.unwrap_or(self.window)];
+        let widest = w0.map(|w| WIDEN_MAX * w);
+        let long: Vec<&Trajectory> = trajs
+            .iter()
+            .filter(|t| t.len() >= widest[0].max(widest[1]) && t.dt > 0.0)
+            .collect();
+        let sigma = [
+            ((pose_std[0].powi(2) + pose_std[1].powi(2)) / 2.0).sqrt(),
+            pose_std[2],
+        ];
+        let Some(dt) = long.first().map(|t| t.dt) else {
+            return fixed;
         };
-        // the velocities' spread as the settings give them
-        let mut sum = [0.0; 3];
-        let mut sq = [0.0; 3];
-        let mut n = 0.0;
-        for t in trajs {
-            let Ok(states) = car_states(t, &fixed) else {
-                continue;
-            };
-            for s in states {
-                for c in 0..3 {
-                    sum[c] += s[3 + c];
-                    sq[c] += s[3 + c] * s[3 + c];
-                }
-                n += 1.0;
-            }
-        }
-        if n < 2.0 {
+        if !(sigma[0] > 0.0 || sigma[1] > 0.0) {
             return fixed;
         }
-        let var = |c: usize| (sq[c] / n - (sum[c] / n).powi(2)).max(0.0);
-        let sigma_xy = ((pose_std[0].powi(2) + pose_std[1].powi(2)) / 2.0).sqrt();
-        // (component's σ, the velocities' smallest variance, the window it starts from)
-        let groups = [
-            (sigma_xy, var(0).min(var(1)), self.window),
-            (pose_std[2], var(2), self.yaw_window.unwrap_or(self.window)),
-        ];
-        let mut chosen = [self.window, self.yaw_window.unwrap_or(self.window)];
-        for (g, &(sigma, v, w0)) in groups.iter().enumerate() {
-            let noise = |w: usize| sigma * derivative_gain(w, self.order, dt);
-            let spread = (v - noise(w0).powi(2)).max(0.0).sqrt();
-            let mut w = w0;
-            while noise(w) > NOISE_TO_SPREAD * spread && w + 6 <= 3 * w0 {
-                w += 6;
+        // (slope of x, of y, of the yaw) per sample and window, and the smoothed yaw
+        let fit = |t: &Trajectory, c: usize, w: usize| {
+            let sg = SavGol { window: w, ..fixed };
+            let col: Vec<f64> = t.pose.iter().map(|p| p[c]).collect();
+            savgol(&t.times_s(), &col, &sg.for_component(0, t.len()))
+        };
+        let mut chosen = w0;
+        for g in 0..2 {
+            if sigma[g] <= 0.0 {
+                continue;
             }
-            chosen[g] = w;
+            let tried: Vec<usize> = (w0[g]..=widest[g]).step_by(WIDEN_STEP).collect();
+            let c0 = derivative_weights(w0[g], self.order, dt);
+            // per window: the mean square slope difference to `w0` of each velocity component
+            let mut msd = vec![[0.0; 2]; tried.len()];
+            // the reference slopes' mean and mean square, for their spread
+            let mut mean = [0.0; 2];
+            let mut sq = [0.0; 2];
+            let mut n = 0.0;
+            for t in &long {
+                let inner = widest[g] / 2..t.len() - widest[g] / 2;
+                let Ok((psi, _)) = fit(t, 2, w0[1]) else {
+                    return fixed;
+                };
+                // the components' slopes of window w: (vx, vy) or (ω)
+                let velocities = |w: usize| -> Option<Vec<[f64; 2]>> {
+                    if g == 0 {
+                        let (_, xd) = fit(t, 0, w).ok()?;
+                        let (_, yd) = fit(t, 1, w).ok()?;
+                        Some(
+                            inner
+                                .clone()
+                                .map(|i| {
+                                    let (s, c) = psi[i].sin_cos();
+                                    [c * xd[i] + s * yd[i], -s * xd[i] + c * yd[i]]
+                                })
+                                .collect(),
+                        )
+                    } else {
+                        let (_, wd) = fit(t, 2, w).ok()?;
+                        Some(inner.clone().map(|i| [wd[i], 0.0]).collect())
+                    }
+                };
+                let Some(reference) = velocities(w0[g]) else {
+                    return fixed;
+                };
+                for v in &reference {
+                    for c in 0..2 {
+                        mean[c] += v[c];
+                        sq[c] += v[c] * v[c];
+                    }
+                }
+                n += reference.len() as f64;
+                for (k, &w) in tried.iter().enumerate().skip(1) {
+                    let Some(vs) = velocities(w) else {
+                        return fixed;
+                    };
+                    for (v, r) in vs.iter().zip(&reference) {
+                        for c in 0..2 {
+                            msd[k][c] += (v[c] - r[c]).powi(2);
+                        }
+                    }
+                }
+            }
+            if n < 2.0 {
+                return fixed;
+            }
+            let var0 = sigma[g].powi(2) * norm2(&c0);
+            // each component's spread net of its noise (at least the noise, for a weight)
+            let weight = [0, 1].map(|c| {
+                let v = sq[c] / n - (mean[c] / n).powi(2);
+                1.0 / (v - var0).max(var0)
+            });
+            let components = if g == 0 { 2 } else { 1 };
+            let error = |k: usize| {
+                let cw = derivative_weights(tried[k], self.order, dt);
+                let noise = sigma[g].powi(2) * norm2(&cw);
+                let noise_diff = sigma[g].powi(2) * norm2(&centred_difference(&cw, &c0));
+                (0..components)
+                    .map(|c| weight[c] * ((msd[k][c] / n - noise_diff).max(0.0) + noise))
+                    .sum::<f64>()
+            };
+            let best = (0..tried.len())
+                .min_by(|&a, &b| error(a).total_cmp(&error(b)))
+                .unwrap_or(0);
+            chosen[g] = tried[best];
         }
         SavGol {
             window: chosen[0],
@@ -898,12 +965,12 @@ fn local_design(t: &[f64], centre: f64, k: usize, a: &mut [f64]) -> Option<f64> 
     (span > 0.0).then_some(scale)
 }
 
-/// `‖c‖` of the derivative weights `c` at the centre of a Savitzky–Golay window of `window`
-/// samples and degree `order` on the step `dt`: white noise of σ gives the slope a noise of
-/// `σ · ‖c‖`. The filter is linear and alike at every interior sample, so the slopes it gives
-/// a unit impulse, at the samples whose window holds it, are those weights (reversed); 0 for
-/// settings [`savgol`] refuses.
-fn derivative_gain(window: usize, order: usize, dt: f64) -> f64 {
+/// The derivative weights `c` at the centre of a Savitzky–Golay window of `window` samples and
+/// degree `order` on the step `dt` (the slope is `Σ c_j y_j`; white noise of σ gives it a noise
+/// of `σ · ‖c‖`), reversed. The filter is linear and alike at every interior sample, so the
+/// slopes it gives a unit impulse, at the samples whose window holds it, are those weights;
+/// empty for settings [`savgol`] refuses.
+fn derivative_weights(window: usize, order: usize, dt: f64) -> Vec<f64> {
     let n = 2 * window + 1;
     let t: Vec<f64> = (0..n).map(|i| i as f64 * dt).collect();
     let mut impulse = vec![0.0; n];
@@ -914,13 +981,22 @@ fn derivative_gain(window: usize, order: usize, dt: f64) -> f64 {
         ..SavGol::default()
     };
     let h = window / 2;
-    savgol(&t, &impulse, &sg).map_or(0.0, |(_, slope)| {
-        slope[window - h..=window + h]
-            .iter()
-            .map(|c| c * c)
-            .sum::<f64>()
-            .sqrt()
+    savgol(&t, &impulse, &sg).map_or(Vec::new(), |(_, slope)| {
+        slope[window - h..=window + h].to_vec()
     })
+}
+
+fn norm2(c: &[f64]) -> f64 {
+    c.iter().map(|v| v * v).sum()
+}
+
+/// `a − b` for centred weights, the shorter `b` padded with zeros on both sides.
+fn centred_difference(a: &[f64], b: &[f64]) -> Vec<f64> {
+    let off = a.len().saturating_sub(b.len()) / 2;
+    a.iter()
+        .enumerate()
+        .map(|(i, v)| v - i.checked_sub(off).and_then(|j| b.get(j)).unwrap_or(&0.0))
+        .collect()
 }
 
 /// Savitzky–Golay smoothing and first derivative of `y(t)` on arbitrary increasing stamps `t`
