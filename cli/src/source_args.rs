@@ -23,8 +23,8 @@ pub struct SourceArgs {
     /// default they are skipped, counted, and the trajectory is split there).
     #[arg(long)]
     pub strict: bool,
-    /// Car velocities from Savitzky–Golay fits over this many poses (odd; default: 15, widened
-    /// where the poses' noise leaves more than a quarter of the velocities' spread).
+    /// Car velocities from Savitzky–Golay fits over this many poses (odd; default: 15 to 45,
+    /// the window estimated to give the velocities the smallest error for the poses' noise).
     #[arg(long, value_name = "POSES")]
     pub savgol_window: Option<usize>,
     /// The fits' polynomial degree.
@@ -45,7 +45,7 @@ impl SourceArgs {
         })
     }
 
-    /// The car's smoothing: the window given, or the default widened for the poses' noise.
+    /// The car's smoothing: the window given, or one chosen for the poses' noise.
     pub fn savgol(&self) -> SavGol {
         match self.savgol_window {
             Some(window) => SavGol {

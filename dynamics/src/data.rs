@@ -692,7 +692,7 @@ pub struct SavGol {
     /// Samples per window for the yaw (odd, > `order`; default: `window`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub yaw_window: Option<usize>,
-    /// Whether the car's loader widens the windows where the poses' noise is large
+    /// Whether the car's loader chooses the windows for the poses' noise and the motion
     /// ([`SavGol::adapted`]); the settings it records are the ones it took.
     #[serde(skip_serializing_if = "std::ops::Not::not")]
     pub adaptive: bool,
@@ -728,7 +728,8 @@ const WIDEN_STEP: usize = 6;
 const WIDEN_MAX: usize = 3;
 
 impl SavGol {
-    /// The default windows, widened where the poses' noise is large ([`SavGol::adapted`]).
+    /// The default windows, widened where that gives the velocities a smaller error
+    /// ([`SavGol::adapted`]).
     pub fn adaptive() -> Self {
         Self {
             adaptive: true,
@@ -769,9 +770,9 @@ impl SavGol {
     /// filter's weights (`σ² ‖c_w‖²`), and the bend from the data: the mean square difference
     /// between the slopes of `w` and of `window`, less the part of it the noise gives
     /// (`σ² ‖c_w − c_window‖²`). The position's window minimises the error of `vx` and `vy`
-    /// (body frame), each relative to its spread, the yaw's that of `ω`; the given window's
-    /// own bend counts as nothing, which errs narrow. Only samples a window of every width
-    /// fits centred on count. Without trajectories long enough, or without noise, the settings
+    /// (body frame), each relative to its spread, the yaw's that of `ω`. The given window's own
+    /// bend is taken as none: where it bends too, the choice errs wide. Only samples a window of
+    /// every width fits centred on count. Without trajectories long enough, or without noise, the settings
     /// stay.
     pub fn adapted(&self, trajs: &[Trajectory], pose_std: [f64; 3]) -> SavGol {
         let fixed = SavGol {
@@ -794,7 +795,7 @@ impl SavGol {
         if !(sigma[0] > 0.0 || sigma[1] > 0.0) {
             return fixed;
         }
-        // (slope of x, of y, of the yaw) per sample and window, and the smoothed yaw
+        // the values and slopes of pose component `c` from fits of `w` samples
         let fit = |t: &Trajectory, c: usize, w: usize| {
             let sg = SavGol { window: w, ..fixed };
             let col: Vec<f64> = t.pose.iter().map(|p| p[c]).collect();

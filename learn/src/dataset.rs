@@ -217,7 +217,7 @@ fn trajectories_with_stamps(
         },
     };
     let (mut trajs, mut report) = build_trajectories(poses, commands, &cfg)?;
-    // the car's smoothing: as given, or widened where the poses' noise is large
+    // the car's smoothing: as given, or chosen for the poses' noise
     let sg = &match report.pose_std {
         Some(std) if sg.adaptive && world == World::Car => sg.adapted(&trajs, std),
         _ => *sg,
@@ -766,7 +766,7 @@ fn in_bag(e: LearnError, path: &Path, pose_topic: &str, cmd_topic: &str) -> Lear
     }
 }
 
-/// How the car's velocities were estimated, where not with the default smoothing (widened for
+/// How the car's velocities were estimated, where not with the default smoothing (chosen for
 /// the poses' noise, or as given): the windows and the noise estimated.
 pub fn smoothing_note(report: &PipelineReport) -> Option<String> {
     let sg = report.savgol.filter(|s| *s != SavGol::default())?;

@@ -150,7 +150,11 @@ def test_model_server_predictions_equal_the_offline_library(car_nominal_model, t
                 p, q = m.pose.position, m.pose.orientation
                 pose_w.write(PoseStamped(header=h, pose=Pose(position=Point(x=p.x, y=p.y, z=p.z),
                                                             orientation=Quaternion(x=q.x, y=q.y, z=q.z, w=q.w))))
-        expected = n_poses - 14  # the first 14 poses fill the Savitzky–Golay window
+        # the poses before the first prediction fill the Savitzky–Golay window of the model's
+        # training data (its widest, x/y or yaw)
+        fits = json.loads((car_nominal_model / "model.json").read_text())["training"]["savgol"]
+        span = max(max(f["window"], f.get("yaw_window", f["window"])) for f in fits)
+        expected = n_poses - (span - 1)
         preds = take_until(pred_r, expected, timeout=10.0, idle=2.0)
         paths = take_until(path_r, expected, timeout=5.0, idle=1.0)
         errors = take_until(err_r, expected - 1, timeout=5.0, idle=1.0)
@@ -160,6 +164,9 @@ def test_model_server_predictions_equal_the_offline_library(car_nominal_model, t
         _, err = proc.communicate(timeout=20)
     assert proc.returncode == 0, err
     assert len(preds) >= 0.9 * expected, f"{len(preds)} of {expected} predictions arrived:\n{err}"
+    assert len(preds) <= n_poses - (span - 1), f"{len(preds)} predictions from {n_poses} poses"
+    if span != 15:
+        assert f"over {fits[0]['window']} poses (x, y)" in err and "as in the model's training data" in err, err
     matched = 0
     for p in preds:
         r = ref.get(ns(p.header.stamp))
