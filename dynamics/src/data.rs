@@ -772,8 +772,8 @@ impl SavGol {
     /// (`σ² ‖c_w − c_window‖²`). The position's window minimises the error of `vx` and `vy`
     /// (body frame), each relative to its spread, the yaw's that of `ω`. The given window's own
     /// bend is taken as none: where it bends too, the choice errs wide. Only samples a window of
-    /// every width fits centred on count. Without trajectories long enough, or without noise, the settings
-    /// stay.
+    /// every width fits centred on count. Without trajectories long enough, or without noise,
+    /// the settings stay.
     pub fn adapted(&self, trajs: &[Trajectory], pose_std: [f64; 3]) -> SavGol {
         let fixed = SavGol {
             adaptive: false,
@@ -792,15 +792,26 @@ impl SavGol {
         let Some(dt) = long.first().map(|t| t.dt) else {
             return fixed;
         };
-        if !(sigma[0] > 0.0 || sigma[1] > 0.0) {
-            return fixed;
+        // per trajectory: its stamps, its pose columns and the yaw of the `w0` fit
+        let mut prepared = Vec::with_capacity(long.len());
+        for t in &long {
+            let times = t.times_s();
+            let cols: [Vec<f64>; 3] = [0, 1, 2].map(|c| t.pose.iter().map(|p| p[c]).collect());
+            let yaw = SavGol {
+                window: w0[1],
+                ..fixed
+            };
+            let Ok((psi, _)) = savgol(&times, &cols[2], &yaw.for_component(0, t.len())) else {
+                return fixed;
+            };
+            prepared.push((times, cols, psi));
         }
-        // the values and slopes of pose component `c` from fits of `w` samples
-        let fit = |t: &Trajectory, c: usize, w: usize| {
-            let sg = SavGol { window: w, ..fixed };
-            let col: Vec<f64> = t.pose.iter().map(|p| p[c]).collect();
-            savgol(&t.times_s(), &col, &sg.for_component(0, t.len()))
-        };
+        // the slopes of pose component `c` of a prepared trajectory from fits of `w` samples
+        let slopes =
+            |(times, cols, _): &(Vec<f64>, [Vec<f64>; 3], Vec<f64>), c: usize, w: usize| {
+                let sg = SavGol { window: w, ..fixed };
+                savgol(times, &cols[c], &sg.for_component(0, times.len())).map(|(_, d)| d)
+            };
         let mut chosen = w0;
         for g in 0..2 {
             if sigma[g] <= 0.0 {
@@ -814,16 +825,14 @@ impl SavGol {
             let mut mean = [0.0; 2];
             let mut sq = [0.0; 2];
             let mut n = 0.0;
-            for t in &long {
-                let inner = widest[g] / 2..t.len() - widest[g] / 2;
-                let Ok((psi, _)) = fit(t, 2, w0[1]) else {
-                    return fixed;
-                };
+            for p in &prepared {
+                let psi = &p.2;
+                let inner = widest[g] / 2..psi.len() - widest[g] / 2;
                 // the components' slopes of window w: (vx, vy) or (ω)
                 let velocities = |w: usize| -> Option<Vec<[f64; 2]>> {
                     if g == 0 {
-                        let (_, xd) = fit(t, 0, w).ok()?;
-                        let (_, yd) = fit(t, 1, w).ok()?;
+                        let xd = slopes(p, 0, w).ok()?;
+                        let yd = slopes(p, 1, w).ok()?;
                         Some(
                             inner
                                 .clone()
@@ -834,7 +843,7 @@ impl SavGol {
                                 .collect(),
                         )
                     } else {
-                        let (_, wd) = fit(t, 2, w).ok()?;
+                        let wd = slopes(p, 2, w).ok()?;
                         Some(inner.clone().map(|i| [wd[i], 0.0]).collect())
                     }
                 };
