@@ -389,6 +389,11 @@ pub fn load_model(
             hint: "use a model trained on data of the same robot".into(),
         });
     }
+    // the fits live state estimates take from the record (`ModelFile::state_fit`)
+    for (i, fit) in meta.training.iter().flat_map(|t| &t.savgol).enumerate() {
+        fit.validate()
+            .map_err(|e| corrupt(format!("training.savgol[{i}]: {e}")))?;
+    }
     let net = match (&meta.network, meta.kind.has_network()) {
         (Some(nm), true) => {
             let wpath: PathBuf = dir.join(WEIGHTS);

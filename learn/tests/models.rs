@@ -297,6 +297,26 @@ fn corrupt_and_mismatched_model_files_are_rejected_with_clear_errors() {
         "{e}"
     );
     restore();
+    // a recorded velocity fit live estimators would take, but no fit: an even window
+    let bad = dir.with_file_name("bad_fit");
+    let record = dynlab_learn::file::TrainingMeta {
+        bags: Vec::new(),
+        config: Default::default(),
+        best_epoch: 0,
+        epochs_run: 1,
+        windows: (1, 1),
+        savgol: vec![SavGol {
+            window: 14,
+            ..SavGol::default()
+        }],
+    };
+    save_model(&m, &bad, Some(record), Default::default()).unwrap();
+    let e = load_model(&bad, None, None).unwrap_err();
+    assert!(matches!(e, LearnError::CorruptModel { .. }), "{e}");
+    assert!(
+        e.to_string().contains("training.savgol[0]") && e.to_string().contains("odd"),
+        "{e}"
+    );
     // not JSON
     std::fs::write(dir.join(MODEL_JSON), &json[..json.len() / 2]).unwrap();
     let e = load_model(&dir, None, None).unwrap_err();
