@@ -6,9 +6,18 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use clap::{Args, Parser};
-use dynlab_diagnose::diagnosis::{DiagnoseConfig, diagnose, diagnosis_page};
+use dynlab_diagnose::diagnosis::{DiagnoseConfig, Score, diagnose, diagnosis_page};
 use dynlab_learn::dynamics::physics::{LimitSurface, PhysicsModel};
 use dynlab_learn::{load_bags_with, load_model, pipeline_notes};
+
+/// [`Score`] on the command line.
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+enum ScoreArg {
+    /// Every state dimension.
+    States,
+    /// The measured pose alone.
+    Poses,
+}
 
 /// `dynlab diagnose …`
 #[derive(Debug, Args)]
@@ -50,6 +59,12 @@ pub struct DiagnoseArgs {
     /// runs down, changes from the bag's first data to its last).
     #[arg(long)]
     no_drift: bool,
+    /// What the k-step error compares: `states` (every state dimension, the car's estimated
+    /// velocities as well) or `poses` (the measured pose alone; the velocities still start each
+    /// window). On noisy motion capture a car's velocity estimates carry errors as large as a
+    /// small effect's; see the diagnose README for what each finds.
+    #[arg(long, value_enum, default_value_t = ScoreArg::States)]
+    score: ScoreArg,
     /// Forward selection adds at most this many effects.
     #[arg(long, default_value_t = 3)]
     max_effects: usize,
@@ -116,6 +131,10 @@ pub fn run(args: DiagnoseArgs) -> anyhow::Result<()> {
         refit_params: args.refit.clone(),
         refit_tolerance: args.refit_tolerance,
         drift: !args.no_drift,
+        score: match args.score {
+            ScoreArg::States => Score::States,
+            ScoreArg::Poses => Score::Poses,
+        },
         ..DiagnoseConfig::default()
     };
     let d = diagnose(&model, &data, &cfg)?;

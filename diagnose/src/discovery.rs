@@ -155,6 +155,68 @@ pub enum DiscoveryError {
     Data(#[from] DataError),
 }
 
+/// What the k-step errors compare: every state dimension, or the measured pose alone.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Score {
+    /// Every dimension of the state (the car's body velocities as well).
+    #[default]
+    States,
+    /// The pose (`x`, `y` and the heading), what a motion capture measures. A car's velocities
+    /// are estimated from the poses and their estimates carry an error of their own (velocities
+    /// from Savitzky–Golay fits lag the yaw rate a steering step gives); scored on the pose,
+    /// the velocities still start each window and reach the score through the poses they
+    /// move. Pushing states are the pose.
+    Poses,
+}
+
+impl Score {
+    /// Whether state dimension `c` is scored.
+    pub fn scores(self, c: usize) -> bool {
+        self == Score::States || c < POSE_DIMS
+    }
+}
+
+/// The pose's dimensions lead every world's state: `x`, `y`, the heading.
+const POSE_DIMS: usize = 3;
+
+/// Per state dimension of `ds`: the RMS k-step change over the windows `ws` (the error of the
+/// "nothing moves" model), the scale of that dimension's error, or infinity where `score`
+/// leaves the dimension out (its errors divide to zero).
+pub(crate) fn k_step_scale<'w>(
+    trajs: &[StateTrajectory],
+    ws: impl IntoIterator<Item = &'w Window>,
+    [ds, angle, k]: [usize; 3],
+    score: Score,
+) -> Vec<f64> {
+    let mut scale = vec![0.0; ds];
+    let mut n = 0usize;
+    for w in ws {
+        let t = &trajs[w.trajectory];
+        for (c, sc) in scale.iter_mut().enumerate() {
+            let mut e = t.s[(w.start + k) * ds + c] - t.s[w.start * ds + c];
+            if c == angle {
+                e = wrap_angle(e);
+            }
+            *sc += e * e;
+        }
+        n += 1;
+    }
+    for (c, v) in scale.iter_mut().enumerate() {
+        *v = if score.scores(c) {
+            (*v / n.max(1) as f64).sqrt().max(1e-6)
+        } else {
+            f64::INFINITY
+        };
+    }
+    scale
+}
+
+/// The number of dimensions a [`k_step_scale`] scores (the mean's denominator).
+pub(crate) fn scored_dims(scale: &[f64]) -> usize {
+    scale.iter().filter(|s| s.is_finite()).count().max(1)
+}
+
 /// Settings of the term search. Every field has a documented default.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
@@ -199,6 +261,9 @@ pub struct DiscoveryConfig {
     /// Names of the targets searched (`vx`, `grip`, …, as in effect files; default: every
     /// target of the robot).
     pub targets: Option<Vec<String>>,
+    /// What the k-step error compares (default: every state dimension; in a diagnosis, the
+    /// diagnosis's own).
+    pub score: Score,
 }
 
 impl Default for DiscoveryConfig {
@@ -221,6 +286,7 @@ impl Default for DiscoveryConfig {
             bins: 12,
             name: "discovered".into(),
             targets: None,
+            score: Score::States,
         }
     }
 }
@@ -474,8 +540,8 @@ fn world_of(robot: Robot) -> World {
 }
 
 impl<'a> Ctx<'a> {
-    /// The k-step error of `robot`'s models on `trajs`, each state dimension divided by its RMS
-    /// k-step change over the windows `ws` (fit and held-out).
+    /// The k-step error of `robot`'s models on `trajs`, each state dimension `score` counts
+    /// divided by its RMS k-step change over the windows `ws` (fit and held-out).
     fn new(
         robot: Robot,
         trajs: &'a [StateTrajectory],
@@ -483,24 +549,11 @@ impl<'a> Ctx<'a> {
         k: usize,
         solver: &Solver,
         h: f64,
+        score: Score,
     ) -> Self {
         let world = world_of(robot);
         let (ds, angle) = (world.state_dim(), world.angle_dim());
-        let mut scale = vec![0.0; ds];
-        for w in ws.into_iter().flatten() {
-            let t = &trajs[w.trajectory];
-            for (c, sc) in scale.iter_mut().enumerate() {
-                let mut e = t.s[(w.start + k) * ds + c] - t.s[w.start * ds + c];
-                if c == angle {
-                    e = wrap_angle(e);
-                }
-                *sc += e * e;
-            }
-        }
-        let nw = (ws[0].len() + ws[1].len()).max(1) as f64;
-        for v in &mut scale {
-            *v = (*v / nw).sqrt().max(1e-6);
-        }
+        let scale = k_step_scale(trajs, ws.into_iter().flatten(), [ds, angle, k], score);
         Self {
             trajs,
             ds,
@@ -529,6 +582,7 @@ impl<'a> Ctx<'a> {
         mut resid: Option<&mut Vec<f64>>,
     ) -> Vec<f64> {
         let (ds, du, k) = (self.ds, self.du, self.k);
+        let scored = scored_dims(&self.scale);
         let n = ws.len();
         let dp = p.dim_state();
         let mut s = initial_states(p, self.trajs, ws.iter().map(|w| (w.trajectory, w.start)));
@@ -554,7 +608,7 @@ impl<'a> Ctx<'a> {
                     if !z.is_finite() {
                         z = 1e3;
                     }
-                    err[i] += z * z / (k * ds) as f64;
+                    err[i] += z * z / (k * scored) as f64;
                     if let Some(r) = resid.as_deref_mut() {
                         r.push(z);
                     }
@@ -1203,12 +1257,13 @@ pub fn strip_through(
     centre: [f64; 2],
     r: f64,
     coefficient: f64,
+    score: Score,
 ) -> Result<Option<Feature>, DiscoveryError> {
     const ANGLES: usize = 36;
     if !(r > 0.0 && coefficient != 0.0) {
         return Ok(None);
     }
-    let ctx = Ctx::new(physics.robot(), trajs, ws, k, solver, h);
+    let ctx = Ctx::new(physics.robot(), trajs, ws, k, solver, h, score);
     let target = region_target(physics.robot());
     let mut strips = StripGain::new(physics, &ctx, ws[0], target, coefficient);
     let mut gain = |shape: [f64; 3]| strips.gain(shape);
@@ -1624,7 +1679,7 @@ pub fn discover_terms_split(
     let held_out = test_w.len();
     let robot = physics.robot();
     let world = world_of(robot);
-    let ctx = Ctx::new(robot, trajs, [fit_w, test_w], k, solver, h);
+    let ctx = Ctx::new(robot, trajs, [fit_w, test_w], k, solver, h, cfg.score);
     let du = ctx.du;
 
     // 1. one-step residuals of the targets on the fit half
@@ -3212,7 +3267,15 @@ mod tests {
                 dt: 1.0,
             });
         }
-        let ctx = Ctx::new(Robot::Pushing, &trajs, [&[], &[]], 1, &solver, 1.0);
+        let ctx = Ctx::new(
+            Robot::Pushing,
+            &trajs,
+            [&[], &[]],
+            1,
+            &solver,
+            1.0,
+            Score::States,
+        );
         let all: Vec<usize> = (0..trajs.len()).collect();
         let one = OneStep::new(&physics, &ctx, &all, 1000, 1);
         let (reg, field) = one
@@ -3410,6 +3473,7 @@ mod grip_disc_tests {
             centre,
             r,
             coefficient,
+            Score::States,
         )
         .expect("the search runs")
         .expect("a strip");
