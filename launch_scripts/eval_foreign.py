@@ -13,7 +13,7 @@ its significant terms) is what no model of ours goes below on those held-out win
 open-loop rollouts), and the table gives the share of the error above it that the effects remove.
 
     eval_foreign.py [--seeds N] [--first-seed N] [--only CASE,CASE] [--jobs N] [--out DIR]
-                    [--friction-ellipse] [--rate HZ] [--perturb F] [--floor]
+                    [--friction-ellipse] [--rate HZ] [--perturb F] [--floor] [--score poses]
 
 `--rate` and `--perturb` pass to the generator: its motion capture's frequency (default 120 Hz) and
 how far each car's parameters are from the datasheet (default ±10 %).
@@ -72,6 +72,7 @@ def run(*cmd):
 
 PERTURB = 0.1  # --perturb: the true model's parameters (--floor) are the generator's
 GENERATOR = []  # extra options of foreign_car.py (--friction-ellipse, --rate, --perturb)
+SCORE = ["states"]  # --score: what the diagnoses' k-step error compares
 
 
 def generated(script, out, *args):
@@ -105,7 +106,8 @@ def true_model(root, car_seed):
 
 
 def diagnose(model, b, out, car_seed):
-    text = run(DYNLAB, "diagnose", "--model", model, "--bag", b, "--out", out, "--seed", car_seed, *TOPICS)
+    text = run(DYNLAB, "diagnose", "--model", model, "--bag", b, "--out", out, "--seed", car_seed,
+               "--score", SCORE[0], *TOPICS)
     (out / "diagnose.txt").write_text(text)
     return json.loads((out / "diagnosis.json").read_text())
 
@@ -170,6 +172,8 @@ def main():
                     help="the generator's motion capture frequency, Hz (default 120)")
     ap.add_argument("--perturb", type=float, default=0.1,
                     help="each car's parameters within ±F of the datasheet (default 0.1)")
+    ap.add_argument("--score", choices=("states", "poses"), default="states",
+                    help="what the diagnoses' k-step error compares (dynlab diagnose --score)")
     ap.add_argument("--floor", action="store_true",
                     help="also diagnose with the generator's own car: the share of the removable error")
     a = ap.parse_args()
@@ -177,6 +181,7 @@ def main():
         ap.error(err)
     global PERTURB
     PERTURB = a.perturb
+    SCORE[0] = a.score
     GENERATOR.extend(["--rate", a.rate, "--perturb", a.perturb])
     if a.friction_ellipse:
         GENERATOR.append("--friction-ellipse")
