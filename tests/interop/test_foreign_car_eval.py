@@ -129,3 +129,20 @@ def test_scored_on_the_poses_a_steering_offset_takes_most_of_the_error(tmp_path)
         assert ("scored on the poses" in proc.stdout) == (score == "poses"), proc.stdout
         found[score] = j["joint"]["reduction_vs_model"]
     assert found["poses"] > 0.8 and found["poses"] > found["states"] + 0.3, found
+
+
+def test_a_steering_term_found_after_the_offset_does_not_break_the_backward_check(tmp_path):
+    """Car seed 9 of `eval_foreign.py`'s `aero_drag + steering_offset` case, scored on the
+    poses: after both are added the term search finds a steering term (`δ` beyond a level; the
+    nominal model's misfit of this car, which the poses show), fitted with the model's steering
+    offset. The backward check then scores each effect
+    against the other and that term; against the model without the offset the term's offset has
+    no place (the build before stopped with "unknown parameter 'steering_offset.delta0'")."""
+    from test_foreign_car import eval_car
+
+    model, bag = eval_car(tmp_path, 9, 5, "aero_drag,steering_offset")
+    proc, j = diagnose(model, bag, tmp_path / "diagnosis", "--seed", "9", "--score", "poses",
+                       "--effects", "steering_offset,aero_drag")
+    assert set(j["effects"]) == {"aero_drag", "steering_offset"}, proc.stdout
+    assert any(t["significant"] and t["state"] == "delta" for t in j["discovery"]["terms"]), proc.stdout
+    assert j["joint"]["reduction_vs_model"] > 0.8, j["joint"]
