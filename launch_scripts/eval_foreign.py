@@ -13,7 +13,7 @@ its significant terms) is what no model of ours goes below on those held-out win
 open-loop rollouts), and the table gives the share of the error above it that the effects remove.
 
     eval_foreign.py [--seeds N] [--first-seed N] [--only CASE,CASE] [--jobs N] [--out DIR]
-                    [--friction-ellipse] [--rate HZ] [--perturb F] [--floor] [--score poses]
+                    [--friction-ellipse] [--rate HZ] [--perturb F] [--floor] [--score poses] [--free P,P]
 
 `--rate` and `--perturb` pass to the generator: its motion capture's frequency (default 120 Hz) and
 how far each car's parameters are from the datasheet (default ±10 %).
@@ -73,6 +73,7 @@ def run(*cmd):
 PERTURB = 0.1  # --perturb: the true model's parameters (--floor) are the generator's
 GENERATOR = []  # extra options of foreign_car.py (--friction-ellipse, --rate, --perturb)
 SCORE = ["states"]  # --score: what the diagnoses' k-step error compares
+NOMINAL_FREE = []  # --free: the nominal models' fitted parameters (empty: train's default)
 
 
 def generated(script, out, *args):
@@ -90,7 +91,8 @@ def nominal_model(root, car_seed):
     m = root / f"car{car_seed}" / "model"
     if not m.exists():
         b = bag(root / f"car{car_seed}" / "nominal", car_seed, 1000 * car_seed + 1, "")
-        run(DYNLAB, "train", "--world", "car", "--kind", "physics", "--bag", b, "--out", m, *TOPICS)
+        free = ["--free", ",".join(NOMINAL_FREE)] if NOMINAL_FREE else []
+        run(DYNLAB, "train", "--world", "car", "--kind", "physics", "--bag", b, "--out", m, *free, *TOPICS)
     return m
 
 
@@ -174,6 +176,8 @@ def main():
                     help="each car's parameters within ±F of the datasheet (default 0.1)")
     ap.add_argument("--score", choices=("states", "poses"), default="states",
                     help="what the diagnoses' k-step error compares (dynlab diagnose --score)")
+    ap.add_argument("--free", default="",
+                    help="the nominal models' fitted parameters (dynlab train --free; default: train's)")
     ap.add_argument("--floor", action="store_true",
                     help="also diagnose with the generator's own car: the share of the removable error")
     a = ap.parse_args()
@@ -182,6 +186,7 @@ def main():
     global PERTURB
     PERTURB = a.perturb
     SCORE[0] = a.score
+    NOMINAL_FREE.extend(x for x in a.free.split(",") if x)
     GENERATOR.extend(["--rate", a.rate, "--perturb", a.perturb])
     if a.friction_ellipse:
         GENERATOR.append("--friction-ellipse")
