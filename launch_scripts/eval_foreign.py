@@ -177,7 +177,8 @@ def main():
     ap.add_argument("--score", choices=("states", "poses"), default="states",
                     help="what the diagnoses' k-step error compares (dynlab diagnose --score)")
     ap.add_argument("--free", default="",
-                    help="the nominal models' fitted parameters (dynlab train --free; default: train's)")
+                    help="the nominal models' fitted parameters (dynlab train --free; default: train's); "
+                         "a model already in --out is reused, so give another --out")
     ap.add_argument("--floor", action="store_true",
                     help="also diagnose with the generator's own car: the share of the removable error")
     a = ap.parse_args()
