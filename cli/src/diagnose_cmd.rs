@@ -65,6 +65,11 @@ pub struct DiagnoseArgs {
     /// small effect's; see the diagnose README for what each finds.
     #[arg(long, value_enum, default_value_t = ScoreArg::States)]
     score: ScoreArg,
+    /// Car, physics model: re-estimate the states with the model before scoring (its motion
+    /// fitted to the poses within S seconds of each sample, e.g. 0.05) in place of the
+    /// Savitzky–Golay estimates. See the diagnose README ("States from the model").
+    #[arg(long, value_name = "S")]
+    model_states: Option<f64>,
     /// Forward selection adds at most this many effects.
     #[arg(long, default_value_t = 3)]
     max_effects: usize,
@@ -131,6 +136,7 @@ pub fn run(args: DiagnoseArgs) -> anyhow::Result<()> {
         refit_params: args.refit.clone(),
         refit_tolerance: args.refit_tolerance,
         drift: !args.no_drift,
+        model_states: args.model_states,
         score: match args.score {
             ScoreArg::States => Score::States,
             ScoreArg::Poses => Score::Poses,

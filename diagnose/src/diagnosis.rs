@@ -270,6 +270,11 @@ pub struct DiagnoseConfig {
     /// global change of the nominal parameters, not a patch, and is not counted (`None`: the
     /// world's, [`DiagnoseConfig::patch_cover_limit`]).
     pub max_patch_cover: Option<f64>,
+    /// Car, physics model: re-estimate the states with the model before anything is scored
+    /// ([`dynlab_learn::smooth::model_states`], the model's motion fitted to the poses within
+    /// this many seconds of each sample) in place of the Savitzky–Golay estimates; the noise
+    /// floor's draws go through the same fits. `None` (default): the estimates as loaded.
+    pub model_states: Option<f64>,
 }
 
 impl Default for DiagnoseConfig {
@@ -297,6 +302,7 @@ impl Default for DiagnoseConfig {
             drift: true,
             max_patch_cover: None,
             score: Score::States,
+            model_states: None,
         }
     }
 }
@@ -336,6 +342,15 @@ impl DiagnoseConfig {
                 "holdout_fraction",
                 self.holdout_fraction,
                 "use a fraction in (0, 1), e.g. 0.5",
+            ));
+        }
+        if let Some(h) = self.model_states
+            && !(h > 0.0 && h <= MODEL_STATES_MAX_S)
+        {
+            return Err(bad(
+                "model_states",
+                h,
+                "use a half-span in seconds in (0, 0.5], e.g. 0.05",
             ));
         }
         if !(self.confidence > 0.5 && self.confidence < 1.0) {
@@ -1158,6 +1173,13 @@ fn errors_in_n_blocks(
 /// Commands before a segment that its effect states are rebuilt from \[s\]: 15 time constants
 /// of a 0.2 s motor lag; the segments' cuts do not restart the states.
 const EFFECT_HISTORY_S: f64 = 3.0;
+
+/// The largest half-span \[s\] of [`DiagnoseConfig::model_states`]'s fits.
+const MODEL_STATES_MAX_S: f64 = 0.5;
+
+/// The pose noise `[x, y, yaw]` (m, m, rad) that weighs the model's fits of the states where
+/// the data's own could not be estimated.
+const MODEL_STATES_POSE_STD: [f64; 3] = [1e-3, 1e-3, 4e-3];
 
 /// Discs from the one-step screen among a `grip_patch` fit's starts.
 const SCREENED_DISCS: usize = 4;
@@ -2603,6 +2625,41 @@ pub fn diagnose(
         });
     }
     let k = cfg.steps_for(world);
+    let pose_noise = pose_noise(data).filter(|_| world == World::Car);
+    // the car's states re-estimated with the model (`model_states`), and the fits' settings
+    let re_estimate = match (cfg.model_states, world) {
+        (Some(h), World::Car) => {
+            let p = model
+                .physics()
+                .filter(|_| model.network().is_none())
+                .ok_or(DiagnosisError::Setting {
+                name: "model_states",
+                value: h.to_string(),
+                hint: "the states are re-estimated with a physics model; diagnose a physics model (dynlab train --kind physics) or leave --model-states out",
+            })?;
+            let half = ((h / data.pose_dt_s.max(1e-9)).round() as usize).max(1);
+            let std = pose_noise.as_ref().map_or(MODEL_STATES_POSE_STD, |n| n.std);
+            Some((p, half, std))
+        }
+        _ => None,
+    };
+    let solver = model.physics_solver();
+    let states_of = |trajs: Vec<StateTrajectory>| match re_estimate {
+        Some((p, half, std)) => dynlab_learn::smooth::model_states(p, &solver, &trajs, std, half),
+        None => trajs,
+    };
+    let loaded = data;
+    let estimated;
+    let data = match re_estimate {
+        Some(_) => {
+            estimated = Dataset {
+                trajectories: states_of(data.trajectories.clone()),
+                ..data.clone()
+            };
+            &estimated
+        }
+        None => data,
+    };
     // the share of the data recorded before each trajectory's first state
     let total = data
         .trajectories
@@ -2657,13 +2714,14 @@ pub fn diagnose(
     // the car's states with draws of a second pose noise, cut into the same segments (the
     // noise is estimated over the whole trajectories, as the data's own: a segment's start is
     // not a trajectory's end)
-    let pose_noise = pose_noise(data).filter(|_| world == World::Car);
     let noisy: Vec<Vec<StateTrajectory>> = match &pose_noise {
         Some(n) => {
             let mut rng = dynlab_sim::SimRng::new(cfg.seed ^ 0x6E6F_6973_6520_666C);
             (0..NOISE_DRAWS)
                 .map(|_| {
-                    let whole = data
+                    // (re-estimated states: the draw on the states as loaded, through the
+                    // same fits)
+                    let whole = loaded
                         .trajectories
                         .iter()
                         .map(|t| {
@@ -2671,6 +2729,7 @@ pub fn diagnose(
                             Ok(StateTrajectory { s, ..t.clone() })
                         })
                         .collect::<Result<Vec<_>, DataError>>()?;
+                    let whole = states_of(whole);
                     Ok(segment(&whole, len)
                         .into_iter()
                         .filter(|t| t.len() > k)
@@ -4019,7 +4078,7 @@ impl Diagnosis {
         let mut o = String::new();
         let _ = writeln!(
             o,
-            "diagnosis of a {} {} model{} over {} held-out segments ({} windows of {} steps{}); baseline error {:.4}",
+            "diagnosis of a {} {} model{} over {} held-out segments ({} windows of {} steps{}{}); baseline error {:.4}",
             self.world,
             self.model_kind,
             if self.model_effects.is_empty() {
@@ -4033,6 +4092,10 @@ impl Diagnosis {
             match self.config.score {
                 Score::States => "",
                 Score::Poses => ", scored on the poses",
+            },
+            match self.config.model_states {
+                Some(h) => format!(", the states re-estimated with the model over ±{h} s"),
+                None => String::new(),
             },
             self.baseline_error
         );

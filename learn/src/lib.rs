@@ -24,6 +24,7 @@ pub mod file;
 pub mod fit;
 pub mod model;
 pub mod net;
+pub mod smooth;
 pub mod train;
 pub mod world;
 
