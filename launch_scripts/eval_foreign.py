@@ -14,6 +14,7 @@ open-loop rollouts), and the table gives the share of the error above it that th
 
     eval_foreign.py [--seeds N] [--first-seed N] [--only CASE,CASE] [--jobs N] [--out DIR]
                     [--friction-ellipse] [--rate HZ] [--perturb F] [--floor] [--score poses] [--free P,P]
+                    [--model-states S]
 
 `--rate` and `--perturb` pass to the generator: its motion capture's frequency (default 120 Hz) and
 how far each car's parameters are from the datasheet (default ±10 %).
@@ -74,6 +75,7 @@ PERTURB = 0.1  # --perturb: the true model's parameters (--floor) are the genera
 GENERATOR = []  # extra options of foreign_car.py (--friction-ellipse, --rate, --perturb)
 SCORE = ["states"]  # --score: what the diagnoses' k-step error compares
 NOMINAL_FREE = []  # --free: the nominal models' fitted parameters (empty: train's default)
+DIAGNOSE = []  # extra options of dynlab diagnose (--model-states)
 
 
 def generated(script, out, *args):
@@ -109,7 +111,7 @@ def true_model(root, car_seed):
 
 def diagnose(model, b, out, car_seed):
     text = run(DYNLAB, "diagnose", "--model", model, "--bag", b, "--out", out, "--seed", car_seed,
-               "--score", SCORE[0], *TOPICS)
+               "--score", SCORE[0], *DIAGNOSE, *TOPICS)
     (out / "diagnose.txt").write_text(text)
     return json.loads((out / "diagnosis.json").read_text())
 
@@ -179,6 +181,8 @@ def main():
     ap.add_argument("--free", default="",
                     help="the nominal models' fitted parameters (dynlab train --free; default: train's); "
                          "a model already in --out is reused, so give another --out")
+    ap.add_argument("--model-states", type=float, metavar="S",
+                    help="the diagnoses' car states re-estimated with the model over ±S s (dynlab diagnose --model-states)")
     ap.add_argument("--floor", action="store_true",
                     help="also diagnose with the generator's own car: the share of the removable error")
     a = ap.parse_args()
@@ -188,6 +192,8 @@ def main():
     PERTURB = a.perturb
     SCORE[0] = a.score
     NOMINAL_FREE.extend(x for x in a.free.split(",") if x)
+    if a.model_states is not None:
+        DIAGNOSE.extend(["--model-states", a.model_states])
     GENERATOR.extend(["--rate", a.rate, "--perturb", a.perturb])
     if a.friction_ellipse:
         GENERATOR.append("--friction-ellipse")

@@ -4793,6 +4793,23 @@ mod tests {
     }
 
     #[test]
+    fn a_model_states_half_span_outside_half_a_second_is_refused_by_name() {
+        for bad in [0.0, -0.05, 0.6, f64::NAN] {
+            let cfg = DiagnoseConfig {
+                model_states: Some(bad),
+                ..DiagnoseConfig::default()
+            };
+            let e = cfg.validate().unwrap_err().to_string();
+            assert!(e.contains("model_states"), "{e}");
+        }
+        let cfg = DiagnoseConfig {
+            model_states: Some(0.05),
+            ..DiagnoseConfig::default()
+        };
+        assert!(cfg.validate().is_ok());
+    }
+
+    #[test]
     fn a_small_value_in_a_wide_range_is_not_on_its_bound() {
         // drag within 0 … 1: a tenth of the usual strength is a value, zero is the bound
         let drag = |c: f64| fitted_effect(Effect::AeroDrag, &[c]).bound_side(0);

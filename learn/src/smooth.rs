@@ -1,7 +1,9 @@
 //! Car states estimated with a physics model: at every sample, the model's motion from a
 //! state a little before it, fitted to the poses around it (a local shooting fit), gives the
 //! pose and the body velocities there. Where a Savitzky–Golay fit bends a fast yaw response
-//! into a polynomial, the model follows the commands.
+//! into a polynomial, the model follows the commands. Each fit also takes a constant
+//! acceleration of each velocity, so that what the model misses over the fit's span (an
+//! effect it lacks) is taken there rather than by the state.
 
 use dynlab_dynamics::data::StateTrajectory;
 use dynlab_dynamics::ode::Solver;
@@ -14,10 +16,12 @@ use crate::fit::solve;
 const ITERATIONS: usize = 4;
 
 /// The car states of `trajs` (`[x, y, ψ, vx, vy, ω]`, as estimated) re-estimated with `p`:
-/// for sample `i`, the state at `a = i − half` (clamped into the trajectory) is fitted so that
-/// the model's rollout from it under the recorded commands matches the poses at `a … a + 2·half`
-/// (weighted by `pose_std`), and the rollout's state at `i` replaces sample `i`. A trajectory
-/// shorter than `2·half + 1` samples is returned as it is.
+/// for sample `i`, the state at `a = i − half` (clamped into the trajectory) and a constant
+/// acceleration of `vx`, `vy` and `ω` are fitted (Gauss–Newton) so that the model's rollout
+/// from it under the recorded commands matches the poses at `a … a + 2·half` (weighted by
+/// `pose_std`); the rollout's state at `i` replaces sample `i`. The poses fitted are those of
+/// the states as given. Effect states (`motor_lag`, `steering_lag`) are rebuilt from the
+/// trajectory's commands. A trajectory shorter than `2·half + 1` samples is returned as it is.
 pub fn model_states(
     p: &PhysicsModel,
     solver: &Solver,
