@@ -66,8 +66,10 @@ pub struct DiagnoseArgs {
     #[arg(long, value_enum, default_value_t = ScoreArg::States)]
     score: ScoreArg,
     /// Car, physics model: re-estimate the states with the model before scoring (its motion
-    /// fitted to the poses within S seconds of each sample, e.g. 0.05) in place of the
-    /// Savitzky–Golay estimates. See the diagnose README ("States from the model").
+    /// fitted to the poses within S seconds of each sample, e.g. 0.1) in place of the
+    /// Savitzky–Golay estimates. On noisy motion capture it shows a steady effect (drag, an
+    /// offset, a lag) more clearly, and it hides what changes within the span (a grip patch, a
+    /// command delay, a servo): see the diagnose README ("States from the model").
     #[arg(long, value_name = "S")]
     model_states: Option<f64>,
     /// Forward selection adds at most this many effects.

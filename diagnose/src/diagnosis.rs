@@ -273,7 +273,10 @@ pub struct DiagnoseConfig {
     /// Car, physics model: re-estimate the states with the model before anything is scored
     /// ([`dynlab_learn::smooth::model_states`], the model's motion fitted to the poses within
     /// this many seconds of each sample) in place of the Savitzky–Golay estimates; the noise
-    /// floor's draws go through the same fits. `None` (default): the estimates as loaded.
+    /// floor's draws go through the same fits. Steady effects stand out more on noisy poses,
+    /// and what changes within the span (a grip patch, a command delay) is partly taken up by
+    /// the fits' constant accelerations (diagnose README, "States from the model"). `None`
+    /// (default): the estimates as loaded.
     pub model_states: Option<f64>,
 }
 
@@ -350,7 +353,7 @@ impl DiagnoseConfig {
             return Err(bad(
                 "model_states",
                 h,
-                "use a half-span in seconds in (0, 0.5], e.g. 0.05",
+                "use a half-span in seconds in (0, 0.5], e.g. 0.1",
             ));
         }
         if !(self.confidence > 0.5 && self.confidence < 1.0) {
