@@ -100,6 +100,61 @@ fn diagnose_names_the_steering_offset_of_the_bundled_bag_and_writes_json_and_htm
     assert!(html.contains("<section") && html.contains("steering_offset"));
 }
 
+/// `--model-states 0.1`: the states re-estimated with the model; the offset is still named and
+/// recovered, the terminal and the page say what the option shows and hides, diagnosis.json
+/// records it; a half-span out of range is refused by name.
+#[test]
+fn diagnose_with_states_from_the_model_names_the_offset_and_says_what_it_hides() {
+    let tmp = tempfile::tempdir().unwrap();
+    let model = tmp.path().join("model");
+    nominal_model(&model, World::Car);
+    let out = tmp.path().join("diag");
+    let run = |half: &str| {
+        Command::new(env!("CARGO_BIN_EXE_dynlab"))
+            .args(["diagnose", "--model"])
+            .arg(&model)
+            .arg("--bag")
+            .arg(repo("bags/car_steering_offset"))
+            .args([
+                "--effects",
+                "steering_offset,aero_drag",
+                "--model-states",
+                half,
+            ])
+            .arg("--out")
+            .arg(&out)
+            .output()
+            .unwrap()
+    };
+    let o = run("0.1");
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(
+        stdout.contains("the states re-estimated with the model over ±0.1 s)"),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("a command delay") && stdout.contains("without --model-states"),
+        "{stdout}"
+    );
+    assert!(stdout.contains("verdict: steering_offset"), "{stdout}");
+    let j: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("diagnosis.json")).unwrap())
+            .unwrap();
+    assert_eq!(j["config"]["model_states"], 0.1, "{j}");
+    let d0 = j["candidates"][0]["params"]["delta0"].as_f64().unwrap();
+    assert!((d0 - 0.03).abs() < 0.005, "δ₀ = {d0}");
+    let html = std::fs::read_to_string(out.join("diagnosis.html")).unwrap();
+    assert!(html.contains("States from the model:"), "{html}");
+    let o = run("0.7");
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("model_states") && err.contains("(0, 0.5]"),
+        "{err}"
+    );
+}
+
 /// A model trained with `--effects-file` (and `--steps 3 --seed 4`) and diagnosed again: the
 /// command that adds what the diagnosis found keeps the model's custom effect, written out at
 /// the model's coefficients, and trains as the model was trained.

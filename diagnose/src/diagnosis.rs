@@ -4075,6 +4075,16 @@ impl Diagnosis {
         )
     }
 
+    /// With the states re-estimated from the model ([`DiagnoseConfig::model_states`]): what
+    /// that shows and what it hides, for the terminal and the page.
+    pub fn model_states_caution(&self) -> Option<String> {
+        self.config.model_states.map(|h| {
+            format!(
+                "the states re-estimated with the model over ±{h} s show steady effects (drag, an offset, a lag) more clearly on noisy poses and partly take up what changes within the span (a grip patch crossed, a command delay, a servo): look for those without --model-states"
+            )
+        })
+    }
+
     /// The terminal summary: a table of candidates and the verdict line.
     pub fn table(&self) -> String {
         use std::fmt::Write as _;
@@ -4102,6 +4112,9 @@ impl Diagnosis {
             },
             self.baseline_error
         );
+        if let Some(c) = self.model_states_caution() {
+            let _ = writeln!(o, "  {c}");
+        }
         if let Some(f) = &self.noise_floor {
             let _ = writeln!(o, "  {}", f.text());
         }

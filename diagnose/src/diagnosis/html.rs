@@ -49,6 +49,9 @@ pub fn diagnosis_html(d: &Diagnosis) -> String {
         d.segments[0],
         g4(d.baseline_error)
     );
+    if let Some(c) = d.model_states_caution() {
+        let _ = writeln!(o, "<p>States from the model: {}.</p>", esc(&c));
+    }
     if let Some(f) = &d.noise_floor {
         let _ = writeln!(
             o,
