@@ -4,7 +4,7 @@
 //! robot.
 
 use std::path::Path;
-use std::process::Command;
+use std::process::{Command, Output};
 
 use dynlab_learn::dynamics::physics::{CustomEffect, PhysicsModel};
 use dynlab_learn::file::TrainingMeta;
@@ -49,17 +49,24 @@ fn save_physics(
 }
 
 /// `dynlab diagnose` of `model` on the bundled steering-offset bag with the candidate `effects`
-/// into `out`: its standard output (the run must succeed).
-fn diagnose_offset_bag(model: &Path, effects: &str, out: &Path) -> String {
-    let o = Command::new(env!("CARGO_BIN_EXE_dynlab"))
+/// and the options `extra` into `out`.
+fn run_on_offset_bag(model: &Path, effects: &str, extra: &[&str], out: &Path) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_dynlab"))
         .args(["diagnose", "--model"])
         .arg(model)
         .arg("--bag")
         .arg(repo("bags/car_steering_offset"))
-        .args(["--effects", effects, "--out"])
+        .args(["--effects", effects])
+        .args(extra)
+        .arg("--out")
         .arg(out)
         .output()
-        .unwrap();
+        .unwrap()
+}
+
+/// [`run_on_offset_bag`] without options: its standard output (the run must succeed).
+fn diagnose_offset_bag(model: &Path, effects: &str, out: &Path) -> String {
+    let o = run_on_offset_bag(model, effects, &[], out);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     String::from_utf8_lossy(&o.stdout).into_owned()
 }
@@ -110,21 +117,12 @@ fn diagnose_with_states_from_the_model_names_the_offset_and_says_what_it_hides()
     nominal_model(&model, World::Car);
     let out = tmp.path().join("diag");
     let run = |half: &str| {
-        Command::new(env!("CARGO_BIN_EXE_dynlab"))
-            .args(["diagnose", "--model"])
-            .arg(&model)
-            .arg("--bag")
-            .arg(repo("bags/car_steering_offset"))
-            .args([
-                "--effects",
-                "steering_offset,aero_drag",
-                "--model-states",
-                half,
-            ])
-            .arg("--out")
-            .arg(&out)
-            .output()
-            .unwrap()
+        run_on_offset_bag(
+            &model,
+            "steering_offset,aero_drag",
+            &["--model-states", half],
+            &out,
+        )
     };
     let o = run("0.1");
     let stdout = String::from_utf8_lossy(&o.stdout);
