@@ -72,6 +72,12 @@ pub struct DiagnoseArgs {
     /// command delay, a servo): see the diagnose README ("States from the model").
     #[arg(long, value_name = "S")]
     model_states: Option<f64>,
+    /// Car, physics model: start every model's windows from its own fit to the poses of the S
+    /// seconds before each window (e.g. 0.1) in place of the estimated states there; with
+    /// `--score poses`, nothing a model is scored on is an estimate. See the diagnose README
+    /// ("Fitted starts").
+    #[arg(long, value_name = "S")]
+    fitted_starts: Option<f64>,
     /// Forward selection adds at most this many effects.
     #[arg(long, default_value_t = 3)]
     max_effects: usize,
@@ -139,6 +145,7 @@ pub fn run(args: DiagnoseArgs) -> anyhow::Result<()> {
         refit_tolerance: args.refit_tolerance,
         drift: !args.no_drift,
         model_states: args.model_states,
+        fitted_starts: args.fitted_starts,
         score: match args.score {
             ScoreArg::States => Score::States,
             ScoreArg::Poses => Score::Poses,

@@ -153,6 +153,51 @@ fn diagnose_with_states_from_the_model_names_the_offset_and_says_what_it_hides()
     );
 }
 
+#[test]
+fn diagnose_with_fitted_starts_scored_on_the_poses_names_the_offset() {
+    let tmp = tempfile::tempdir().unwrap();
+    let model = tmp.path().join("model");
+    nominal_model(&model, World::Car);
+    let out = tmp.path().join("diag");
+    let run = |span: &str| {
+        run_on_offset_bag(
+            &model,
+            "steering_offset,aero_drag",
+            &["--fitted-starts", span, "--score", "poses"],
+            &out,
+        )
+    };
+    let o = run("0.1");
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(
+        stdout.contains(
+            "scored on the poses, each model started from its own fit to the 0.1 s of poses before each window)"
+        ),
+        "{stdout}"
+    );
+    assert!(stdout.contains("verdict: steering_offset"), "{stdout}");
+    let j: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("diagnosis.json")).unwrap())
+            .unwrap();
+    assert_eq!(j["config"]["fitted_starts"], 0.1, "{j}");
+    let d0 = j["candidates"][0]["params"]["delta0"].as_f64().unwrap();
+    assert!((d0 - 0.03).abs() < 0.005, "δ₀ = {d0}");
+    let html = std::fs::read_to_string(out.join("diagnosis.html")).unwrap();
+    assert!(
+        html.contains("Fitted starts:")
+            && html.contains("nothing it is compared with is an estimate"),
+        "{html}"
+    );
+    let o = run("0.5");
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("fitted_starts") && err.contains("(0, 0.3]"),
+        "{err}"
+    );
+}
+
 /// A model trained with `--effects-file` (and `--steps 3 --seed 4`) and diagnosed again: the
 /// command that adds what the diagnosis found keeps the model's custom effect, written out at
 /// the model's coefficients, and trains as the model was trained.

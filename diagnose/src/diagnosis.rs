@@ -92,6 +92,7 @@ use dynlab_learn::fit::{
     ForwardDifferences, SENSITIVITY_LIMIT, bounded_least_squares, calm_windows,
     cluster_jackknife_std, forward_jacobian, initial_states_after, kept_rows,
 };
+use dynlab_learn::smooth::StartFits;
 use dynlab_learn::train::{segment, segment_origins};
 use dynlab_learn::{Dataset, LearnError, Model, World};
 use dynlab_nn::parallel::in_n_blocks;
@@ -278,6 +279,13 @@ pub struct DiagnoseConfig {
     /// the fits' constant accelerations (diagnose README, "States from the model"). `None`
     /// (default): the estimates as loaded.
     pub model_states: Option<f64>,
+    /// Car, physics model: each model compared (the baseline and every candidate) starts each
+    /// window from its own fit to the poses of this many seconds before it
+    /// ([`dynlab_learn::smooth::StartFits`]) in place of the estimated state there, so that no
+    /// model is scored from states another one estimated. With [`Score::Poses`] nothing a
+    /// model is scored on is an estimate. `None` (default): the windows start from the states
+    /// as estimated.
+    pub fitted_starts: Option<f64>,
 }
 
 impl Default for DiagnoseConfig {
@@ -306,6 +314,7 @@ impl Default for DiagnoseConfig {
             max_patch_cover: None,
             score: Score::States,
             model_states: None,
+            fitted_starts: None,
         }
     }
 }
@@ -354,6 +363,15 @@ impl DiagnoseConfig {
                 "model_states",
                 h,
                 "use a half-span in seconds in (0, 0.5], e.g. 0.1",
+            ));
+        }
+        if let Some(h) = self.fitted_starts
+            && !(h > 0.0 && h <= FITTED_STARTS_MAX_S)
+        {
+            return Err(bad(
+                "fitted_starts",
+                h,
+                "use a span in seconds in (0, 0.3], e.g. 0.1",
             ));
         }
         if !(self.confidence > 0.5 && self.confidence < 1.0) {
@@ -862,6 +880,8 @@ struct Data<'a> {
     angle: usize,
     /// [`DiagnoseConfig::window_error_cap`].
     cap: f64,
+    /// Each physics model's windows start from its own fit to the poses before them.
+    starts: Option<&'a StartFits>,
 }
 
 /// Parameters fitted on the fit half (refitted nominal ones first, then the effects'), with the
@@ -1060,7 +1080,10 @@ impl Augmented<'_> {
             sb = initial_states_after(&self.base, d.history, d.trajs, at());
         }
         if let Some(p) = with {
-            sw = initial_states_after(p, d.history, d.trajs, at());
+            sw = match d.starts.filter(|_| self.pure_physics) {
+                Some(f) => f.states(p, &solver, (d.trajs, d.history), at(), dt_phys),
+                None => initial_states_after(p, d.history, d.trajs, at()),
+            };
         }
         let mut err = vec![0.0; n];
         let mut next = vec![0.0; n * ds];
@@ -1179,6 +1202,9 @@ const EFFECT_HISTORY_S: f64 = 3.0;
 
 /// The largest half-span \[s\] of [`DiagnoseConfig::model_states`]'s fits.
 const MODEL_STATES_MAX_S: f64 = 0.5;
+
+/// The longest span \[s\] of [`DiagnoseConfig::fitted_starts`]'s fits.
+const FITTED_STARTS_MAX_S: f64 = 0.3;
 
 /// The pose noise `[x, y, yaw]` (m, m, rad) that weighs the model's fits of the states where
 /// the data's own could not be estimated.
@@ -2002,6 +2028,7 @@ impl<'a> Ctx<'a> {
                     &dcfg,
                     among,
                     shapes,
+                    self.d.starts.map(|f| (f, self.d.history)),
                 )
                 .map(|d| d.terms.into_iter().next())
             };
@@ -2813,6 +2840,29 @@ pub fn diagnose(
         false => Vec::new(),
     };
     let have = base.effects();
+    let starts = match cfg.fitted_starts {
+        Some(h) if !(pure_physics && world == World::Car) => {
+            return Err(DiagnosisError::Setting {
+                name: "fitted_starts",
+                value: h.to_string(),
+                hint: "the starts are fitted with a car physics model; diagnose one (dynlab train --kind physics) or leave --fitted-starts out",
+            });
+        }
+        Some(h) => {
+            let half = ((h / data.pose_dt_s.max(1e-9)).round() as usize).clamp(1, k - 1);
+            let std = pose_noise.as_ref().map_or(MODEL_STATES_POSE_STD, |n| n.std);
+            Some(StartFits::new(
+                &base,
+                &solver,
+                (&trajs, &history),
+                fit_w.iter().chain(&test_w).map(|w| (w.trajectory, w.start)),
+                half,
+                std,
+                model.physics_time(),
+            ))
+        }
+        _ => None,
+    };
     let positions = fit_w
         .iter()
         .chain(&test_w)
@@ -2834,6 +2884,7 @@ pub fn diagnose(
             scale,
             angle,
             cap: cfg.window_error_cap,
+            starts: starts.as_ref(),
         },
         base: base.clone(),
         pure_physics,
@@ -3080,6 +3131,7 @@ pub fn diagnose(
             &dcfg,
             &|_| true,
             &ctx.strips.lock().unwrap_or_else(|e| e.into_inner()),
+            ctx.d.starts.map(|f| (f, ctx.d.history)),
         )?))
     };
     let mut discovery = search_terms(&cur.physics)?;
@@ -4091,7 +4143,7 @@ impl Diagnosis {
         let mut o = String::new();
         let _ = writeln!(
             o,
-            "diagnosis of a {} {} model{} over {} held-out segments ({} windows of {} steps{}{}); baseline error {:.4}",
+            "diagnosis of a {} {} model{} over {} held-out segments ({} windows of {} steps{}{}{}); baseline error {:.4}",
             self.world,
             self.model_kind,
             if self.model_effects.is_empty() {
@@ -4108,6 +4160,12 @@ impl Diagnosis {
             },
             match self.config.model_states {
                 Some(h) => format!(", the states re-estimated with the model over ±{h} s"),
+                None => String::new(),
+            },
+            match self.config.fitted_starts {
+                Some(h) => format!(
+                    ", each model started from its own fit to the {h} s of poses before each window"
+                ),
                 None => String::new(),
             },
             self.baseline_error

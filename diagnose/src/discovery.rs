@@ -95,6 +95,7 @@ use dynlab_learn::dynamics::physics::{
 use dynlab_learn::fit::{
     ForwardDifferences, SENSITIVITY_LIMIT, bounded_least_squares, cluster_std, initial_states,
 };
+use dynlab_learn::smooth::StartFits;
 use dynlab_learn::train::segment;
 use dynlab_learn::{Dataset, LearnError, Model, World};
 use serde::{Deserialize, Serialize};
@@ -529,7 +530,13 @@ struct Ctx<'a> {
     angle: usize,
     solver: Solver,
     h: f64,
+    /// Each model's windows start from its own fit to the poses before them, with the commands
+    /// of the recording before each trajectory ([`StartFits`]).
+    starts: Option<Starts<'a>>,
 }
+
+/// Start fits of the windows and the commands of the recording before each trajectory.
+pub type Starts<'a> = (&'a StartFits, &'a [Vec<f64>]);
 
 /// The world of `robot`'s data.
 fn world_of(robot: Robot) -> World {
@@ -563,6 +570,7 @@ impl<'a> Ctx<'a> {
             angle,
             solver: *solver,
             h,
+            starts: None,
         }
     }
 
@@ -585,7 +593,11 @@ impl<'a> Ctx<'a> {
         let scored = scored_dims(&self.scale);
         let n = ws.len();
         let dp = p.dim_state();
-        let mut s = initial_states(p, self.trajs, ws.iter().map(|w| (w.trajectory, w.start)));
+        let at = ws.iter().map(|w| (w.trajectory, w.start));
+        let mut s = match self.starts {
+            Some((f, history)) => f.states(p, &self.solver, (self.trajs, history), at, self.h),
+            None => initial_states(p, self.trajs, at),
+        };
         let mut u = vec![0.0; n * du];
         let mut next = vec![0.0; n * dp];
         let mut err = vec![0.0; n];
@@ -1536,6 +1548,7 @@ pub(crate) fn grip_discs(
         angle: World::Car.angle_dim(),
         solver: *solver,
         h,
+        starts: None,
     };
     let one = OneStep::new(physics, &ctx, fit_trajs, cfg.max_transitions, cfg.seed);
     let n = one.trans.len();
@@ -1651,6 +1664,7 @@ pub fn discover_terms(
         cfg,
         &|_| true,
         &[],
+        None,
     )
 }
 
@@ -1674,12 +1688,14 @@ pub fn discover_terms_split(
     cfg: &DiscoveryConfig,
     among: &dyn Fn(&Feature) -> bool,
     shapes: &[(Feature, f64)],
+    starts: Option<Starts<'_>>,
 ) -> Result<Discovery, DiscoveryError> {
     cfg.validate()?;
     let held_out = test_w.len();
     let robot = physics.robot();
     let world = world_of(robot);
-    let ctx = Ctx::new(robot, trajs, [fit_w, test_w], k, solver, h, cfg.score);
+    let mut ctx = Ctx::new(robot, trajs, [fit_w, test_w], k, solver, h, cfg.score);
+    ctx.starts = starts;
     let du = ctx.du;
 
     // 1. one-step residuals of the targets on the fit half

@@ -10,7 +10,11 @@ use dynlab_dynamics::ode::Solver;
 use dynlab_dynamics::physics::PhysicsModel;
 use dynlab_nn::parallel::in_blocks;
 
-use crate::fit::solve;
+use std::collections::HashMap;
+
+use dynlab_dynamics::conventions::wrap_angle;
+
+use crate::fit::{initial_states_after, solve};
 
 /// Gauss–Newton iterations of each local fit.
 const ITERATIONS: usize = 4;
@@ -200,4 +204,230 @@ fn fit_block(
             along[(k * span + j) * DS..(k * span + j + 1) * DS].to_vec()
         })
         .collect()
+}
+
+/// Windows' start states fitted by the model that rolls them out: for a window starting at
+/// sample `s`, the car state at `a = s − half` (clamped into the trajectory) is fitted to the
+/// poses at `a … a + half` (weighted by the pose noise) and the model's rollout from it gives
+/// the state at `s`, effect states included. Every model is started from its own fit to the
+/// same poses, so none is scored from states that another model estimated (a Savitzky–Golay
+/// fit, or the model diagnosed). The fit is Gauss–Newton with the gain of the model the fits
+/// were built with, which moves little between the candidates; each iteration is one rollout
+/// of `half` steps.
+#[derive(Clone, Debug)]
+pub struct StartFits {
+    half: usize,
+    weight: [f64; 3],
+    /// Per window `(trajectory, start)`: its `(JᵀJ)⁻¹Jᵀ` of the weighted pose residuals
+    /// (`6 × 3·(half + 1)`, row-major).
+    gain: HashMap<(usize, usize), Vec<f64>>,
+}
+
+/// State dimensions of the car that the start fits estimate.
+const CAR_DS: usize = 6;
+
+/// Finite-difference steps of the car state's dimensions.
+const CAR_EPS: [f64; CAR_DS] = [1e-6, 1e-6, 1e-7, 1e-6, 1e-6, 1e-6];
+
+/// Gauss–Newton iterations of each start fit.
+const START_ITERATIONS: usize = 2;
+
+impl StartFits {
+    /// The gains of the windows `at` (`(trajectory, start)`), linearised with `p` at the
+    /// trajectories' states; `history[i]` holds the recording's commands before trajectory
+    /// `i`. `half` samples of poses before each start (at least 1) are fitted, weighted by
+    /// `pose_std` (`x`, `y`, heading); `dt` is the model's step.
+    pub fn new(
+        p: &PhysicsModel,
+        solver: &Solver,
+        data: (&[StateTrajectory], &[Vec<f64>]),
+        at: impl IntoIterator<Item = (usize, usize)>,
+        half: usize,
+        pose_std: [f64; 3],
+        dt: f64,
+    ) -> Self {
+        let (trajs, history) = data;
+        let half = half.max(1);
+        let weight = pose_std.map(|s| 1.0 / s.max(1e-12));
+        let mut fits = Self {
+            half,
+            weight,
+            gain: HashMap::new(),
+        };
+        let mut keys: Vec<(usize, usize)> = at.into_iter().collect();
+        keys.sort_unstable();
+        keys.dedup();
+        keys.retain(|&(ti, _)| trajs[ti].dim_s == CAR_DS && trajs[ti].len() > half);
+        if keys.is_empty() {
+            return fits;
+        }
+        let m = keys.len();
+        let origins: Vec<(usize, usize)> = keys.iter().map(|&w| fits.origin(trajs, w)).collect();
+        let s0 = initial_states_after(p, history, trajs, origins.iter().copied());
+        let dw = p.dim_state();
+        // copy 0 as estimated, copy c + 1 with dimension c moved
+        let mut s = Vec::with_capacity((CAR_DS + 1) * m * dw);
+        let mut rows = Vec::with_capacity((CAR_DS + 1) * m);
+        for c in 0..=CAR_DS {
+            for (r, &o) in origins.iter().enumerate() {
+                let mut x = s0[r * dw..(r + 1) * dw].to_vec();
+                if c > 0 {
+                    x[c - 1] += CAR_EPS[c - 1];
+                }
+                s.extend_from_slice(&x);
+                rows.push((o, 0));
+            }
+        }
+        let (res, _) = fits.roll(p, solver, trajs, &rows, s, dt);
+        let nr = 3 * (half + 1);
+        for (r, key) in keys.iter().enumerate() {
+            let r0 = &res[r * nr..(r + 1) * nr];
+            let jac: Vec<Vec<f64>> = (0..CAR_DS)
+                .map(|c| {
+                    let rc = &res[((c + 1) * m + r) * nr..((c + 1) * m + r + 1) * nr];
+                    (0..nr).map(|q| (rc[q] - r0[q]) / CAR_EPS[c]).collect()
+                })
+                .collect();
+            let mut jtj = [0.0; CAR_DS * CAR_DS];
+            for a in 0..CAR_DS {
+                for b in 0..CAR_DS {
+                    jtj[a * CAR_DS + b] = (0..nr).map(|q| jac[a][q] * jac[b][q]).sum();
+                }
+                jtj[a * CAR_DS + a] *= 1.0 + 1e-9;
+                jtj[a * CAR_DS + a] += 1e-12;
+            }
+            // (JᵀJ)⁻¹Jᵀ, column by column of Jᵀ
+            let mut g = vec![0.0; CAR_DS * nr];
+            let mut ok = true;
+            for q in 0..nr {
+                let col: Vec<f64> = (0..CAR_DS).map(|a| jac[a][q]).collect();
+                match solve(&jtj, &col, CAR_DS) {
+                    Some(x) if x.iter().all(|v| v.is_finite()) => {
+                        for a in 0..CAR_DS {
+                            g[a * nr + q] = x[a];
+                        }
+                    }
+                    _ => ok = false,
+                }
+            }
+            if ok {
+                fits.gain.insert(*key, g);
+            }
+        }
+        fits
+    }
+
+    /// The fitted start states of `p` (`dim_state` each, effect states included) at the
+    /// windows `at`; a window without a gain starts from its state as estimated.
+    pub fn states(
+        &self,
+        p: &PhysicsModel,
+        solver: &Solver,
+        data: (&[StateTrajectory], &[Vec<f64>]),
+        at: impl IntoIterator<Item = (usize, usize)>,
+        dt: f64,
+    ) -> Vec<f64> {
+        let (trajs, history) = data;
+        let at: Vec<(usize, usize)> = at.into_iter().collect();
+        let rows: Vec<((usize, usize), usize)> = at
+            .iter()
+            .map(|&w| match self.gain.contains_key(&w) {
+                true => {
+                    let o = self.origin(trajs, w);
+                    (o, w.1 - o.1)
+                }
+                false => (w, 0),
+            })
+            .collect();
+        let mut s = initial_states_after(p, history, trajs, rows.iter().map(|r| r.0));
+        let dw = p.dim_state();
+        let nr = 3 * (self.half + 1);
+        let cost = |res: &[f64], r: usize| -> f64 {
+            res[r * nr..(r + 1) * nr]
+                .iter()
+                .map(|v| if v.is_finite() { v * v } else { f64::INFINITY })
+                .sum()
+        };
+        let (mut res, mut out) = self.roll(p, solver, trajs, &rows, s.clone(), dt);
+        for _ in 0..START_ITERATIONS {
+            let mut trial = s.clone();
+            for (r, w) in at.iter().enumerate() {
+                let Some(g) = self.gain.get(w) else {
+                    continue;
+                };
+                let rr = &res[r * nr..(r + 1) * nr];
+                if !rr.iter().all(|v| v.is_finite()) {
+                    continue;
+                }
+                for a in 0..CAR_DS {
+                    let d: f64 = (0..nr).map(|q| g[a * nr + q] * rr[q]).sum();
+                    trial[r * dw + a] -= d;
+                }
+            }
+            let (res_t, out_t) = self.roll(p, solver, trajs, &rows, trial.clone(), dt);
+            // a step is kept only where it lowers the fit's cost
+            for r in 0..at.len() {
+                if cost(&res_t, r) < cost(&res, r) {
+                    s[r * dw..(r + 1) * dw].copy_from_slice(&trial[r * dw..(r + 1) * dw]);
+                    res[r * nr..(r + 1) * nr].copy_from_slice(&res_t[r * nr..(r + 1) * nr]);
+                    out[r * dw..(r + 1) * dw].copy_from_slice(&out_t[r * dw..(r + 1) * dw]);
+                }
+            }
+        }
+        out
+    }
+
+    /// Where the fit of the window `(trajectory, start)` starts.
+    fn origin(&self, trajs: &[StateTrajectory], (ti, start): (usize, usize)) -> (usize, usize) {
+        let last = trajs[ti].len() - 1;
+        (ti, start.saturating_sub(self.half).min(last - self.half))
+    }
+
+    /// Rolls out `p` from the states `s` (`rows.len() × dim_state`) of `rows` (`((trajectory,
+    /// origin), out)`) over `half` steps of their commands: the weighted pose residuals
+    /// (`rows × (half + 1) × 3`) and each row's state at its step `out`.
+    fn roll(
+        &self,
+        p: &PhysicsModel,
+        solver: &Solver,
+        trajs: &[StateTrajectory],
+        rows: &[((usize, usize), usize)],
+        mut s: Vec<f64>,
+        dt: f64,
+    ) -> (Vec<f64>, Vec<f64>) {
+        let n = rows.len();
+        let dw = p.dim_state();
+        let du = trajs.first().map_or(0, |t| t.dim_u);
+        let span = self.half + 1;
+        let mut res = vec![0.0; n * span * 3];
+        let mut out = vec![0.0; n * dw];
+        let mut u = vec![0.0; n * du];
+        let mut next = vec![0.0; n * dw];
+        for j in 0..span {
+            for (r, &((ti, a), o)) in rows.iter().enumerate() {
+                let t = &trajs[ti];
+                let meas = &t.s[(a + j) * t.dim_s..];
+                for c in 0..3 {
+                    let mut e = s[r * dw + c] - meas[c];
+                    if c == 2 {
+                        e = wrap_angle(e);
+                    }
+                    res[(r * span + j) * 3 + c] = e * self.weight[c];
+                }
+                if j == o {
+                    out[r * dw..(r + 1) * dw].copy_from_slice(&s[r * dw..(r + 1) * dw]);
+                }
+            }
+            if j + 1 == span {
+                break;
+            }
+            for (r, &((ti, a), _)) in rows.iter().enumerate() {
+                let t = &trajs[ti];
+                u[r * du..(r + 1) * du].copy_from_slice(&t.u[(a + j) * du..(a + j + 1) * du]);
+            }
+            p.integrate_step(solver, n, &s, &u, dt, &mut next);
+            std::mem::swap(&mut s, &mut next);
+        }
+        (res, out)
+    }
 }

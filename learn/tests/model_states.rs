@@ -1,10 +1,11 @@
-//! Car states re-estimated with a physics model (`smooth::model_states`) against the
+//! Car states re-estimated with a physics model (`smooth::model_states`) and windows' start
+//! states fitted by the model that rolls them out (`smooth::StartFits`) against the
 //! Savitzky–Golay estimates, on a simulated drive whose true states are known.
 
 use dynlab_dynamics::data::{SavGol, SplitMix64, StateTrajectory, Trajectory};
 use dynlab_dynamics::ode::Solver;
 use dynlab_dynamics::physics::PhysicsModel;
-use dynlab_learn::smooth::model_states;
+use dynlab_learn::smooth::{StartFits, model_states};
 
 const RATE_HZ: f64 = 100.0;
 const STD: [f64; 3] = [1e-3, 1e-3, 4e-3];
@@ -129,4 +130,63 @@ fn a_trajectory_shorter_than_the_fits_is_kept_as_estimated() {
         8,
     );
     assert_eq!(after, vec![sg]);
+}
+
+/// RMS errors of `[vx, vy, ω]` of the states `s` (`dim_state` each, car state first) at the
+/// samples `at` against the truth.
+fn start_rms(s: &[f64], dim: usize, at: &[usize], truth: &[[f64; 6]]) -> [f64; 3] {
+    let mut e = [0.0; 3];
+    for (r, &i) in at.iter().enumerate() {
+        for c in 0..3 {
+            e[c] += (s[r * dim + 3 + c] - truth[i][3 + c]).powi(2) / at.len() as f64;
+        }
+    }
+    e.map(f64::sqrt)
+}
+
+#[test]
+fn fitted_starts_of_the_true_model_are_nearer_the_truth_than_savitzky_golay_and_a_wrong_model() {
+    let mut car =
+        PhysicsModel::car(&PhysicsModel::parse_effects(&["steering_offset"]).unwrap()).unwrap();
+    car.set_param("steering_offset.delta0", 0.03).unwrap();
+    let without = PhysicsModel::car(&[]).unwrap();
+    let solver = Solver::Rk4 { substeps: 4 };
+    let (traj, truth) = drive(&car, 8.0, 5);
+    let sg = StateTrajectory::car(&traj, &SavGol::default()).unwrap();
+    let trajs = std::slice::from_ref(&sg);
+    let history = vec![Vec::new()];
+    // window starts, the first before a whole fit's span
+    let at: Vec<usize> = (3..sg.len() - 60).step_by(7).collect();
+    let windows = || at.iter().map(|&i| (0, i));
+    let dt = 1.0 / RATE_HZ;
+    let fits = StartFits::new(&without, &solver, (trajs, &history), windows(), 10, STD, dt);
+    let estimated: Vec<f64> = at
+        .iter()
+        .flat_map(|&i| sg.s[i * 6..(i + 1) * 6].to_vec())
+        .collect();
+    let before = start_rms(&estimated, 6, &at, &truth);
+    let own = fits.states(&car, &solver, (trajs, &history), windows(), dt);
+    let own = start_rms(&own, car.dim_state(), &at, &truth);
+    let wrong = fits.states(&without, &solver, (trajs, &history), windows(), dt);
+    let wrong = start_rms(&wrong, without.dim_state(), &at, &truth);
+    eprintln!("Savitzky–Golay {before:?}, the true model {own:?}, without the offset {wrong:?}");
+    // the gains of the model without the offset serve the true model's fits as well
+    assert!(own[2] < 0.7 * before[2], "{own:?} against {before:?}");
+    assert!(own[1] < before[1], "{own:?} against {before:?}");
+    // the yaw rate of the model without the offset takes up what the offset turns
+    assert!(own[2] < wrong[2], "{own:?} against {wrong:?}");
+}
+
+#[test]
+fn a_window_without_a_fit_starts_from_its_state_as_estimated() {
+    let p = PhysicsModel::car(&[]).unwrap();
+    let solver = Solver::Rk4 { substeps: 4 };
+    let (traj, _) = drive(&p, 1.0, 6);
+    let sg = StateTrajectory::car(&traj, &SavGol::default()).unwrap();
+    let trajs = std::slice::from_ref(&sg);
+    let history = vec![Vec::new()];
+    let fits = StartFits::new(&p, &solver, (trajs, &history), [(0, 40)], 10, STD, 0.01);
+    let s = fits.states(&p, &solver, (trajs, &history), [(0, 40), (0, 70)], 0.01);
+    assert_eq!(s[6..], sg.s[70 * 6..71 * 6]);
+    assert_ne!(s[..6], sg.s[40 * 6..41 * 6]);
 }

@@ -3,7 +3,8 @@
 use std::fmt::Write as _;
 
 use super::{
-    Candidate, Diagnosis, Drift, coupled_alone_text, coupled_text, cross_fit_text, g4, param_text,
+    Candidate, Diagnosis, Drift, Score, coupled_alone_text, coupled_text, cross_fit_text, g4,
+    param_text,
 };
 
 fn esc(s: &str) -> String {
@@ -49,6 +50,17 @@ pub fn diagnosis_html(d: &Diagnosis) -> String {
         d.segments[0],
         g4(d.baseline_error)
     );
+    if let Some(h) = d.config.fitted_starts {
+        let _ = writeln!(
+            o,
+            "<p>Fitted starts: each model compared (the baseline and every candidate) starts each window from its own fit to the {h} s of poses before it{}.</p>",
+            match d.config.score {
+                Score::Poses =>
+                    ", and is scored on the poses alone: nothing it is compared with is an estimate",
+                Score::States => "",
+            }
+        );
+    }
     if let Some(c) = d.model_states_caution() {
         let _ = writeln!(o, "<p>States from the model: {}.</p>", esc(&c));
     }
