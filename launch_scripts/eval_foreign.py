@@ -14,7 +14,7 @@ open-loop rollouts), and the table gives the share of the error above it that th
 
     eval_foreign.py [--seeds N] [--first-seed N] [--only CASE,CASE] [--jobs N] [--out DIR]
                     [--friction-ellipse] [--rate HZ] [--perturb F] [--floor] [--score poses] [--free P,P]
-                    [--model-states S]
+                    [--model-states S] [--fitted-starts S]
 
 `--rate` and `--perturb` pass to the generator: its motion capture's frequency (default 120 Hz) and
 how far each car's parameters are from the datasheet (default ±10 %).
@@ -75,7 +75,7 @@ PERTURB = 0.1  # --perturb: the true model's parameters (--floor) are the genera
 GENERATOR = []  # extra options of foreign_car.py (--friction-ellipse, --rate, --perturb)
 SCORE = ["states"]  # --score: what the diagnoses' k-step error compares
 NOMINAL_FREE = []  # --free: the nominal models' fitted parameters (empty: train's default)
-DIAGNOSE = []  # extra options of dynlab diagnose (--model-states)
+DIAGNOSE = []  # extra options of dynlab diagnose (--model-states, --fitted-starts)
 
 
 def generated(script, out, *args):
@@ -183,6 +183,8 @@ def main():
                          "a model already in --out is reused, so give another --out")
     ap.add_argument("--model-states", type=float, metavar="S",
                     help="the diagnoses' car states re-estimated with the model over ±S s (dynlab diagnose --model-states)")
+    ap.add_argument("--fitted-starts", type=float, metavar="S",
+                    help="every model compared starts each window from its own fit to the S s of poses before it (dynlab diagnose --fitted-starts)")
     ap.add_argument("--floor", action="store_true",
                     help="also diagnose with the generator's own car: the share of the removable error")
     a = ap.parse_args()
@@ -194,6 +196,8 @@ def main():
     NOMINAL_FREE.extend(x for x in a.free.split(",") if x)
     if a.model_states is not None:
         DIAGNOSE.extend(["--model-states", a.model_states])
+    if a.fitted_starts is not None:
+        DIAGNOSE.extend(["--fitted-starts", a.fitted_starts])
     GENERATOR.extend(["--rate", a.rate, "--perturb", a.perturb])
     if a.friction_ellipse:
         GENERATOR.append("--friction-ellipse")
