@@ -61,7 +61,7 @@ pub struct DiagnoseArgs {
     no_drift: bool,
     /// What the k-step error compares: `states` (every state dimension, the car's estimated
     /// velocities as well) or `poses` (the measured pose alone; the velocities still start each
-    /// window). On noisy motion capture a car's velocity estimates carry errors as large as a
+    /// window, unless `--fitted-starts`). On noisy motion capture a car's velocity estimates carry errors as large as a
     /// small effect's; see the diagnose README for what each finds.
     #[arg(long, value_enum, default_value_t = ScoreArg::States)]
     score: ScoreArg,

@@ -107,26 +107,53 @@ fn diagnose_names_the_steering_offset_of_the_bundled_bag_and_writes_json_and_htm
     assert!(html.contains("<section") && html.contains("steering_offset"));
 }
 
+/// Diagnoses the bundled offset bag with the span option `flag` at 0.1 s (and `extra`): the
+/// offset is named and recovered and diagnosis.json records the span under `key`; the span
+/// `bad` is refused by name with the `range`. The standard output and the page of the run at
+/// 0.1 s.
+fn offset_bag_with_span(
+    flag: &str,
+    key: &str,
+    extra: &[&str],
+    bad: &str,
+    range: &str,
+) -> [String; 2] {
+    let tmp = tempfile::tempdir().unwrap();
+    let model = tmp.path().join("model");
+    nominal_model(&model, World::Car);
+    let out = tmp.path().join("diag");
+    let run = |span: &str| {
+        let args: Vec<&str> = [flag, span]
+            .into_iter()
+            .chain(extra.iter().copied())
+            .collect();
+        run_on_offset_bag(&model, "steering_offset,aero_drag", &args, &out)
+    };
+    let o = run("0.1");
+    let stdout = String::from_utf8_lossy(&o.stdout).into_owned();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(stdout.contains("verdict: steering_offset"), "{stdout}");
+    let j: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("diagnosis.json")).unwrap())
+            .unwrap();
+    assert_eq!(j["config"][key], 0.1, "{j}");
+    let d0 = j["candidates"][0]["params"]["delta0"].as_f64().unwrap();
+    assert!((d0 - 0.03).abs() < 0.005, "δ₀ = {d0}");
+    let html = std::fs::read_to_string(out.join("diagnosis.html")).unwrap();
+    let o = run(bad);
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains(key) && err.contains(range), "{err}");
+    [stdout, html]
+}
+
 /// `--model-states 0.1`: the states re-estimated with the model; the offset is still named and
 /// recovered, the terminal and the page say what the option shows and hides, diagnosis.json
 /// records it; a half-span out of range is refused by name.
 #[test]
 fn diagnose_with_states_from_the_model_names_the_offset_and_says_what_it_hides() {
-    let tmp = tempfile::tempdir().unwrap();
-    let model = tmp.path().join("model");
-    nominal_model(&model, World::Car);
-    let out = tmp.path().join("diag");
-    let run = |half: &str| {
-        run_on_offset_bag(
-            &model,
-            "steering_offset,aero_drag",
-            &["--model-states", half],
-            &out,
-        )
-    };
-    let o = run("0.1");
-    let stdout = String::from_utf8_lossy(&o.stdout);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let [stdout, html] =
+        offset_bag_with_span("--model-states", "model_states", &[], "0.7", "(0, 0.5]");
     assert!(
         stdout.contains("the states re-estimated with the model over ±0.1 s)"),
         "{stdout}"
@@ -135,66 +162,31 @@ fn diagnose_with_states_from_the_model_names_the_offset_and_says_what_it_hides()
         stdout.contains("a command delay") && stdout.contains("without --model-states"),
         "{stdout}"
     );
-    assert!(stdout.contains("verdict: steering_offset"), "{stdout}");
-    let j: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("diagnosis.json")).unwrap())
-            .unwrap();
-    assert_eq!(j["config"]["model_states"], 0.1, "{j}");
-    let d0 = j["candidates"][0]["params"]["delta0"].as_f64().unwrap();
-    assert!((d0 - 0.03).abs() < 0.005, "δ₀ = {d0}");
-    let html = std::fs::read_to_string(out.join("diagnosis.html")).unwrap();
     assert!(html.contains("States from the model:"), "{html}");
-    let o = run("0.7");
-    assert!(!o.status.success());
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert!(
-        err.contains("model_states") && err.contains("(0, 0.5]"),
-        "{err}"
-    );
 }
 
+/// `--fitted-starts 0.1 --score poses`: every model started from its own fit to the poses
+/// before each window; the offset is named and recovered, the terminal and the page say how the
+/// models are started and scored; a span out of range is refused by name.
 #[test]
 fn diagnose_with_fitted_starts_scored_on_the_poses_names_the_offset() {
-    let tmp = tempfile::tempdir().unwrap();
-    let model = tmp.path().join("model");
-    nominal_model(&model, World::Car);
-    let out = tmp.path().join("diag");
-    let run = |span: &str| {
-        run_on_offset_bag(
-            &model,
-            "steering_offset,aero_drag",
-            &["--fitted-starts", span, "--score", "poses"],
-            &out,
-        )
-    };
-    let o = run("0.1");
-    let stdout = String::from_utf8_lossy(&o.stdout);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let [stdout, html] = offset_bag_with_span(
+        "--fitted-starts",
+        "fitted_starts",
+        &["--score", "poses"],
+        "0.5",
+        "(0, 0.3]",
+    );
     assert!(
         stdout.contains(
             "scored on the poses, each model started from its own fit to the 0.1 s of poses before each window)"
         ),
         "{stdout}"
     );
-    assert!(stdout.contains("verdict: steering_offset"), "{stdout}");
-    let j: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("diagnosis.json")).unwrap())
-            .unwrap();
-    assert_eq!(j["config"]["fitted_starts"], 0.1, "{j}");
-    let d0 = j["candidates"][0]["params"]["delta0"].as_f64().unwrap();
-    assert!((d0 - 0.03).abs() < 0.005, "δ₀ = {d0}");
-    let html = std::fs::read_to_string(out.join("diagnosis.html")).unwrap();
     assert!(
         html.contains("Fitted starts:")
             && html.contains("nothing it is compared with is an estimate"),
         "{html}"
-    );
-    let o = run("0.5");
-    assert!(!o.status.success());
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert!(
-        err.contains("fitted_starts") && err.contains("(0, 0.3]"),
-        "{err}"
     );
 }
 

@@ -167,7 +167,8 @@ pub enum Score {
     /// are estimated from the poses and their estimates carry an error of their own (velocities
     /// from Savitzky–Golay fits lag the yaw rate a steering step gives); scored on the pose,
     /// the velocities still start each window and reach the score through the poses they
-    /// move. Pushing states are the pose.
+    /// move, unless each model's start is fitted to the poses before the window
+    /// ([`crate::diagnosis::DiagnoseConfig::fitted_starts`]). Pushing states are the pose.
     Poses,
 }
 

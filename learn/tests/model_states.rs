@@ -51,6 +51,14 @@ fn drive(p: &PhysicsModel, seconds: f64, seed: u64) -> (Trajectory, Vec<[f64; 6]
     (traj, truth)
 }
 
+/// The car with a steering offset of 0.03 rad.
+fn offset_car() -> PhysicsModel {
+    let mut car =
+        PhysicsModel::car(&PhysicsModel::parse_effects(&["steering_offset"]).unwrap()).unwrap();
+    car.set_param("steering_offset.delta0", 0.03).unwrap();
+    car
+}
+
 /// RMS errors of `[vx, vy, ω]` against the truth, 0.5 s away from the ends.
 fn velocity_rms(t: &StateTrajectory, truth: &[[f64; 6]]) -> [f64; 3] {
     let inner = 50..truth.len() - 50;
@@ -103,9 +111,7 @@ fn the_true_model_estimates_the_velocities_of_a_quick_car_better_than_savitzky_g
 #[test]
 fn a_model_without_the_cars_steering_offset_still_estimates_its_yaw_rate_better() {
     // the fits' constant accelerations take what the model misses, not the states
-    let mut car =
-        PhysicsModel::car(&PhysicsModel::parse_effects(&["steering_offset"]).unwrap()).unwrap();
-    car.set_param("steering_offset.delta0", 0.03).unwrap();
+    let car = offset_car();
     let model = PhysicsModel::car(&[]).unwrap();
     let (traj, truth) = drive(&car, 8.0, 4);
     let sg = StateTrajectory::car(&traj, &SavGol::default()).unwrap();
@@ -146,9 +152,7 @@ fn start_rms(s: &[f64], dim: usize, at: &[usize], truth: &[[f64; 6]]) -> [f64; 3
 
 #[test]
 fn fitted_starts_of_the_true_model_are_nearer_the_truth_than_savitzky_golay_and_a_wrong_model() {
-    let mut car =
-        PhysicsModel::car(&PhysicsModel::parse_effects(&["steering_offset"]).unwrap()).unwrap();
-    car.set_param("steering_offset.delta0", 0.03).unwrap();
+    let car = offset_car();
     let without = PhysicsModel::car(&[]).unwrap();
     let solver = Solver::Rk4 { substeps: 4 };
     let (traj, truth) = drive(&car, 8.0, 5);
