@@ -4,6 +4,10 @@
 //! into a polynomial, the model follows the commands. Each fit also takes a constant
 //! acceleration of each velocity, so that what the model misses over the fit's span (an
 //! effect it lacks) is taken there rather than by the state.
+//!
+//! Windows' start states fitted by each model ([`StartFits`]): the state at a window's start
+//! from the model's own motion fitted to the poses before it, so that models compared are each
+//! started from their own estimate.
 
 use dynlab_dynamics::data::StateTrajectory;
 use dynlab_dynamics::ode::Solver;
@@ -406,7 +410,10 @@ impl StartFits {
         for j in 0..span {
             for (r, &((ti, a), o)) in rows.iter().enumerate() {
                 let t = &trajs[ti];
-                let meas = &t.s[(a + j) * t.dim_s..];
+                // (a window without a fit, started at its own sample, may end its unused
+                // rollout past the trajectory)
+                let i = (a + j).min(t.len() - 1);
+                let meas = &t.s[i * t.dim_s..];
                 for c in 0..3 {
                     let mut e = s[r * dw + c] - meas[c];
                     if c == 2 {
@@ -423,7 +430,8 @@ impl StartFits {
             }
             for (r, &((ti, a), _)) in rows.iter().enumerate() {
                 let t = &trajs[ti];
-                u[r * du..(r + 1) * du].copy_from_slice(&t.u[(a + j) * du..(a + j + 1) * du]);
+                let i = (a + j).min(t.len() - 1);
+                u[r * du..(r + 1) * du].copy_from_slice(&t.u[i * du..(i + 1) * du]);
             }
             p.integrate_step(solver, n, &s, &u, dt, &mut next);
             std::mem::swap(&mut s, &mut next);

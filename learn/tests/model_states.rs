@@ -190,7 +190,11 @@ fn a_window_without_a_fit_starts_from_its_state_as_estimated() {
     let trajs = std::slice::from_ref(&sg);
     let history = vec![Vec::new()];
     let fits = StartFits::new(&p, &solver, (trajs, &history), [(0, 40)], 10, STD, 0.01);
-    let s = fits.states(&p, &solver, (trajs, &history), [(0, 40), (0, 70)], 0.01);
-    assert_eq!(s[6..], sg.s[70 * 6..71 * 6]);
+    // (the last sample: a start with no poses after it)
+    let last = sg.len() - 1;
+    let at = [(0, 40), (0, 70), (0, last)];
+    let s = fits.states(&p, &solver, (trajs, &history), at, 0.01);
+    assert_eq!(s[6..12], sg.s[70 * 6..71 * 6]);
+    assert_eq!(s[12..], sg.s[last * 6..(last + 1) * 6]);
     assert_ne!(s[..6], sg.s[40 * 6..41 * 6]);
 }
