@@ -216,8 +216,8 @@ fn fit_block(
 /// the state at `s`, effect states included. Every model is started from its own fit to the
 /// same poses, so none is scored from states that another model estimated (a Savitzky–Golay
 /// fit, or the model diagnosed). The fit is Gauss–Newton with the gain of the model the fits
-/// were built with, which moves little between the candidates; each iteration is one rollout
-/// of `half` steps.
+/// were built with, which moves little between the candidates: a model's fits cost three
+/// rollouts of `half` steps (from the states as estimated, then after each of two steps).
 #[derive(Clone, Debug)]
 pub struct StartFits {
     half: usize,
