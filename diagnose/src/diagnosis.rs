@@ -2656,6 +2656,8 @@ pub fn diagnose(
     }
     let k = cfg.steps_for(world);
     let pose_noise = pose_noise(data).filter(|_| world == World::Car);
+    // what weighs the poses in the fits of states and starts to them
+    let pose_std = pose_noise.as_ref().map_or(MODEL_STATES_POSE_STD, |n| n.std);
     // the car's states re-estimated with the model (`model_states`), and the fits' settings
     let re_estimate = match (cfg.model_states, world) {
         (Some(h), World::Car) => {
@@ -2668,8 +2670,7 @@ pub fn diagnose(
                 hint: "the states are re-estimated with a physics model; diagnose a physics model (dynlab train --kind physics) or leave --model-states out",
             })?;
             let half = ((h / data.pose_dt_s.max(1e-9)).round() as usize).max(1);
-            let std = pose_noise.as_ref().map_or(MODEL_STATES_POSE_STD, |n| n.std);
-            Some((p, half, std))
+            Some((p, half, pose_std))
         }
         _ => None,
     };
@@ -2850,14 +2851,13 @@ pub fn diagnose(
         }
         Some(h) => {
             let half = ((h / data.pose_dt_s.max(1e-9)).round() as usize).clamp(1, k - 1);
-            let std = pose_noise.as_ref().map_or(MODEL_STATES_POSE_STD, |n| n.std);
             Some(StartFits::new(
                 &base,
                 &solver,
                 (&trajs, &history),
                 fit_w.iter().chain(&test_w).map(|w| (w.trajectory, w.start)),
                 half,
-                std,
+                pose_std,
                 model.physics_time(),
             ))
         }
